@@ -1,0 +1,93 @@
+"""Interaction kernels p(x_k, x_l) and their partial derivatives.
+
+A kernel is evaluated on *pairs*: `xk` has shape (..., N, 1, d) and `xl` has shape
+(..., 1, N, d), so that broadcasting gives every ordered pair (k, l). `value` returns the
+(..., N, N) matrix P with P[..., k, l] = p(x_k, x_l); `grad_x` and `grad_y` return the
+(..., N, N, d) arrays of the partial gradients dp/dx and dp/dy at (x_k, x_l). The last axis of
+length N of `value` is the index l, so a kernel that depends on the index of the second agent
+(like the non-symmetric kernel of `eq:nonsymmker`) multiplies by a weight array of shape (N,).
+
+Users plug in their own kernel by writing a class with these three methods and a boolean
+attribute `symmetric` (True when p(x, y) = p(y, x) for every pair, which makes the frozen
+linearization and the exact Jacobian symmetric matrices).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@runtime_checkable
+class InteractionKernel(Protocol):
+    """What the dynamics need from an interaction kernel (see the module docstring)."""
+
+    symmetric: bool
+
+    def value(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+        """p(x_k, x_l): (..., N, N) from xk (..., N, 1, d) and xl (..., 1, N, d)."""
+        ...
+
+    def grad_x(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+        """dp/dx at (x_k, x_l): (..., N, N, d)."""
+        ...
+
+    def grad_y(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+        """dp/dy at (x_k, x_l): (..., N, N, d)."""
+        ...
+
+
+class CuckerSmaleKernel:
+    """Cucker-Smale-like kernel ``p(x_k, x_l) = w_l / (alpha^2 + |x_k - x_l|^2)``.
+
+    With one weight ``w = 1/eps`` this is the symmetric kernel of `eq:symmker`; with weights
+    ``w_l = 1/eps_l``, ``eps_l = eps_min + (eps_max - eps_min)(l-1)/(N-1)``, it is the
+    non-symmetric kernel of `eq:nonsymmker`.
+
+    Gradients, with r = x_l - x_k and D = alpha^2 + |r|^2:
+    ``dp/dx = 2 w_l r / D^2`` and ``dp/dy = -2 w_l r / D^2``.
+    """
+
+    def __init__(self, alpha: float, weights: float | np.ndarray) -> None:
+        if not alpha > 0:
+            raise ValueError(f"alpha must be > 0, got {alpha}")
+        w = np.asarray(weights, dtype=float)
+        if w.ndim > 1 or not np.all(np.isfinite(w)) or np.any(w <= 0):
+            raise ValueError("weights must be a positive finite scalar or 1-D array")
+        self.alpha = float(alpha)
+        self.weights = w
+        self.symmetric = bool(w.ndim == 0 or np.all(w == w.flat[0]))
+
+    @classmethod
+    def symmetric_kernel(cls, alpha: float, epsilon: float) -> CuckerSmaleKernel:
+        """The kernel of `eq:symmker` with stiffness epsilon."""
+        return cls(alpha, 1.0 / epsilon)
+
+    @classmethod
+    def nonsymmetric_kernel(
+        cls, alpha: float, epsilon_min: float, epsilon_max: float, n_agents: int
+    ) -> CuckerSmaleKernel:
+        """The kernel of `eq:nonsymmker`: eps_l linear from eps_min (l = 1) to eps_max (l = N)."""
+        eps = np.linspace(epsilon_min, epsilon_max, n_agents)
+        kernel = cls(alpha, 1.0 / eps)
+        kernel.symmetric = epsilon_min == epsilon_max
+        return kernel
+
+    def _denominator(self, xk: np.ndarray, xl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r = xl - xk
+        return r, self.alpha**2 + np.sum(r * r, axis=-1)
+
+    def value(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+        _, denom = self._denominator(xk, xl)
+        return self.weights / denom
+
+    def grad_x(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+        r, denom = self._denominator(xk, xl)
+        return (2.0 * self.weights / denom**2)[..., None] * r
+
+    def grad_y(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+        return -self.grad_x(xk, xl)
+
+    def __repr__(self) -> str:
+        return f"CuckerSmaleKernel(alpha={self.alpha}, symmetric={self.symmetric})"

@@ -1,0 +1,160 @@
+"""The swarm's drift F(x, u), its exact Jacobian J(x) and its frozen-kernel linearization L(x).
+
+State arrays have shape (..., N, d): any leading batch axes (Brownian paths, envs), then the
+N agents, then the d coordinates. With P[k, l] = p(x_k, x_l) and s_k = sum_l P[k, l], the
+drift of `eq:dynamics` / `eq:dyn_matrix` is
+
+    F_k(x, u) = (1/N) sum_l p(x_k, x_l) (x_l - x_k) + u_k  =  (L(x) x)_k + u_k,
+
+with the frozen-kernel linearization L(x) = (P(x) - diag(s(x))) / N, an (N, N) matrix that acts
+on every coordinate alike (as an Nd x Nd matrix it is L ⊗ I_d). L(x) is minus a weighted graph
+Laplacian: its eigenvalues have non-positive real part for every x.
+
+The exact Jacobian dF/dx (`eq:jac`, entries below `eq:exp_int_discr`, generalized to d >= 1)
+is an (Nd, Nd) matrix made of d x d blocks, with r_kl = x_l - x_k:
+
+    J_kl = (1/N) (r_kl ⊗ dp/dy(x_k, x_l) + p(x_k, x_l) I_d)            (l != k)
+    J_kk = (1/N) sum_{l != k} (r_kl ⊗ dp/dx(x_k, x_l) - p(x_k, x_l) I_d)
+
+For the Cucker-Smale kernel, ``r ⊗ dp/dy = -2 w r r^T / D^2``, so J_kl = 0 in d = 1 exactly
+when |x_k - x_l| = alpha and it turns negative for agents farther apart than alpha: the exact
+Jacobian is then indefinite (positive eigenvalues), unlike L(x).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
+from agent_envs.params import SwarmParams
+
+
+def kernel_from_params(params: SwarmParams) -> InteractionKernel:
+    """The kernel object named by `params.kernel` (a user kernel is returned as is)."""
+    if params.kernel == "symmetric":
+        return CuckerSmaleKernel.symmetric_kernel(params.alpha, params.epsilon)
+    if params.kernel == "nonsymmetric":
+        return CuckerSmaleKernel.nonsymmetric_kernel(
+            params.alpha, params.epsilon_min, params.epsilon_max, params.n_agents
+        )
+    return params.kernel
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """A matrix A used by the exponential integrators, with how it acts on a state.
+
+    `per_coordinate=True`: A has shape (..., N, N) and acts on a state (..., N, d) column by
+    column (the frozen L(x)). `per_coordinate=False`: A has shape (..., Nd, Nd) and acts on the
+    flattened state (..., Nd) (the exact Jacobian).
+    """
+
+    matrix: np.ndarray
+    per_coordinate: bool
+    symmetric: bool
+
+    def as_columns(self, v: np.ndarray) -> np.ndarray:
+        """Reshape a state (..., N, d) into the (..., n, k) column block A acts on."""
+        if self.per_coordinate:
+            return v
+        return v.reshape(*v.shape[:-2], -1, 1)
+
+    def from_columns(self, w: np.ndarray, like: np.ndarray) -> np.ndarray:
+        """Inverse of `as_columns`: back to the state shape of `like`."""
+        return w.reshape(like.shape)
+
+    def apply(self, v: np.ndarray) -> np.ndarray:
+        """A v for a state-shaped v (..., N, d)."""
+        return self.from_columns(self.matrix @ self.as_columns(v), v)
+
+
+class SwarmModel:
+    """Drift, Jacobian and frozen linearization of the swarm SDE for given `SwarmParams`.
+
+    The integrators see only `drift`, `linearization` and `sigma`; the controllers and envs use
+    `interaction_drift` and `interaction_matrix`. Every method is batched over leading axes.
+    """
+
+    def __init__(self, params: SwarmParams) -> None:
+        self.params = params
+        self.kernel: InteractionKernel = kernel_from_params(params)
+        self.n_agents = params.n_agents
+        self.dim = params.dim
+        self.sigma = params.sigma
+
+    def _check_state(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if x.ndim < 2 or x.shape[-2:] != (self.n_agents, self.dim):
+            raise ValueError(
+                f"state must have shape (..., {self.n_agents}, {self.dim}), got {x.shape}"
+            )
+        return x
+
+    def interaction_matrix(self, x: np.ndarray) -> np.ndarray:
+        """P(x) with P[..., k, l] = p(x_k, x_l); shape (..., N, N)."""
+        x = self._check_state(x)
+        return self.kernel.value(x[..., :, None, :], x[..., None, :, :])
+
+    def frozen_linearization(self, x: np.ndarray) -> np.ndarray:
+        """L(x) = (P(x) - diag(P(x) 1)) / N; shape (..., N, N)."""
+        p = self.interaction_matrix(x)
+        n = self.n_agents
+        diag = np.arange(n)
+        p[..., diag, diag] -= p.sum(axis=-1)
+        return p / n
+
+    def interaction_drift(self, x: np.ndarray) -> np.ndarray:
+        """(1/N) sum_l p(x_k, x_l)(x_l - x_k) = L(x) x; shape (..., N, d)."""
+        x = self._check_state(x)
+        return self.frozen_linearization(x) @ x
+
+    def drift(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """F(x, u) = L(x) x + u of `eq:dyn_matrix`; x and u broadcast to (..., N, d)."""
+        f = self.interaction_drift(x)
+        return f if u is None else f + u
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """The exact Jacobian dF/dx (see the module docstring); shape (..., Nd, Nd).
+
+        Rows and columns are ordered agent-major: index k*d + i is coordinate i of agent k.
+        """
+        x = self._check_state(x)
+        n, d = self.n_agents, self.dim
+        xk, xl = x[..., :, None, :], x[..., None, :, :]
+        r = xl - xk  # (..., N, N, d)
+        p = self.kernel.value(xk, xl)  # (..., N, N)
+        gx = self.kernel.grad_x(xk, xl)
+        gy = self.kernel.grad_y(xk, xl)
+        eye = np.eye(d)
+        # Off-diagonal blocks for every (k, l); at l = k they hold p_kk I / N, which the
+        # diagonal sum below cancels by including its own l = k term (-p_kk I / N).
+        blocks = r[..., :, None] * gy[..., None, :] + p[..., None, None] * eye  # (..,N,N,d,d)
+        diag_blocks = np.sum(r[..., :, None] * gx[..., None, :] - p[..., None, None] * eye, -3)
+        idx = np.arange(n)
+        blocks[..., idx, idx, :, :] += diag_blocks
+        blocks /= n
+        # (..., N, N, d, d) -> (..., N, d, N, d) -> (..., Nd, Nd)
+        blocks = np.swapaxes(blocks, -3, -2)
+        return blocks.reshape(*x.shape[:-2], n * d, n * d)
+
+    def linearization(self, x: np.ndarray, kind: str) -> Linearization:
+        """The matrix an exponential integrator uses: ``"exact"`` J(x) or ``"frozen"`` L(x)."""
+        return self.drift_and_linearization(x, None, kind)[1]
+
+    def drift_and_linearization(
+        self, x: np.ndarray, u: np.ndarray | None, kind: str
+    ) -> tuple[np.ndarray, Linearization]:
+        """F(x, u) and the ``"exact"`` or ``"frozen"`` linearization, sharing the work of L(x)."""
+        if kind not in ("exact", "frozen"):
+            raise ValueError(f"jacobian must be 'exact' or 'frozen', got {kind!r}")
+        x = self._check_state(x)
+        frozen = self.frozen_linearization(x)
+        f = frozen @ x
+        if u is not None:
+            f = f + u
+        symmetric = bool(self.kernel.symmetric)
+        if kind == "frozen":
+            return f, Linearization(frozen, True, symmetric)
+        return f, Linearization(self.jacobian(x), self.dim == 1, symmetric)

@@ -1,0 +1,57 @@
+"""The integrator interface shared by every time-stepping scheme.
+
+An integrator is a small stateless object with
+
+    step(model, x, u, t, dt, dW, du_dt=None) -> x_next
+
+and class attributes `name`, `strong_order` (strong order for additive noise; the deterministic
+order when sigma = 0 is `deterministic_order`) and `needs_jacobian`. Integrators never draw random
+numbers: the Brownian increments `dW` (same shape as `x`, variance `dt`) come in from outside,
+so every scheme can be compared on the same noise.
+
+`model` is anything with `drift(x, u)`, `sigma` and, for exponential schemes,
+`drift_and_linearization(x, u, kind)` (see `agent_envs.dynamics.swarm.SwarmModel`).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Protocol
+
+import numpy as np
+
+
+class DriftModel(Protocol):
+    """What an integrator needs from the dynamics."""
+
+    sigma: float
+
+    def drift(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray: ...
+
+    def drift_and_linearization(self, x: np.ndarray, u: np.ndarray | None, kind: str):
+        """(F(x, u), Linearization) for exponential schemes."""
+        ...
+
+
+class Integrator:
+    """Base class: holds the metadata; subclasses implement `step`."""
+
+    name: ClassVar[str]
+    strong_order: ClassVar[float]
+    deterministic_order: ClassVar[float]
+    needs_jacobian: ClassVar[bool] = False
+
+    def step(
+        self,
+        model: DriftModel,
+        x: np.ndarray,
+        u: np.ndarray | None,
+        t: float,
+        dt: float,
+        dW: np.ndarray,
+        du_dt: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Advance the state x (..., N, d) from t to t + dt with control u and increments dW."""
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"

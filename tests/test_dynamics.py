@@ -1,0 +1,110 @@
+"""Kernel gradients and the exact Jacobian against finite differences; structure of L(x)."""
+
+import numpy as np
+import pytest
+
+from agent_envs import SwarmModel, SwarmParams
+from agent_envs.dynamics.kernels import CuckerSmaleKernel
+
+
+def _params(kernel, dim, n=7):
+    return SwarmParams(n_agents=n, dim=dim, kernel=kernel, epsilon=0.3, alpha=0.4)
+
+
+def _fd_jacobian(model, x, h=1e-6):
+    """Central differences of the drift, agent-major flattening: (Nd, Nd)."""
+    n, d = x.shape
+    flat = x.reshape(-1)
+    jac = np.empty((n * d, n * d))
+    for j in range(n * d):
+        e = np.zeros(n * d)
+        e[j] = h
+        fp = model.drift((flat + e).reshape(n, d))
+        fm = model.drift((flat - e).reshape(n, d))
+        jac[:, j] = (fp - fm).reshape(-1) / (2 * h)
+    return jac
+
+
+@pytest.mark.parametrize("kernel", ["symmetric", "nonsymmetric"])
+@pytest.mark.parametrize("dim", [1, 2])
+def test_exact_jacobian_matches_finite_differences(kernel, dim):
+    model = SwarmModel(_params(kernel, dim))
+    x = np.random.default_rng(1).uniform(-1, 1, (7, dim))
+    jac = model.jacobian(x)
+    assert jac.shape == (7 * dim, 7 * dim)
+    np.testing.assert_allclose(jac, _fd_jacobian(model, x), rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("dim", [1, 2])
+def test_kernel_gradients_match_finite_differences(dim):
+    kernel = CuckerSmaleKernel.nonsymmetric_kernel(0.3, 0.1, 0.5, 5)
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-1, 1, (5, dim))
+    xk, xl = x[:, None, :], x[None, :, :]
+    h = 1e-6
+    for i in range(dim):
+        e = np.zeros(dim)
+        e[i] = h
+        dx = (kernel.value(xk + e, xl) - kernel.value(xk - e, xl)) / (2 * h)
+        dy = (kernel.value(xk, xl + e) - kernel.value(xk, xl - e)) / (2 * h)
+        np.testing.assert_allclose(kernel.grad_x(xk, xl)[..., i], dx, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(kernel.grad_y(xk, xl)[..., i], dy, rtol=1e-6, atol=1e-8)
+
+
+def test_drift_is_frozen_linearization_times_state_and_batched():
+    model = SwarmModel(SwarmParams(n_agents=6, dim=2, kernel="nonsymmetric"))
+    x = np.random.default_rng(3).uniform(-1, 1, (4, 3, 6, 2))
+    u = np.random.default_rng(4).normal(size=(6, 2))
+    lx = model.frozen_linearization(x)
+    assert lx.shape == (4, 3, 6, 6)
+    np.testing.assert_allclose(model.drift(x, u), lx @ x + u)
+    # the batched call equals the one-by-one calls
+    np.testing.assert_allclose(model.drift(x)[2, 1], model.drift(x[2, 1]))
+    # explicit double sum of eq:dynamics
+    n = 6
+    xs = x[0, 0]
+    p = model.interaction_matrix(xs)
+    direct = np.array([sum(p[k, j] * (xs[j] - xs[k]) for j in range(n)) / n for k in range(n)])
+    np.testing.assert_allclose(model.interaction_drift(xs), direct)
+
+
+def test_frozen_linearization_is_minus_a_laplacian():
+    model = SwarmModel(SwarmParams(n_agents=30, epsilon=0.05))
+    x = np.random.default_rng(5).uniform(-1, 1, (30, 1))
+    lx = model.frozen_linearization(x)
+    np.testing.assert_allclose(lx.sum(axis=1), 0.0, atol=1e-10)  # rows sum to zero
+    np.testing.assert_allclose(lx, lx.T)
+    assert np.max(np.linalg.eigvalsh(lx)) < 1e-9  # negative semi-definite
+
+
+def test_exact_jacobian_is_indefinite_when_agents_are_spread():
+    """The finding behind the default jacobian='frozen': J has positive eigenvalues."""
+    model = SwarmModel(SwarmParams(n_agents=100, epsilon=0.05, alpha=0.1))
+    x = np.linspace(-1, 1, 100)[:, None]
+    eig = np.linalg.eigvalsh(model.jacobian(x))
+    assert eig.max() > 50.0
+    assert np.max(np.linalg.eigvalsh(model.frozen_linearization(x))) < 1e-9
+
+
+def test_user_kernel_is_accepted():
+    class Gaussian:
+        symmetric = True
+
+        def value(self, xk, xl):
+            return np.exp(-np.sum((xk - xl) ** 2, axis=-1))
+
+        def grad_x(self, xk, xl):
+            return -2 * (xk - xl) * self.value(xk, xl)[..., None]
+
+        def grad_y(self, xk, xl):
+            return -self.grad_x(xk, xl)
+
+    model = SwarmModel(SwarmParams(n_agents=5, dim=2, kernel=Gaussian()))
+    x = np.random.default_rng(6).uniform(-1, 1, (5, 2))
+    np.testing.assert_allclose(model.jacobian(x), _fd_jacobian(model, x), rtol=1e-6, atol=1e-7)
+
+
+def test_bad_state_shape_is_rejected():
+    model = SwarmModel(SwarmParams(n_agents=5))
+    with pytest.raises(ValueError, match=r"\(\.\.\., 5, 1\)"):
+        model.drift(np.zeros((4, 1)))

@@ -1,0 +1,182 @@
+"""Measured orders of convergence, invariants and registry behaviour of the integrators.
+
+Orders are measured as in diffrax's test_sde1.py: integrate on a sequence of step sizes with
+the *same* Brownian path (coarse increments are sums of fine ones), compare with a reference,
+fit the slope of log(error) against log(dt) and assert it within a tolerance.
+"""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from agent_envs import SwarmModel, SwarmParams, make_integrator, simulate
+from agent_envs.integrators import INTEGRATORS
+
+PARAMS = dict(n_agents=6, dim=1, alpha=0.5, epsilon=1.0, horizon=0.5)
+STEPS = [8, 16, 32, 64]
+
+
+def _x0(n=6, d=1):
+    return np.linspace(-1.0, 1.0, n * d).reshape(n, d)
+
+
+def _integrate(scheme, model, x0, m, dw_fine, horizon, control=None, control_rate=None):
+    """Integrate with m steps, increments summed from the fine ones (paths, m_fine, N, d)."""
+    m_fine = dw_fine.shape[1]
+    dw = dw_fine.reshape(dw_fine.shape[0], m, m_fine // m, *dw_fine.shape[2:]).sum(axis=2)
+    dt = horizon / m
+    x = np.broadcast_to(x0, (dw.shape[0], *x0.shape)).copy()
+    for n in range(m):
+        t = n * dt
+        u = None if control is None else control(t)
+        du = None if control_rate is None else control_rate(t)
+        x = scheme.step(model, x, u, t, dt, dw[:, n], du_dt=du)
+    return x
+
+
+def _order(errors):
+    slope, _ = np.polyfit(np.log([1.0 / m for m in STEPS]), np.log(errors), 1)
+    return slope
+
+
+def _ode_reference(model, x0, horizon, control=None):
+    def rhs(t, y):
+        u = None if control is None else control(t)
+        return model.drift(y.reshape(x0.shape), u).reshape(-1)
+
+    sol = solve_ivp(rhs, (0, horizon), x0.reshape(-1), method="DOP853", rtol=1e-12, atol=1e-13)
+    return sol.y[:, -1].reshape(x0.shape)
+
+
+@pytest.mark.parametrize(
+    ("name", "jacobian", "expected"),
+    [
+        ("ee", "frozen", 1.0),
+        ("heun", "frozen", 2.0),
+        ("erb", "exact", 2.0),
+        ("erb", "frozen", 1.0),
+        ("serb", "exact", 2.0),
+    ],
+)
+@pytest.mark.parametrize("kernel", ["symmetric", "nonsymmetric"])
+def test_deterministic_order(name, jacobian, expected, kernel):
+    params = SwarmParams(**PARAMS, kernel=kernel, epsilon_min=0.5, epsilon_max=2.0, sigma=0.0)
+    model = SwarmModel(params)
+    x0 = _x0()
+    ref = _ode_reference(model, x0, params.horizon)
+    scheme = make_integrator(name, jacobian=jacobian)
+    dw = np.zeros((1, STEPS[-1], *x0.shape))
+    errors = [
+        np.max(np.abs(_integrate(scheme, model, x0, m, dw, params.horizon)[0] - ref)) for m in STEPS
+    ]
+    assert _order(errors) == pytest.approx(expected, abs=0.25), errors
+
+
+@pytest.mark.parametrize(
+    ("name", "jacobian"),
+    [
+        ("em", "frozen"),
+        ("heun", "frozen"),
+        ("serb", "frozen"),
+        ("serb", "exact"),
+        ("erb", "frozen"),
+    ],
+)
+def test_strong_order_additive_noise(name, jacobian):
+    params = SwarmParams(**PARAMS, sigma=0.5)
+    model = SwarmModel(params)
+    x0 = _x0()
+    rng = np.random.default_rng(12345)
+    m_fine = 2048
+    dw = np.sqrt(params.horizon / m_fine) * rng.standard_normal((200, m_fine, *x0.shape))
+    ref = _integrate(make_integrator("heun"), model, x0, m_fine, dw, params.horizon)
+    scheme = make_integrator(name, jacobian=jacobian)
+    errors = [
+        np.mean(
+            np.max(
+                np.abs(_integrate(scheme, model, x0, m, dw, params.horizon) - ref), axis=(-2, -1)
+            )
+        )
+        for m in STEPS
+    ]
+    assert _order(errors) == pytest.approx(scheme.strong_order, abs=0.25), errors
+
+
+@pytest.mark.parametrize(
+    ("name", "with_rate", "expected"),
+    [("serb", True, 2.0), ("serb", False, 1.0), ("heun", True, 2.0)],
+)
+def test_control_rate_phi2_term_restores_second_order(name, with_rate, expected):
+    """eq:serbaut: with a time-dependent control, the phi2 term keeps ERB/SERB of order 2."""
+    params = SwarmParams(**PARAMS, sigma=0.0)
+    model = SwarmModel(params)
+    x0 = _x0()
+    weights = np.linspace(1.0, 2.0, 6)[:, None]
+
+    def control(t):
+        return weights * np.sin(3.0 * t)
+
+    def rate(t):
+        return 3.0 * weights * np.cos(3.0 * t)
+
+    ref = _ode_reference(model, x0, params.horizon, control)
+    scheme = make_integrator(name, jacobian="exact")
+    dw = np.zeros((1, STEPS[-1], *x0.shape))
+    errors = [
+        np.max(
+            np.abs(
+                _integrate(
+                    scheme, model, x0, m, dw, params.horizon, control, rate if with_rate else None
+                )[0]
+                - ref
+            )
+        )
+        for m in STEPS
+    ]
+    assert _order(errors) == pytest.approx(expected, abs=0.25), errors
+
+
+@pytest.mark.parametrize("name", sorted(INTEGRATORS))
+@pytest.mark.parametrize("jacobian", ["frozen", "exact"])
+def test_symmetric_interaction_conserves_the_mean(name, jacobian):
+    params = SwarmParams(n_agents=20, dim=2, epsilon=0.05, sigma=0.0)
+    traj = simulate(params, name, jacobian=jacobian, n_steps=200, n_paths=1, seed=0)
+    means = traj.positions[:, 0].mean(axis=-2)  # (m+1, d)
+    assert not traj.diverged
+    np.testing.assert_allclose(means, np.broadcast_to(means[0], means.shape), atol=1e-12)
+
+
+def test_symmetric_interaction_mean_moves_only_by_the_noise():
+    """With noise, the agents' mean moves by exactly sigma * mean(dW) for every integrator."""
+    params = SwarmParams(n_agents=10, epsilon=0.05, sigma=0.3)
+    results = [
+        simulate(params, name, n_steps=30, n_paths=3, seed=7).positions
+        for name in sorted(INTEGRATORS)
+    ]
+    for positions in results[1:]:
+        np.testing.assert_allclose(positions.mean(axis=-2), results[0].mean(axis=-2), atol=1e-12)
+
+
+@pytest.mark.parametrize("m", [5, 25, 100])
+def test_frozen_exponential_euler_stays_in_the_convex_hull(m):
+    params = SwarmParams(n_agents=50, dim=1, epsilon=0.05, sigma=0.0)
+    x0 = np.random.default_rng(3).uniform(-1, 1, 50)
+    traj = simulate(params, "erb", jacobian="frozen", n_steps=m, n_paths=1, initial_positions=x0)
+    pos = traj.positions[:, 0, :, 0]
+    assert pos.min() >= x0.min() - 1e-12
+    assert pos.max() <= x0.max() + 1e-12
+    # and the hull shrinks monotonically
+    spread = pos.max(axis=1) - pos.min(axis=1)
+    assert np.all(np.diff(spread) <= 1e-12)
+
+
+def test_registry_and_metadata():
+    assert set(INTEGRATORS) == {"em", "ee", "heun", "erb", "serb"}
+    for name, cls in INTEGRATORS.items():
+        assert cls.name == name
+        assert isinstance(cls.needs_jacobian, bool)
+        assert make_integrator(name).strong_order in (1.0,)
+    with pytest.raises(ValueError, match="integrator must be one of"):
+        make_integrator("rk4")
+    with pytest.raises(ValueError, match="jacobian"):
+        make_integrator("serb", jacobian="approx")
