@@ -23,13 +23,13 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import argparse  # noqa: E402
-import time  # noqa: E402
+import argparse
+import time
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from agent_envs import SwarmModel, SwarmParams, make_integrator  # noqa: E402
-from agent_envs.integrators.phi_functions import phi_action  # noqa: E402
+from agent_envs import SwarmModel, SwarmParams, make_integrator
+from agent_envs.integrators.phi_functions import phi_action
 
 SCHEMES = [
     ("em", "frozen"),
@@ -62,7 +62,7 @@ def bench_phi(sizes) -> None:
         a = 0.04 * model.frozen_linearization(x)
         v = model.drift(x)
         res = {
-            m: _timeit(lambda m=m: phi_action(a, v, 1, method=m, symmetric=True))
+            m: _timeit(lambda m=m, a=a, v=v: phi_action(a, v, 1, method=m, symmetric=True))
             for m in ("expm", "eigh", "krylov")
         }
         print(
@@ -90,7 +90,9 @@ def bench_steps(sizes, paths_list) -> None:
                     continue
                 scheme = make_integrator(name, jacobian=jac)
                 label = f"{name} ({jac})" if scheme.needs_jacobian else name
-                t = _timeit(lambda s=scheme: s.step(model, x, None, 0.0, 0.04, dw))
+                t = _timeit(
+                    lambda s=scheme, md=model, x=x, dw=dw: s.step(md, x, None, 0.0, 0.04, dw)
+                )
                 base = t if base is None else base
                 batch = "" if paths == 1 else f"{t / single[label]:.1f}"
                 if paths == 1:
