@@ -1,0 +1,120 @@
+"""The public `simulate` contract: shapes, seeding, controls, divergence flagging."""
+
+import numpy as np
+import pytest
+
+from agent_envs import SwarmParams, simulate
+from agent_envs.integrators import INTEGRATORS
+
+
+def test_contract_call_from_the_issue():
+    x0 = np.random.default_rng(0).uniform(-1, 1, 100)
+    traj = simulate(
+        SwarmParams(n_agents=100, epsilon=0.05, sigma=0.01),
+        integrator="serb",
+        jacobian="frozen",
+        n_steps=25,
+        n_paths=20,
+        seed=0,
+        initial_positions=x0,
+        control=None,
+    )
+    assert traj.times.shape == (26,)
+    assert traj.positions.shape == (26, 20, 100, 1)
+    assert traj.times[0] == 0.0 and traj.times[-1] == pytest.approx(1.0)
+    np.testing.assert_array_equal(traj.positions[0, 3, :, 0], x0)
+    assert not traj.diverged
+    assert np.all(np.isfinite(traj.positions))
+
+
+@pytest.mark.parametrize("name", sorted(INTEGRATORS))
+def test_same_seed_gives_bit_identical_trajectories(name):
+    params = SwarmParams(n_agents=8, dim=2, sigma=0.1)
+    a = simulate(params, name, n_steps=10, n_paths=3, seed=42)
+    b = simulate(params, name, n_steps=10, n_paths=3, seed=42)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    c = simulate(params, name, n_steps=10, n_paths=3, seed=43)
+    assert not np.array_equal(a.positions, c.positions)
+
+
+def test_integrators_see_the_same_brownian_increments():
+    """With zero interaction (huge epsilon) every scheme reduces to x + sigma W(t)."""
+    params = SwarmParams(n_agents=5, epsilon=1e12, sigma=0.3)
+    runs = [
+        simulate(params, name, n_steps=12, n_paths=2, seed=5).positions
+        for name in sorted(INTEGRATORS)
+    ]
+    for positions in runs[1:]:
+        np.testing.assert_allclose(positions, runs[0], atol=1e-9)
+
+
+def test_initial_positions_do_not_change_the_noise():
+    params = SwarmParams(n_agents=4, epsilon=1e12, sigma=1.0)
+    x0 = np.zeros(4)
+    a = simulate(params, "em", n_steps=5, n_paths=2, seed=1, initial_positions=x0)
+    b = simulate(params, "em", n_steps=5, n_paths=2, seed=1)
+    np.testing.assert_allclose(
+        a.positions - a.positions[0], b.positions - b.positions[0], atol=1e-9
+    )
+
+
+def test_generator_seed_is_accepted_and_reproducible():
+    params = SwarmParams(n_agents=4)
+    a = simulate(params, "em", n_steps=5, seed=np.random.default_rng(3))
+    b = simulate(params, "em", n_steps=5, seed=np.random.default_rng(3))
+    np.testing.assert_array_equal(a.positions, b.positions)
+
+
+def test_control_as_array_and_callable_agree():
+    params = SwarmParams(n_agents=6, dim=2, sigma=0.05)
+    m = 8
+    u = np.random.default_rng(0).normal(size=(m, 6, 2))
+    times = np.linspace(0, 1, m + 1)
+    a = simulate(params, "serb", n_steps=m, n_paths=2, seed=0, control=u)
+
+    def feedback(t, x):
+        assert x.shape == (2, 6, 2)
+        return u[int(np.argmin(np.abs(times - t)))]
+
+    b = simulate(params, "serb", n_steps=m, n_paths=2, seed=0, control=feedback)
+    np.testing.assert_allclose(a.positions, b.positions)
+    np.testing.assert_allclose(a.controls[:, 1], u)
+
+
+def test_constant_control_moves_the_mean_exactly():
+    """Symmetric interaction: d/dt mean = mean(u); every scheme is exact for the mean."""
+    params = SwarmParams(n_agents=10, sigma=0.0, epsilon=0.05)
+    u = np.full((20, 10, 1), 0.5)
+    for name in sorted(INTEGRATORS):
+        traj = simulate(params, name, n_steps=20, n_paths=1, seed=0, control=u)
+        means = traj.positions[:, 0].mean(axis=(-2, -1))
+        np.testing.assert_allclose(means - means[0], 0.5 * traj.times, atol=1e-12)
+
+
+def test_divergence_is_flagged_not_silent():
+    params = SwarmParams(n_agents=20, epsilon=1e-4, sigma=0.0)
+    traj = simulate(params, "em", n_steps=5, n_paths=1, seed=0, divergence_threshold=5.0)
+    assert traj.diverged
+    assert traj.divergence_step is not None and 1 <= traj.divergence_step <= 5
+    assert traj.diverged_paths.tolist() == [True]
+    assert np.all(np.isfinite(traj.positions[: traj.divergence_step]))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(n_steps=0), "n_steps"),
+        (dict(n_paths=0), "n_paths"),
+        (dict(integrator="rk45"), "integrator"),
+        (dict(jacobian="numeric"), "jacobian"),
+        (dict(phi_method="pade"), "phi_method"),
+        (dict(initial_positions=np.zeros(3)), "initial_positions"),
+        (dict(initial_positions=[np.nan] * 4), "initial_positions"),
+        (dict(control=np.zeros((2, 4, 1))), "control"),
+        (dict(seed="abc"), "seed"),
+        (dict(divergence_threshold=0.0), "divergence_threshold"),
+    ],
+)
+def test_bad_arguments_raise_clear_errors(kwargs, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        simulate(SwarmParams(n_agents=4), **{"n_steps": 5, **kwargs})
