@@ -1,0 +1,362 @@
+"""The episode core shared by the Gymnasium and the PettingZoo swarm environments.
+
+Both envs are thin adapters over `SwarmEpisode`: it validates the keyword arguments
+(`EpisodeConfig`), holds the state of the `n_paths` Brownian paths, steps them with the core's
+integrator (`agent_envs.integrators.make_integrator`) on increments drawn from the generator
+the env passes in (its ``self.np_random``), takes the running cost of `eq:running_cost` with
+`agent_envs.costs`, and flags divergence with `agent_envs.simulator.diverged_paths`. Nothing
+here re-derives the dynamics: the drift, its linearization and the interaction drift of the
+observation all come from `agent_envs.dynamics.SwarmModel`.
+
+One step n -> n + 1 (tau = T / m, t_n = n tau)::
+
+    c^n     = mean over paths of c(x^n, u^n)                  (eq:running_cost)
+    dW^n    ~ N(0, tau I), shape (n_paths, N, d), from the env's generator
+    x^{n+1} = integrator.step(model, x^n, u^n, t_n, tau, dW^n)
+
+and the reward is ``-tau c^n`` (left rectangle rule of `eq:discrete_cost_functional`), so that
+the rewards of an episode add up to minus the discrete cost functional on the env's paths.
+
+The observation needs the interaction drift L(x^{n+1}) x^{n+1} at the new state, and the next
+integrator step needs L(x^{n+1}) again (every scheme evaluates F(x, u) = L(x) x + u at the start
+of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the identity of the
+(read-only) state array, so the kernel matrix is built once per step instead of twice.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from agent_envs.costs import agent_running_cost, running_cost
+from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.integrators import (
+    DEFAULT_INTEGRATOR,
+    DEFAULT_JACOBIAN,
+    Integrator,
+    make_integrator,
+)
+from agent_envs.params import SwarmParams
+from agent_envs.simulator import (
+    DEFAULT_DIVERGENCE_THRESHOLD,
+    as_positions,
+    brownian_increments,
+    diverged_paths,
+    uniform_positions,
+)
+
+#: Default number of time steps m (the paper's turnpike experiments).
+DEFAULT_N_STEPS = 50
+#: Default bound on each coordinate of u_k: an action a in [-1, 1] is the control u = 150 a.
+#: benchmarks/max_control.py measures the turnpike cheap control (eq:cheap_ctr, beta = 12) in
+#: the paper's settings (N = 100, m = 50, 20 seeds): max |u| = 67.7 (symmetric, eps = 0.05,
+#: xbar = 0.7 / -1.7) and 83.6 (non-symmetric, eps in [1e-2, 1e-1], xbar = 2.3) with the
+#: paper's 20 paths; with one path (the env default) 75.3 / 86.4 (symmetric, SERB / EM) and
+#: 95.6 / 113.1 (non-symmetric, SERB / EM). 150 leaves it unclipped with a 30 % margin.
+DEFAULT_MAX_CONTROL = 150.0
+
+ENV_OPTION_NAMES = (
+    "integrator",
+    "jacobian",
+    "phi_method",
+    "n_steps",
+    "n_paths",
+    "max_control",
+    "divergence_threshold",
+)
+
+
+def _positive_int(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value}")
+    return int(value)
+
+
+def _positive_real(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be finite and > 0, got {value}")
+    return value
+
+
+def _check_target(params: SwarmParams, threshold: float) -> None:
+    if np.any(np.abs(params.target_vector) >= threshold):
+        raise ValueError(
+            f"target must lie inside the divergence threshold (|target| < {threshold}), "
+            f"got {params.target}"
+        )
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Validated keyword arguments of both swarm envs (everything except `render_mode`).
+
+    Build it with `EpisodeConfig.from_kwargs(**kwargs)`: the `SwarmParams` fields go to
+    `params`, the rest are the fields below. A bad value raises `ValueError` (or `TypeError`)
+    naming the argument; an unknown name raises `TypeError`.
+    """
+
+    params: SwarmParams
+    integrator: str = DEFAULT_INTEGRATOR
+    jacobian: str = DEFAULT_JACOBIAN
+    phi_method: str = "auto"
+    n_steps: int = DEFAULT_N_STEPS
+    n_paths: int = 1
+    max_control: float = DEFAULT_MAX_CONTROL
+    divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.params, SwarmParams):
+            raise TypeError(f"params must be a SwarmParams, got {type(self.params).__name__}")
+        make_integrator(self.integrator, jacobian=self.jacobian, phi_method=self.phi_method)
+        set_ = object.__setattr__
+        set_(self, "n_steps", _positive_int("n_steps", self.n_steps))
+        set_(self, "n_paths", _positive_int("n_paths", self.n_paths))
+        set_(self, "max_control", _positive_real("max_control", self.max_control))
+        threshold = _positive_real("divergence_threshold", self.divergence_threshold)
+        set_(self, "divergence_threshold", threshold)
+        _check_target(self.params, threshold)
+
+    @classmethod
+    def from_kwargs(cls, **kwargs: Any) -> EpisodeConfig:
+        """Split env keyword arguments into `SwarmParams` fields and env options."""
+        param_names = SwarmParams.field_names()
+        unknown = sorted(set(kwargs) - set(param_names) - set(ENV_OPTION_NAMES))
+        if unknown:
+            allowed = ", ".join((*param_names, *ENV_OPTION_NAMES, "render_mode"))
+            raise TypeError(f"unknown keyword argument(s) {unknown}; the swarm envs take {allowed}")
+        params = SwarmParams(**{k: v for k, v in kwargs.items() if k in param_names})
+        return cls(params=params, **{k: v for k, v in kwargs.items() if k not in param_names})
+
+    @property
+    def dt(self) -> float:
+        """The time step tau = T / m."""
+        return self.params.horizon / self.n_steps
+
+
+class _CachedLinearizationModel(SwarmModel):
+    """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
+
+    The episode only hands it read-only state arrays that it never mutates, and the cached
+    matrix is made read-only too, so a stale or corrupted hit is impossible.
+    """
+
+    def __init__(self, params: SwarmParams) -> None:
+        super().__init__(params)
+        self._cached_state: np.ndarray | None = None
+        self._cached_matrix: np.ndarray | None = None
+
+    def frozen_linearization(self, x: np.ndarray) -> np.ndarray:
+        if x is self._cached_state and self._cached_matrix is not None:
+            return self._cached_matrix
+        matrix = super().frozen_linearization(x)
+        if isinstance(x, np.ndarray) and not x.flags.writeable:
+            matrix.flags.writeable = False
+            self._cached_state, self._cached_matrix = x, matrix
+        return matrix
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """What one `SwarmEpisode.step` did.
+
+    Attributes:
+        start_positions: x^n, (n_paths, N, d), the state the running cost is taken at.
+        control: u^n, (N, d), the control applied over the step (after clipping).
+        running_cost: c(x^n, u^n) of `eq:running_cost`, mean over the paths.
+        diverged: True when x^{n+1} left the divergence threshold, or it or its interaction
+            drift became non-finite, on some path; the episode then keeps x^n and t_n.
+        truncated: True when the step reached the horizon T (n + 1 = m) without diverging.
+    """
+
+    start_positions: np.ndarray
+    control: np.ndarray
+    running_cost: float
+    diverged: bool
+    truncated: bool
+
+
+class SwarmEpisode:
+    """State and stepping of one episode of the controlled swarm, for both env adapters.
+
+    Attributes:
+        config: the validated `EpisodeConfig`.
+        params: the `SwarmParams` of the current episode (target included).
+        model: the `SwarmModel` of `params` (the integrators and controllers use it).
+        integrator: the `Integrator` named by `config.integrator`.
+        positions: (n_paths, N, d) current state (read-only array).
+        step_index: n, the number of steps taken since reset.
+        diverged: True once a step diverged (the episode is then over).
+    """
+
+    def __init__(self, config: EpisodeConfig) -> None:
+        self.config = config
+        self.integrator: Integrator = make_integrator(
+            config.integrator, jacobian=config.jacobian, phi_method=config.phi_method
+        )
+        self.params = config.params
+        self.model: SwarmModel = _CachedLinearizationModel(self.params)
+        self.dt = config.dt
+        self.positions: np.ndarray | None = None
+        self.step_index = 0
+        self.diverged = False
+        self._mean_drift: np.ndarray | None = None
+        self._target = self.params.target_vector
+
+    # ----------------------------------------------------------------- state
+    @property
+    def n_agents(self) -> int:
+        return self.params.n_agents
+
+    @property
+    def dim(self) -> int:
+        return self.params.dim
+
+    @property
+    def target(self) -> np.ndarray:
+        """xbar as a (d,) array (a copy)."""
+        return self._target.copy()
+
+    @property
+    def time(self) -> float:
+        """t_n = n T / m."""
+        return self.params.horizon * self.step_index / self.config.n_steps
+
+    @property
+    def time_fraction(self) -> float:
+        """t_n / T = n / m."""
+        return self.step_index / self.config.n_steps
+
+    @property
+    def done(self) -> bool:
+        """True when the episode has ended (horizon reached or diverged)."""
+        return self.diverged or self.step_index >= self.config.n_steps
+
+    @property
+    def mean_positions(self) -> np.ndarray:
+        """E x over the paths: (N, d), a new array."""
+        return self._require_state().mean(axis=0)
+
+    @property
+    def mean_interaction_drift(self) -> np.ndarray:
+        """E (1/N) sum_l p(x_k, x_l)(x_l - x_k) over the paths: (N, d), a new array."""
+        self._require_state()
+        return self._mean_drift.copy()
+
+    def _require_state(self) -> np.ndarray:
+        if self.positions is None:
+            raise RuntimeError("the episode has not been reset; call reset() first")
+        return self.positions
+
+    def _mean_drift_at(self, x: np.ndarray) -> np.ndarray:
+        """E interaction drift at a (read-only) state x; fills the L(x) cache for the next step."""
+        x.flags.writeable = False
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self.model.interaction_drift(x).mean(axis=0)
+
+    # ---------------------------------------------------------------- stepping
+    def reset(
+        self, rng: np.random.Generator, initial_positions: Any = None, target: Any = None
+    ) -> None:
+        """Start an episode at t = 0.
+
+        The uniform start on [-1, 1]^d is always drawn from `rng` (then replaced by
+        `initial_positions` if given), so that the Brownian increments of the episode do not
+        depend on whether a start was given. `target` overrides xbar for this episode.
+        """
+        n, d = self.config.params.n_agents, self.config.params.dim
+        x0 = uniform_positions(rng, n, d)
+        if initial_positions is not None:
+            x0 = as_positions(initial_positions, n, d, "initial_positions")
+            if np.any(diverged_paths(x0, self.config.divergence_threshold)):
+                raise ValueError(
+                    "initial_positions must lie inside the divergence threshold "
+                    f"(|x| <= {self.config.divergence_threshold})"
+                )
+        params = self.config.params
+        if target is not None:
+            params = dataclasses.replace(params, target=target)
+            _check_target(params, self.config.divergence_threshold)
+        if params != self.params:
+            self.params = params
+            self.model = _CachedLinearizationModel(params)
+            self._target = params.target_vector
+        x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
+        drift = self._mean_drift_at(x)
+        if not np.all(np.isfinite(drift)):
+            raise ValueError("the interaction drift is not finite at the initial positions")
+        self.positions, self._mean_drift = x, drift
+        self.step_index = 0
+        self.diverged = False
+
+    def step(self, rng: np.random.Generator, control: np.ndarray) -> StepOutcome:
+        """Advance all paths by one step under the control u^n (N, d) (already validated)."""
+        x = self._require_state()
+        if self.done:
+            raise RuntimeError(
+                "the episode is over (horizon reached or diverged); call reset() first"
+            )
+        cost = float(np.mean(running_cost(x, control, self._target, self.params.gamma)))
+        dw = brownian_increments(rng, x.shape, self.dt)
+        with np.errstate(over="ignore", invalid="ignore"):
+            x_next = self.integrator.step(self.model, x, control, self.time, self.dt, dw)
+        diverged = bool(np.any(diverged_paths(x_next, self.config.divergence_threshold)))
+        if not diverged:
+            drift = self._mean_drift_at(x_next)
+            diverged = not np.all(np.isfinite(drift))
+        if diverged:
+            self.diverged = True
+        else:
+            self.positions, self._mean_drift = x_next, drift
+            self.step_index += 1
+        return StepOutcome(
+            start_positions=x,
+            control=control,
+            running_cost=cost,
+            diverged=diverged,
+            truncated=not diverged and self.step_index >= self.config.n_steps,
+        )
+
+    # ------------------------------------------------------------------ rewards
+    def reward(self, outcome: StepOutcome) -> float:
+        """-tau c(x^n, u^n), mean over the paths."""
+        return -self.dt * outcome.running_cost
+
+    def agent_costs(self, outcome: StepOutcome) -> np.ndarray:
+        """|x_k^n - xbar|^2 + gamma |u_k^n|^2, mean over the paths: (N,)."""
+        costs = agent_running_cost(
+            outcome.start_positions, outcome.control, self._target, self.params.gamma
+        )
+        return costs.mean(axis=0)
+
+    def agent_rewards(self, outcome: StepOutcome) -> np.ndarray:
+        """-tau/N (|x_k^n - xbar|^2 + gamma |u_k^n|^2), mean over the paths: (N,).
+
+        They add up to `reward(outcome)` (up to round-off).
+        """
+        return -(self.dt / self.n_agents) * self.agent_costs(outcome)
+
+    def control_from_action(self, action: Any, name: str = "action") -> np.ndarray:
+        """u = max_control * clip(action, -1, 1) as an (N, d) float64 array.
+
+        `action` must have N d entries, shaped (N d,) or (N, d) (or (N,) for d = 1); a NaN or
+        infinite entry raises `ValueError`, an entry outside [-1, 1] is clipped.
+        """
+        n, d = self.config.params.n_agents, self.config.params.dim
+        try:
+            arr = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"{name} must be an array of {n * d} real numbers: {exc}") from None
+        if arr.shape not in ((n * d,), (n, d)):
+            raise ValueError(f"{name} must have shape ({n * d},) or ({n}, {d}), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite, got NaN or inf entries")
+        return self.config.max_control * np.clip(arr, -1.0, 1.0).reshape(n, d)

@@ -1,0 +1,292 @@
+"""Gymnasium adapter `agent_envs/Swarm-v0`: one controller sets every agent's control.
+
+The numerics live in `agent_envs.envs.episode.SwarmEpisode`; this module turns it into a
+`gymnasium.Env` (spaces, seeding, `info`, rendering) and provides the registered entry point
+`make_swarm_env`, which adds the `TimeLimit` of the episode's own m = `n_steps`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.envs.episode import EpisodeConfig, StepOutcome, SwarmEpisode
+from agent_envs.envs.observation import (
+    global_observation,
+    interaction_drift_bound,
+    observation_space,
+)
+from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
+from agent_envs.params import SwarmParams
+
+ENV_ID = "agent_envs/Swarm-v0"
+
+
+class SwarmEnv(gym.Env[np.ndarray, np.ndarray]):
+    r"""Drive a stochastic, possibly stiff swarm of N agents to a target at least cost.
+
+    ## Description
+
+    N agents x_k in R^d follow the controlled SDE of the paper (`eq:dynamics`)
+
+        dx_k = ( (1/N) sum_l p(x_k, x_l)(x_l - x_k) + u_k ) dt + sigma dW_k,
+
+    with the Cucker-Smale kernel p(x, y) = 1/(eps (alpha^2 + |x - y|^2)) (`eq:symmker`; small
+    eps makes the interaction stiff) or its non-symmetric version with eps_l linear in l from
+    eps_min to eps_max (`eq:nonsymmker`). One step of the env is one step tau = T/m of the
+    chosen integrator ("serb", the stochastic exponential Rosenbrock-Euler scheme of
+    `eq:serb`, by default), with the control u held fixed over the step. `n_paths` Brownian
+    paths start from the same positions and are driven by the same control; the expectations
+    of the problem are means over these paths. The goal is the fully discrete control problem
+    `eq:discrete_cost_functional`:
+
+        minimize  tau sum_{n=0}^{m-1} E[ (1/N) sum_k |x_k^n - xbar|^2 + gamma |u_k^n|^2 ].
+
+    ## Action Space
+
+    `Box(-1, 1, (N d,), float32)`, agent-major (entry k d + i is coordinate i of agent k).
+    The control is u = max_control * clip(action, -1, 1), reshaped (N, d): an action outside
+    [-1, 1] is clipped (not an error); a NaN or infinite entry, or a shape other than (N d,) or
+    (N, d), raises `ValueError`. The default `max_control = 150` leaves the paper's turnpike
+    cheap control (`eq:cheap_ctr`, beta = 12, N = 100, m = 50) unclipped. Measured by
+    benchmarks/max_control.py, largest |u_k^n| over 20 seeds:
+
+    | kernel (N = 100, m = 50)             | SERB 20 paths | EM 20 | SERB 1 path | EM 1 |
+    |--------------------------------------|---------------|-------|-------------|------|
+    | symmetric eps=0.05, xbar=0.7 or -1.7 | 67.7          | 67.0  | 75.3        | 86.4 |
+    | non-symmetric eps in [0.01, 0.1], 2.3| 83.6          | 81.8  | 95.6        | 113.1|
+
+    ## Observation Space
+
+    `Box((2 N d + d + 1,), float32)`, (N, d) blocks flattened agent-major:
+
+    | slice                  | content                                                      |
+    |------------------------|--------------------------------------------------------------|
+    | [0, N d)               | E x_k, the agents' positions (mean over the paths)          |
+    | [N d, 2 N d)           | E (1/N) sum_l p(x_k, x_l)(x_l - x_k), the interaction drift |
+    | [2 N d, 2 N d + d)     | the target xbar                                              |
+    | 2 N d + d              | t / T, the elapsed fraction of the horizon                   |
+
+    Bounds: positions and target in [-divergence_threshold, divergence_threshold], drift in
+    [-mean(1/eps)/(2 alpha), mean(1/eps)/(2 alpha)], t/T in [0, 1]. Use
+    `agent_envs.envs.observation.split_observation(obs, N, d)` to take it apart (batched).
+    With it the turnpike control is u = beta (xbar - E x) - E drift.
+
+    ## Rewards
+
+    r^n = -tau c(x^n, u^n), with the running cost of `eq:running_cost`
+
+        c(x, u) = (1/N) sum_k ( |x_k - xbar|^2 + gamma |u_k|^2 )
+
+    taken at the state x^n at the *start* of the step (left rectangle rule) and averaged over
+    the paths. So the rewards of an episode add up to minus the discrete cost functional
+    `eq:discrete_cost_functional` estimated on the env's paths:
+    sum_n r^n = -agent_envs.costs.discrete_cost(positions, controls, xbar, gamma, tau).mean().
+
+    ## Starting State
+
+    Positions drawn uniform on [-1, 1]^d from `self.np_random` (the paper's start), the same
+    for every path. `reset(options={"initial_positions": x0})` with x0 of shape (N,) (d = 1) or
+    (N, d) replaces them, and `options={"target": xbar}` replaces the target for the episode.
+    The uniform draw is made either way, so the Brownian increments of a seeded episode do not
+    depend on the options. Other option keys are ignored.
+
+    ## Episode End
+
+    - Truncation: after m = `n_steps` steps (t = T), `truncated=True`. `gym.make` adds a
+      `TimeLimit(n_steps)` as well, so `env.spec.max_episode_steps == n_steps`.
+    - Termination: if a step makes some path non-finite or leave
+      [-divergence_threshold, divergence_threshold] (e.g. Euler-Maruyama on a stiff kernel),
+      `terminated=True` and `info["diverged"] = True`. The env keeps the last finite state
+      x^n and time t_n, returns it as the observation and in `info["positions"]`, and the
+      reward -tau c(x^n, u^n) is finite. With n_paths > 1 one diverging path ends the episode.
+
+    ## Info
+
+    `positions` (n_paths, N, d) after the step, `control` (N, d) the applied u,
+    `time` the time after the step, `running_cost` c(x^n, u^n), `diverged` (bool).
+    `reset` returns `positions`, `time` (0.0) and `diverged` (False).
+
+    ## Arguments
+
+    | kwarg                | default       | meaning                                          |
+    |----------------------|---------------|--------------------------------------------------|
+    | n_agents             | 100           | N >= 2                                           |
+    | dim                  | 1             | d >= 1                                           |
+    | kernel               | "symmetric"   | "symmetric", "nonsymmetric" or a kernel object   |
+    | alpha                | 0.1           | kernel length scale                              |
+    | epsilon              | 0.05          | symmetric kernel stiffness eps > 0               |
+    | epsilon_min, _max    | 0.01, 0.1     | non-symmetric kernel's eps_l range               |
+    | sigma                | 0.01          | noise level                                      |
+    | horizon              | 1.0           | T                                                |
+    | target               | 0.7           | xbar, scalar or length-d sequence                |
+    | gamma                | 0.01          | control weight of the running cost               |
+    | integrator           | "serb"        | "em", "ee", "heun", "erb" or "serb"              |
+    | jacobian             | "frozen"      | "frozen" L(x) or "exact" dF/dx (erb, serb)       |
+    | phi_method           | "auto"        | "auto", "expm", "eigh" or "krylov"               |
+    | n_steps              | 50            | m, the number of steps; tau = T / m              |
+    | n_paths              | 1             | Brownian paths driven by the same control        |
+    | max_control          | 150.0         | u = max_control * clip(action, -1, 1)            |
+    | divergence_threshold | 1e4           | max |x| beyond which a step counts as diverged   |
+    | render_mode          | None          | None, "rgb_array" or "human"                     |
+
+    Bad values raise `ValueError`/`TypeError` naming the argument.
+
+    ## Attributes (on `env.unwrapped`)
+
+    params, model, max_control, n_steps, n_paths, dt, integrator_name, jacobian, positions
+    (n_paths, N, d), time, step_index, episode (the shared `SwarmEpisode`).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        self.config = EpisodeConfig.from_kwargs(**kwargs)
+        self.episode = SwarmEpisode(self.config)
+        self.render_mode = check_render_mode(render_mode)
+        params = self.config.params
+        n, d = params.n_agents, params.dim
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n * d,), dtype=np.float32)
+        self.observation_space = observation_space(
+            n,
+            d,
+            self.config.divergence_threshold,
+            interaction_drift_bound(self.episode.model.kernel),
+        )
+        self._renderer = (
+            None
+            if self.render_mode is None
+            else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
+        )
+
+    # ------------------------------------------------------------- attributes
+    @property
+    def params(self) -> SwarmParams:
+        """SwarmParams of the current episode (target included)."""
+        return self.episode.params
+
+    @property
+    def model(self) -> SwarmModel:
+        return self.episode.model
+
+    @property
+    def max_control(self) -> float:
+        return self.config.max_control
+
+    @property
+    def n_steps(self) -> int:
+        return self.config.n_steps
+
+    @property
+    def n_paths(self) -> int:
+        return self.config.n_paths
+
+    @property
+    def dt(self) -> float:
+        return self.episode.dt
+
+    @property
+    def integrator_name(self) -> str:
+        return self.config.integrator
+
+    @property
+    def jacobian(self) -> str:
+        return self.config.jacobian
+
+    @property
+    def positions(self) -> np.ndarray | None:
+        """(n_paths, N, d) current state (read-only; None before the first reset)."""
+        return self.episode.positions
+
+    @property
+    def time(self) -> float:
+        return self.episode.time
+
+    @property
+    def step_index(self) -> int:
+        return self.episode.step_index
+
+    # ------------------------------------------------------------------ API
+    def _observation(self) -> np.ndarray:
+        ep = self.episode
+        return global_observation(
+            ep.mean_positions,
+            ep.mean_interaction_drift,
+            ep.target,
+            ep.time_fraction,
+            self.observation_space,
+        )
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = {} if options is None else options
+        self.episode.reset(
+            self.np_random,
+            initial_positions=options.get("initial_positions"),
+            target=options.get("target"),
+        )
+        if self._renderer is not None:
+            self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)
+            if self.render_mode == "human":
+                self.render()
+        info = {"positions": self.episode.positions.copy(), "time": 0.0, "diverged": False}
+        return self._observation(), info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        control = self.episode.control_from_action(action)
+        outcome: StepOutcome = self.episode.step(self.np_random, control)
+        if self._renderer is not None and not outcome.diverged:
+            self._renderer.record(self.episode.time, self.episode.mean_positions)
+            if self.render_mode == "human":
+                self.render()
+        info = {
+            "positions": self.episode.positions.copy(),
+            "control": control,
+            "time": self.episode.time,
+            "running_cost": outcome.running_cost,
+            "diverged": outcome.diverged,
+        }
+        return (
+            self._observation(),
+            float(self.episode.reward(outcome)),
+            outcome.diverged,
+            outcome.truncated,
+            info,
+        )
+
+    def render(self) -> np.ndarray | None:
+        if self._renderer is None:
+            gym.logger.warn(
+                "You are calling render method without specifying any render mode. "
+                f'You can specify the render_mode at initialization, e.g. gym.make("{ENV_ID}", '
+                'render_mode="rgb_array")'
+            )
+            return None
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+
+
+def make_swarm_env(**kwargs: Any) -> gym.Env:
+    """Entry point of `agent_envs/Swarm-v0`: `SwarmEnv(**kwargs)` in a `TimeLimit(n_steps)`.
+
+    The horizon m = `n_steps` is a keyword argument, so a fixed `max_episode_steps` in the
+    registration would be wrong for every other m (too short above it). The id is therefore
+    registered without one and this entry point adds `TimeLimit(env, env.n_steps)`: episodes
+    last exactly `n_steps` steps and `gym.make(...).spec.max_episode_steps == n_steps`. The
+    env itself also truncates at `n_steps` (it cannot step past t = T), so both agree.
+    """
+    env = SwarmEnv(**kwargs)
+    return gym.wrappers.TimeLimit(env, max_episode_steps=env.n_steps)
+
+
+# gym.make reads the render modes from the entry point's metadata.
+make_swarm_env.metadata = SwarmEnv.metadata  # type: ignore[attr-defined]

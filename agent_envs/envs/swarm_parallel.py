@@ -1,0 +1,282 @@
+"""PettingZoo adapter: one agent per swarm member, over the same `SwarmEpisode` core.
+
+Exposed as the versioned module `agent_envs.swarm_v0` (`parallel_env`, `env`, `raw_env`).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.envs.episode import EpisodeConfig, SwarmEpisode
+from agent_envs.envs.observation import (
+    agent_observation_space,
+    agent_observations,
+    global_observation,
+    interaction_drift_bound,
+    observation_space,
+)
+from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
+from agent_envs.params import SwarmParams
+
+
+class SwarmParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
+    r"""The swarm of `agent_envs/Swarm-v0` with each member as its own agent.
+
+    ## Description
+
+    The same controlled SDE (`eq:dynamics`), integrator, seeding and episode as
+    `agent_envs.envs.swarm_env.SwarmEnv` (both adapt `agent_envs.envs.episode.SwarmEpisode`),
+    but agent ``agent_k`` (k = 0 .. N-1) chooses its own control u_k.
+
+    ## Action Space
+
+    Per agent `Box(-1, 1, (d,), float32)`; u_k = max_control * clip(action_k, -1, 1). Every
+    live agent must act each step; a missing or unknown agent, a NaN/infinite entry or a
+    wrong shape raises `ValueError`. Out-of-range actions are clipped.
+
+    ## Observation Space
+
+    Per agent `Box((3 d + 1,), float32)`, means over the Brownian paths:
+
+    | slice        | content                                                  |
+    |--------------|----------------------------------------------------------|
+    | [0, d)       | E x_k, the agent's own position                          |
+    | [d, 2d)      | E (1/N) sum_l p(x_k, x_l)(x_l - x_k), the drift it feels |
+    | [2d, 3d)     | the target xbar                                          |
+    | 3d           | t / T                                                    |
+
+    This is enough for a decentralized turnpike policy
+    u_k = beta (xbar - E x_k) - E drift_k. `state()` returns the global state, equal to the
+    Gymnasium observation vector (`state_space` is its Box).
+
+    ## Rewards
+
+    r_k^n = -tau/N (|x_k^n - xbar|^2 + gamma |u_k^n|^2), mean over the paths, at the state at
+    the start of the step. sum_k r_k^n is the Gymnasium reward -tau c(x^n, u^n) for the same
+    states and controls (up to round-off).
+
+    ## Starting State / Episode End / Arguments
+
+    As for `SwarmEnv`: the same keyword arguments and reset options; after m = `n_steps` steps
+    every agent is truncated, on divergence every agent is terminated (and its info has
+    ``diverged=True``). Either way `agents` becomes empty; call `reset()` again.
+
+    ## Info (per agent)
+
+    `time` (after the step), `running_cost` (the agent's term |x_k - xbar|^2 + gamma |u_k|^2,
+    mean over the paths), `diverged` (bool). Global quantities (positions of all paths, the
+    control) are on the env: `positions`, `last_control`.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "swarm_v0",
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 10,
+        "is_parallelizable": True,
+    }
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        self.config = EpisodeConfig.from_kwargs(**kwargs)
+        self.episode = SwarmEpisode(self.config)
+        self.render_mode = check_render_mode(render_mode)
+        params = self.config.params
+        n, d = params.n_agents, params.dim
+        self.possible_agents: list[str] = [f"agent_{k}" for k in range(n)]
+        self.agents: list[str] = []
+        self._agent_index = {agent: k for k, agent in enumerate(self.possible_agents)}
+        bound = self.config.divergence_threshold
+        drift_bound = interaction_drift_bound(self.episode.model.kernel)
+        self.observation_spaces = {
+            agent: agent_observation_space(d, bound, drift_bound) for agent in self.possible_agents
+        }
+        self.action_spaces = {
+            agent: spaces.Box(-1.0, 1.0, shape=(d,), dtype=np.float32)
+            for agent in self.possible_agents
+        }
+        self.state_space = observation_space(n, d, bound, drift_bound)
+        self._obs_space = self.observation_spaces[self.possible_agents[0]]
+        self._np_random: np.random.Generator | None = None
+        self._np_random_seed: int | None = None
+        self.last_control: np.ndarray | None = None
+        self._renderer = (
+            None
+            if self.render_mode is None
+            else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
+        )
+
+    # ------------------------------------------------------------ spaces, rng
+    def observation_space(self, agent: str) -> spaces.Box:
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Box:
+        return self.action_spaces[agent]
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The env's generator (seeded by `reset(seed=...)`, as in Gymnasium)."""
+        if self._np_random is None:
+            self._np_random, self._np_random_seed = seeding.np_random()
+        return self._np_random
+
+    # ------------------------------------------------------------- attributes
+    @property
+    def params(self) -> SwarmParams:
+        return self.episode.params
+
+    @property
+    def model(self) -> SwarmModel:
+        return self.episode.model
+
+    @property
+    def max_control(self) -> float:
+        return self.config.max_control
+
+    @property
+    def n_steps(self) -> int:
+        return self.config.n_steps
+
+    @property
+    def n_paths(self) -> int:
+        return self.config.n_paths
+
+    @property
+    def dt(self) -> float:
+        return self.episode.dt
+
+    @property
+    def integrator_name(self) -> str:
+        return self.config.integrator
+
+    @property
+    def jacobian(self) -> str:
+        return self.config.jacobian
+
+    @property
+    def positions(self) -> np.ndarray | None:
+        return self.episode.positions
+
+    @property
+    def time(self) -> float:
+        return self.episode.time
+
+    @property
+    def step_index(self) -> int:
+        return self.episode.step_index
+
+    # ------------------------------------------------------------------ API
+    def _observations(self) -> dict[str, np.ndarray]:
+        ep = self.episode
+        rows = agent_observations(
+            ep.mean_positions,
+            ep.mean_interaction_drift,
+            ep.target,
+            ep.time_fraction,
+            self._obs_space,
+        )
+        return dict(zip(self.possible_agents, rows, strict=True))
+
+    def state(self) -> np.ndarray:
+        """The global state: the Gymnasium observation vector of the current state."""
+        ep = self.episode
+        return global_observation(
+            ep.mean_positions,
+            ep.mean_interaction_drift,
+            ep.target,
+            ep.time_fraction,
+            self.state_space,
+        )
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
+        if seed is not None:
+            self._np_random, self._np_random_seed = seeding.np_random(seed)
+        options = {} if options is None else options
+        self.episode.reset(
+            self.np_random,
+            initial_positions=options.get("initial_positions"),
+            target=options.get("target"),
+        )
+        self.agents = self.possible_agents[:]
+        self.last_control = None
+        if self._renderer is not None:
+            self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)
+            if self.render_mode == "human":
+                self.render()
+        infos = {agent: {"time": 0.0, "diverged": False} for agent in self.agents}
+        return self._observations(), infos
+
+    def _control(self, actions: dict[str, Any]) -> np.ndarray:
+        if not self.agents:
+            raise RuntimeError("the episode is over (no live agents); call reset() first")
+        if not isinstance(actions, dict):
+            raise TypeError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
+        missing = [a for a in self.agents if a not in actions]
+        extra = [a for a in actions if a not in self._agent_index]
+        if missing or extra:
+            raise ValueError(
+                f"actions must hold one action per live agent; missing {missing[:5]}"
+                f"{'...' if len(missing) > 5 else ''}, unknown {extra[:5]}"
+            )
+        n, d = self.config.params.n_agents, self.config.params.dim
+        try:
+            stacked = np.asarray([actions[a] for a in self.possible_agents], dtype=np.float64)
+        except (TypeError, ValueError):
+            stacked = None
+        if stacked is None or stacked.shape not in ((n, d), (n,) if d == 1 else (n, d)):
+            for agent in self.possible_agents:  # slow path: name the offending agent
+                try:
+                    shape = np.asarray(actions[agent], dtype=np.float64).shape
+                except (TypeError, ValueError) as exc:
+                    raise TypeError(f"actions[{agent!r}] must be real numbers: {exc}") from None
+                if shape not in ((d,), () if d == 1 else (d,)):
+                    raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {shape}")
+            raise ValueError(f"actions must all have the same shape ({d},) to stack to ({n}, {d})")
+        return self.episode.control_from_action(stacked, name="actions")
+
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[
+        dict[str, np.ndarray],
+        dict[str, float],
+        dict[str, bool],
+        dict[str, bool],
+        dict[str, dict[str, Any]],
+    ]:
+        control = self._control(actions)
+        outcome = self.episode.step(self.np_random, control)
+        self.last_control = control
+        rewards_arr = self.episode.agent_rewards(outcome)
+        costs = self.episode.agent_costs(outcome)
+        agents = self.agents
+        rewards = {a: float(r) for a, r in zip(agents, rewards_arr, strict=True)}
+        terminations = dict.fromkeys(agents, outcome.diverged)
+        truncations = dict.fromkeys(agents, outcome.truncated)
+        time = self.episode.time
+        infos = {
+            a: {"time": time, "running_cost": float(c), "diverged": outcome.diverged}
+            for a, c in zip(agents, costs, strict=True)
+        }
+        observations = self._observations()
+        if self._renderer is not None and not outcome.diverged:
+            self._renderer.record(time, self.episode.mean_positions)
+            if self.render_mode == "human":
+                self.render()
+        if outcome.diverged or outcome.truncated:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def render(self) -> np.ndarray | None:
+        if self._renderer is None:
+            return None
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
