@@ -1,0 +1,57 @@
+"""Reference controllers for the swarm envs, all SB3 `PolicyPredictor`s.
+
+    from baselines import TurnpikeController
+    ctrl = TurnpikeController(env)                    # beta = 12, delta = 2e-4 (paper)
+    action, state = ctrl.predict(obs, state)          # actions in [-1, 1]
+
+- `TurnpikeController`: cheap control `eq:cheap_ctr` until tbar (`eq:tptime`), then u = 0.
+- `ProportionalController`: beta (xbar - x_k) until tbar, no interaction cancellation.
+- `ZeroController`: u = 0 (static control, `eq:stationary_solution`).
+- `turnpike_time`, `cheap_control`: the formulas on arrays.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from baselines.simple import ProportionalController, ZeroController
+from baselines.turnpike import (
+    DEFAULT_BETA,
+    DEFAULT_DELTA,
+    CheapClosedLoopModel,
+    FeedbackController,
+    TurnpikeController,
+    cheap_control,
+    cheap_control_from_model,
+    turnpike_time,
+)
+
+#: name -> controller class (`make_baseline`, `agent-envs evaluate --policy NAME`)
+BASELINES: dict[str, type[FeedbackController]] = {
+    "turnpike": TurnpikeController,
+    "proportional": ProportionalController,
+    "zero": ZeroController,
+}
+
+
+def make_baseline(name: str, env: Any, **kwargs: Any) -> FeedbackController:
+    """Build the baseline registered under `name` ("turnpike", "proportional", "zero") for env."""
+    if name not in BASELINES:
+        raise ValueError(f"unknown baseline {name!r}; choose one of {sorted(BASELINES)}")
+    return BASELINES[name](env, **kwargs)
+
+
+__all__ = [
+    "BASELINES",
+    "DEFAULT_BETA",
+    "DEFAULT_DELTA",
+    "CheapClosedLoopModel",
+    "FeedbackController",
+    "ProportionalController",
+    "TurnpikeController",
+    "ZeroController",
+    "cheap_control",
+    "cheap_control_from_model",
+    "make_baseline",
+    "turnpike_time",
+]

@@ -1,0 +1,455 @@
+"""Reproduction of the paper's turnpike-controlled experiments (Section 5.2, Figs. 5-6).
+
+    agent-envs reproduce turnpike --out DIR [--seeds 0 1 2]
+
+Setting (paper): N = 100 agents uniform on [-1, 1], T = 1, m = 50, 20 Brownian paths,
+sigma = 0.01, alpha = 0.1, beta = 12, delta = 2e-4; tbar from `eq:tptime` per run.
+
+Runs:
+- ``em_sym_0.7``:      symmetric kernel eps = 0.05, xbar = 0.7, Euler-Maruyama (Fig. 5 top);
+- ``serb_sym_0.7``:    same, SERB (frozen Jacobian, the core's default) (Fig. 5 centre);
+- ``serb_sym_-1.7``:   xbar = -1.7, SERB (Fig. 5 bottom; its caption says -1.6, the text and
+  tbar = 0.6 say -1.7);
+- ``serb_nonsym_2.3``: non-symmetric kernel, eps_l from 1e-2 to 1e-1, xbar = 2.3, SERB (Fig. 6);
+- ``serb-exact_sym_0.7``: SERB with the exact Jacobian, for comparison (not in the paper).
+
+Each run is done in two modes, from the same initial positions (the env's seeded draw):
+
+- ``env``: the public API. ``gym.make("agent_envs/Swarm-v0", n_paths=20, ...)`` driven by
+  `baselines.TurnpikeController`: the cheap control `eq:cheap_ctr` (path means), held constant
+  over each step (zero-order hold, as every RL policy acts), until tbar, then u = 0.
+- ``closed-loop``: the paper's procedure (Section 5.2): in [0, tbar] the closed loop
+  `eq:dyn_mean` is integrated with the run's scheme (`baselines.CheapClosedLoopModel`: the
+  cheap control cancels each path's interaction, dx = beta (xbar - x) dt + sigma dW; for SERB the
+  mean follows `eq:expint_mean`, exact), then the uncontrolled swarm (static control u = 0,
+  `eq:stationary_solution`) with the same scheme. Uses the core's integrators and its Brownian
+  increments; the cost uses the per-path control u(x^n) at each step's start.
+
+Per run: tbar, the Lyapunov value L = ||E x - xbar||^2 (`eq:tptime`'s quantity) at tbar and at
+T, the RMS distance sqrt(mean_k |E x_k(T) - xbar|^2) at T and its maximum after tbar, the total
+cost tau sum_n c(x^n, u^n) (`eq:discrete_cost_functional`), max |u|, and whether a path diverged
+(non-finite or |x| > 1e4). Outputs: results.md / results.csv / results.json, one PNG of the mean
+trajectories per mode (one panel per run, tbar marked), and lyapunov.png (L^n against t).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from baselines import CheapClosedLoopModel, TurnpikeController, turnpike_time
+
+BETA = 12.0
+DELTA = 2e-4
+N_AGENTS = 100
+N_STEPS = 50
+N_PATHS = 20
+EPSILON = 0.05
+MODES = ("env", "closed-loop")
+
+
+@dataclass(frozen=True)
+class TurnpikeRun:
+    """One controlled experiment of Section 5.2."""
+
+    name: str
+    integrator: str
+    target: float
+    kernel: str = "symmetric"
+    jacobian: str = "frozen"
+    figure: str = ""
+
+    def env_kwargs(self, n_agents: int, n_steps: int, n_paths: int) -> dict[str, Any]:
+        return {
+            "n_agents": n_agents,
+            "n_steps": n_steps,
+            "n_paths": n_paths,
+            "epsilon": EPSILON,
+            "epsilon_min": 1e-2,
+            "epsilon_max": 1e-1,
+            "alpha": 0.1,
+            "sigma": 0.01,
+            "horizon": 1.0,
+            "kernel": self.kernel,
+            "target": self.target,
+            "integrator": self.integrator,
+            "jacobian": self.jacobian,
+        }
+
+
+PAPER_RUNS: tuple[TurnpikeRun, ...] = (
+    TurnpikeRun("em_sym_0.7", "em", 0.7, figure="Fig. 5 top"),
+    TurnpikeRun("serb_sym_0.7", "serb", 0.7, figure="Fig. 5 centre"),
+    TurnpikeRun("serb_sym_-1.7", "serb", -1.7, figure="Fig. 5 bottom"),
+    TurnpikeRun("serb_nonsym_2.3", "serb", 2.3, kernel="nonsymmetric", figure="Fig. 6"),
+    TurnpikeRun("serb-exact_sym_0.7", "serb", 0.7, jacobian="exact", figure="(comparison)"),
+)
+
+
+@dataclass
+class RunRecord:
+    """Path-mean trajectory and controls of one run, plus what the table needs."""
+
+    times: np.ndarray  # (m+1,)
+    mean_positions: np.ndarray  # (m+1, N, d), NaN after a divergence
+    controls: np.ndarray  # (m, N, d)
+    running_cost: np.ndarray  # (m,)
+    target: float
+    tbar: float
+    dt: float
+    diverged: bool
+    divergence_step: int | None
+    wall_time: float
+    max_abs_u: float | None = None  # over the applied controls (per path); None: from controls
+
+
+def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_paths: int):
+    """The run through `agent_envs/Swarm-v0` and the TurnpikeController (public API)."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401
+    from training.evaluate import rollout
+
+    env = gym.make("agent_envs/Swarm-v0", **run.env_kwargs(n_agents, n_steps, n_paths))
+    try:
+        ctrl = TurnpikeController(env, beta=BETA, delta=DELTA)
+        ep = rollout(ctrl, env, seed)
+    finally:
+        env.close()
+    return RunRecord(
+        times=ep.times,
+        mean_positions=ep.mean_positions,
+        controls=ep.controls,
+        running_cost=ep.running_cost,
+        target=run.target,
+        tbar=ep.turnpike_time,
+        dt=ep.dt,
+        diverged=ep.diverged,
+        divergence_step=ep.divergence_step,
+        wall_time=ep.wall_time,
+    ), ep.mean_positions[0]
+
+
+def run_closed_loop_mode(
+    run: TurnpikeRun, seed: int, x0: np.ndarray, n_steps: int, n_paths: int
+) -> RunRecord:
+    """The paper's procedure: closed-loop `eq:dyn_mean` on [0, tbar], then u = 0 (core API)."""
+    from agent_envs.costs import running_cost
+    from agent_envs.dynamics.swarm import SwarmModel
+    from agent_envs.integrators import make_integrator
+    from agent_envs.params import SwarmParams
+    from agent_envs.simulator import (
+        DEFAULT_DIVERGENCE_THRESHOLD,
+        brownian_increments,
+        diverged_paths,
+    )
+
+    kw = run.env_kwargs(x0.shape[0], n_steps, n_paths)
+    params = SwarmParams(**{k: kw[k] for k in SwarmParams.field_names() if k in kw})
+    model = SwarmModel(params)
+    target = params.target_vector
+    closed = CheapClosedLoopModel(model, target, BETA)
+    scheme = make_integrator(run.integrator, jacobian=run.jacobian)
+    dt = params.horizon / n_steps
+    tbar = turnpike_time(x0, target, BETA, DELTA, params.horizon)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 5, 2]))
+    n, d = params.n_agents, params.dim
+    x = np.broadcast_to(x0, (n_paths, n, d)).copy()
+    mean_positions = np.full((n_steps + 1, n, d), np.nan)
+    mean_positions[0] = x.mean(axis=0)
+    controls = np.zeros((n_steps, n, d))
+    costs = np.zeros(n_steps)
+    diverged, divergence_step = False, None
+    max_u = 0.0
+    start = time.perf_counter()
+    for step in range(n_steps):
+        t = step * dt
+        cheap = t < tbar - 1e-9
+        u = closed.control(x) if cheap else np.zeros_like(x)  # per path (n_paths, N, d)
+        controls[step] = u.mean(axis=0)
+        max_u = max(max_u, float(np.max(np.abs(u))))
+        costs[step] = float(np.mean(running_cost(x, u, target, params.gamma)))
+        dw = brownian_increments(rng, x.shape, dt)
+        with np.errstate(over="ignore", invalid="ignore"):
+            x = scheme.step(closed if cheap else model, x, None, t, dt, dw)
+        if np.any(diverged_paths(x, DEFAULT_DIVERGENCE_THRESHOLD)):
+            diverged, divergence_step = True, step + 1
+            break
+        mean_positions[step + 1] = x.mean(axis=0)
+    return RunRecord(
+        times=np.linspace(0.0, params.horizon, n_steps + 1),
+        mean_positions=mean_positions,
+        controls=controls,
+        running_cost=costs,
+        target=run.target,
+        tbar=float(tbar),
+        dt=dt,
+        diverged=diverged,
+        divergence_step=divergence_step,
+        wall_time=time.perf_counter() - start,
+        max_abs_u=max_u,
+    )
+
+
+def summarize_record(run: TurnpikeRun, mode: str, seed: int, rec: RunRecord) -> dict[str, Any]:
+    """The table row of one run."""
+    err = rec.mean_positions - rec.target  # (m+1, N, d)
+    lyap = np.sum(err**2, axis=(-2, -1))  # L^n
+    rms = np.sqrt(np.mean(np.sum(err**2, axis=-1), axis=-1))
+    nbar = min(int(np.ceil(rec.tbar / rec.dt - 1e-9)), len(rec.times) - 1)
+    finite = np.isfinite(rms)
+    after = rms[nbar:][finite[nbar:]]
+    return {
+        "run": run.name,
+        "mode": mode,
+        "seed": seed,
+        "figure": run.figure,
+        "integrator": run.integrator.upper() + (" (exact J)" if run.jacobian == "exact" else ""),
+        "kernel": run.kernel,
+        "target": run.target,
+        "tbar": rec.tbar,
+        "L_at_tbar": float(lyap[nbar]),
+        "L_at_T": float(lyap[-1]),
+        "rms_distance_at_T": float(rms[-1]),
+        "max_rms_after_tbar": float(after.max()) if after.size else float("nan"),
+        "total_cost": float(rec.dt * np.sum(rec.running_cost)),
+        "max_abs_u": float(
+            np.max(np.abs(rec.controls)) if rec.max_abs_u is None else rec.max_abs_u
+        ),
+        "diverged": bool(rec.diverged),
+        "wall_time_s": rec.wall_time,
+    }
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> None:
+    """One panel per run: every agent's path-mean position against time, tbar marked."""
+    plt = _pyplot()
+    ncols = 2
+    nrows = int(np.ceil(len(panels) / ncols))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(11, 3.1 * nrows), squeeze=False)
+    for ax in axes.flat[len(panels) :]:
+        ax.set_visible(False)
+    for ax, (row, rec) in zip(axes.flat, panels, strict=False):
+        ax.plot(rec.times, rec.mean_positions[..., 0], lw=0.5, color="tab:blue", alpha=0.6)
+        ax.axhline(rec.target, color="k", ls="--", lw=1)
+        ax.axvline(rec.tbar, color="tab:red", ls=":", lw=1.3)
+        status = (
+            "DIVERGED" if row["diverged"] else f"RMS dist. at T = {row['rms_distance_at_T']:.2g}"
+        )
+        ax.set_title(
+            f"{row['integrator']}, {row['kernel']}, xbar = {row['target']:g}, "
+            f"tbar = {row['tbar']:.2f}\n[{status}]",
+            fontsize=9,
+        )
+        ax.set_xlabel("t")
+        ax.set_ylabel("E x_k(t)")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, RunRecord]]]) -> None:
+    """L^n = ||E x^n - xbar||^2 against t, one panel per mode, one curve per run."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(by_mode), figsize=(6 * len(by_mode), 4), squeeze=False)
+    for ax, (mode, panels) in zip(axes[0], by_mode.items(), strict=True):
+        for i, (row, rec) in enumerate(panels):
+            lyap = np.sum((rec.mean_positions - rec.target) ** 2, axis=(-2, -1))
+            ax.plot(rec.times, lyap, color=f"C{i}", lw=1.4, label=row["run"])
+            ax.axvline(rec.tbar, color=f"C{i}", ls=":", lw=0.9)
+        ax.axhline(DELTA, color="k", ls="--", lw=0.8, label="delta")
+        ax.set_yscale("log")
+        ax.set_xlabel("t")
+        ax.set_ylabel("||E x^n - xbar||^2")
+        ax.set_title(f"mode: {mode} (dotted: tbar)", fontsize=10)
+        ax.grid(True, which="both", alpha=0.25)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+TABLE_COLUMNS = (
+    "run",
+    "mode",
+    "seed",
+    "integrator",
+    "kernel",
+    "target",
+    "tbar",
+    "L_at_tbar",
+    "L_at_T",
+    "rms_distance_at_T",
+    "max_rms_after_tbar",
+    "total_cost",
+    "max_abs_u",
+    "diverged",
+)
+
+
+def _markdown_table(df: pd.DataFrame) -> str:
+    def fmt(v):
+        if isinstance(v, (bool, np.bool_)):
+            return "yes" if v else "no"
+        if isinstance(v, (float, np.floating)):
+            return f"{v:.3g}" if np.isfinite(v) else "n/a"
+        return str(v)
+
+    cols = [c for c in TABLE_COLUMNS if c in df.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    lines += ["| " + " | ".join(fmt(r[c]) for c in cols) + " |" for _, r in df.iterrows()]
+    return "\n".join(lines)
+
+
+def reproduce(
+    out_dir: str | Path,
+    seeds: tuple[int, ...] = (0,),
+    *,
+    runs: tuple[TurnpikeRun, ...] = PAPER_RUNS,
+    modes: tuple[str, ...] = MODES,
+    n_agents: int = N_AGENTS,
+    n_steps: int = N_STEPS,
+    n_paths: int = N_PATHS,
+    progress: bool = True,
+) -> pd.DataFrame:
+    """Run every (run, mode, seed), write the table and figures into `out_dir`; return the table.
+
+    Figures show the first seed.
+    """
+    from tqdm.auto import tqdm
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for mode in modes:
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    rows: list[dict[str, Any]] = []
+    panels: dict[str, list[tuple[dict, RunRecord]]] = {m: [] for m in modes}
+    bar = tqdm(total=len(runs) * len(seeds), desc="reproduce turnpike", disable=not progress)
+    for seed in seeds:
+        for run in runs:
+            bar.set_postfix_str(f"{run.name} seed={seed}")
+            env_rec, x0 = run_env_mode(run, seed, n_agents, n_steps, n_paths)
+            records = {"env": env_rec}
+            if "closed-loop" in modes:
+                records["closed-loop"] = run_closed_loop_mode(run, seed, x0, n_steps, n_paths)
+            for mode in modes:
+                row = summarize_record(run, mode, seed, records[mode])
+                rows.append(row)
+                if seed == seeds[0]:
+                    panels[mode].append((row, records[mode]))
+            bar.update(1)
+    bar.close()
+    table = pd.DataFrame(rows)
+    table.to_csv(out / "results.csv", index=False)
+    settings = {
+        "n_agents": n_agents,
+        "n_steps": n_steps,
+        "n_paths": n_paths,
+        "beta": BETA,
+        "delta": DELTA,
+        "epsilon": EPSILON,
+        "sigma": 0.01,
+        "alpha": 0.1,
+        "seeds": list(seeds),
+        "runs": [asdict(r) for r in runs],
+    }
+    (out / "results.json").write_text(
+        json.dumps(
+            {"settings": settings, "rows": json.loads(table.to_json(orient="records"))}, indent=1
+        )
+    )
+    figures = []
+    for mode in modes:
+        fname = f"turnpike_{mode.replace('-', '_')}.png"
+        plot_runs(
+            out / fname,
+            panels[mode],
+            f"Turnpike control, mode '{mode}', seed {seeds[0]}: path-mean positions "
+            f"(N = {n_agents}, m = {n_steps}, {n_paths} paths); dotted red: tbar",
+        )
+        figures.append(fname)
+    plot_lyapunov(out / "lyapunov.png", panels)
+    figures.append("lyapunov.png")
+    md = [
+        "# Turnpike-controlled experiments (paper Section 5.2)",
+        "",
+        f"N = {n_agents}, m = {n_steps}, {n_paths} paths, eps = {EPSILON} (non-symmetric: "
+        f"1e-2..1e-1), sigma = 0.01, alpha = 0.1, beta = {BETA:g}, delta = {DELTA:g}; "
+        f"seeds {list(seeds)}. L = ||E x - xbar||^2 (sum over agents); rms = "
+        "sqrt(mean_k (E x_k - xbar)^2); cost = tau sum_n c(x^n, u^n).",
+        "",
+        "Modes: `env` = agent_envs/Swarm-v0 + TurnpikeController (control held over each step); "
+        "`closed-loop` = the paper's procedure (closed loop eq:dyn_mean integrated on [0, tbar], "
+        "then u = 0).",
+        "",
+        _markdown_table(table),
+        "",
+        *[f"![{f}]({f})" for f in figures],
+        "",
+    ]
+    (out / "results.md").write_text("\n".join(md))
+    return table
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("reproduction_turnpike"),
+        help="output folder (default: reproduction_turnpike)",
+    )
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=[0],
+        help="seeds of the initial positions and noise (default: 0)",
+    )
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        choices=MODES,
+        default=list(MODES),
+        help="env (public API, zero-order hold) and/or closed-loop (paper)",
+    )
+    parser.add_argument("--n-agents", type=int, default=N_AGENTS)
+    parser.add_argument("--n-paths", type=int, default=N_PATHS)
+    parser.add_argument("--n-steps", type=int, default=N_STEPS)
+    parser.add_argument("--no-progress", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    table = reproduce(
+        args.out,
+        tuple(args.seeds),
+        modes=tuple(args.modes),
+        n_agents=args.n_agents,
+        n_steps=args.n_steps,
+        n_paths=args.n_paths,
+        progress=not args.no_progress,
+    )
+    cols = [c for c in TABLE_COLUMNS if c in table.columns]
+    with pd.option_context(
+        "display.width", 200, "display.max_columns", 30, "display.float_format", "{:.3g}".format
+    ):
+        print(table[cols].to_string(index=False))
+    print(f"written: {args.out}/results.md, results.csv, results.json and PNGs")
+    return 0
