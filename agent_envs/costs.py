@@ -15,10 +15,7 @@ import numpy as np
 
 def running_cost(x: np.ndarray, u: np.ndarray | None, target: np.ndarray, gamma: float):
     """c(x, u) per path: x, u of shape (..., N, d), target (d,); returns shape (...)."""
-    state = np.mean(np.sum((x - target) ** 2, axis=-1), axis=-1)
-    if u is None:
-        return state
-    return state + gamma * np.mean(np.sum(u * u, axis=-1), axis=-1)
+    return np.mean(agent_running_cost(x, u, target, gamma), axis=-1)
 
 
 def agent_running_cost(x, u, target, gamma) -> np.ndarray:

@@ -19,7 +19,8 @@ import numpy as np
 KERNEL_NAMES = ("symmetric", "nonsymmetric")
 
 
-def _check_real(name: str, value: Any) -> float:
+def check_real(name: str, value: Any) -> float:
+    """`value` as a finite float; TypeError/ValueError naming `name` otherwise."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
     value = float(value)
@@ -28,14 +29,16 @@ def _check_real(name: str, value: Any) -> float:
     return value
 
 
-def _check_positive(name: str, value: Any) -> float:
-    value = _check_real(name, value)
+def check_positive(name: str, value: Any) -> float:
+    """`value` as a finite float > 0; TypeError/ValueError naming `name` otherwise."""
+    value = check_real(name, value)
     if value <= 0.0:
         raise ValueError(f"{name} must be > 0, got {value}")
     return value
 
 
-def _check_int(name: str, value: Any, minimum: int) -> int:
+def check_int(name: str, value: Any, minimum: int) -> int:
+    """`value` as an int >= minimum (bools rejected); TypeError/ValueError naming `name`."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
     if value < minimum:
@@ -94,8 +97,8 @@ class SwarmParams:
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
-        set_(self, "n_agents", _check_int("n_agents", self.n_agents, 2))
-        set_(self, "dim", _check_int("dim", self.dim, 1))
+        set_(self, "n_agents", check_int("n_agents", self.n_agents, 2))
+        set_(self, "dim", check_int("dim", self.dim, 1))
         if isinstance(self.kernel, str):
             if self.kernel not in KERNEL_NAMES:
                 raise ValueError(
@@ -103,29 +106,31 @@ class SwarmParams:
                     f"got {self.kernel!r}"
                 )
         else:
-            missing = [m for m in ("value", "grad_x", "grad_y") if not hasattr(self.kernel, m)]
+            needed = ("value", "grad_x", "grad_y", "symmetric")
+            missing = [m for m in needed if not hasattr(self.kernel, m)]
             if missing:
                 raise TypeError(
                     "kernel must be 'symmetric', 'nonsymmetric' or an object with methods "
-                    f"value, grad_x, grad_y (InteractionKernel); missing {missing}"
+                    "value, grad_x, grad_y and a bool attribute symmetric (InteractionKernel); "
+                    f"missing {missing}"
                 )
-        set_(self, "alpha", _check_positive("alpha", self.alpha))
-        set_(self, "epsilon", _check_positive("epsilon", self.epsilon))
-        set_(self, "epsilon_min", _check_positive("epsilon_min", self.epsilon_min))
-        set_(self, "epsilon_max", _check_positive("epsilon_max", self.epsilon_max))
+        set_(self, "alpha", check_positive("alpha", self.alpha))
+        set_(self, "epsilon", check_positive("epsilon", self.epsilon))
+        set_(self, "epsilon_min", check_positive("epsilon_min", self.epsilon_min))
+        set_(self, "epsilon_max", check_positive("epsilon_max", self.epsilon_max))
         if self.epsilon_max < self.epsilon_min:
             raise ValueError(
                 f"epsilon_max must be >= epsilon_min, got epsilon_min={self.epsilon_min}, "
                 f"epsilon_max={self.epsilon_max}"
             )
-        sigma = _check_real("sigma", self.sigma)
+        sigma = check_real("sigma", self.sigma)
         if sigma < 0.0:
             raise ValueError(f"sigma must be >= 0, got {sigma}")
         set_(self, "sigma", sigma)
-        set_(self, "horizon", _check_positive("horizon", self.horizon))
+        set_(self, "horizon", check_positive("horizon", self.horizon))
         tgt = target_as_vector(self.target, self.dim)
         set_(self, "target", float(tgt[0]) if self.dim == 1 else tuple(float(v) for v in tgt))
-        gamma = _check_real("gamma", self.gamma)
+        gamma = check_real("gamma", self.gamma)
         if gamma < 0.0:
             raise ValueError(f"gamma must be >= 0, got {gamma}")
         set_(self, "gamma", gamma)

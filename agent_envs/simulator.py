@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
 from agent_envs.integrators import DEFAULT_JACOBIAN, Integrator, make_integrator
-from agent_envs.params import SwarmParams
+from agent_envs.params import SwarmParams, check_int, check_positive
 
 #: A state is flagged as diverged when it is non-finite or max |x| exceeds this.
 DEFAULT_DIVERGENCE_THRESHOLD = 1e4
@@ -47,6 +47,27 @@ def uniform_positions(rng: np.random.Generator, n_agents: int, dim: int) -> np.n
 def brownian_increments(rng: np.random.Generator, shape: tuple[int, ...], dt: float):
     """Increments dW ~ N(0, dt I) of the given shape."""
     return np.sqrt(dt) * rng.standard_normal(shape)
+
+
+def check_phi_method_fits_kernel(
+    params: SwarmParams, integrator: str, jacobian: str, phi_method: str
+) -> None:
+    """Raise `ValueError` naming `phi_method` when "eigh" is forced on a non-symmetric matrix.
+
+    "eigh" needs a symmetric kernel for `jacobian="frozen"`, and a symmetric radial kernel
+    (attribute `radial`) for `jacobian="exact"`; it matters only for "erb"/"serb".
+    """
+    if phi_method != "eigh" or integrator not in ("erb", "serb"):
+        return
+    kernel = kernel_from_params(params)
+    symmetric = bool(kernel.symmetric)
+    if jacobian == "exact":
+        symmetric = symmetric and bool(getattr(kernel, "radial", False))
+    if not symmetric:
+        raise ValueError(
+            f"phi_method='eigh' needs a symmetric matrix, but jacobian={jacobian!r} with this "
+            "kernel is not symmetric; use phi_method='auto', 'expm' or 'krylov'"
+        )
 
 
 def diverged_paths(x: np.ndarray, threshold: float = DEFAULT_DIVERGENCE_THRESHOLD) -> np.ndarray:
@@ -127,6 +148,8 @@ def _generators(seed: int | np.random.Generator | None):
     else:
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
             raise TypeError(f"seed must be an int, a numpy Generator or None, got {seed!r}")
+        if seed is not None and seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed}")
         init_ss, noise_ss = np.random.SeedSequence(seed).spawn(2)
         init_rng, noise_rng = np.random.default_rng(init_ss), np.random.default_rng(noise_ss)
     return init_rng, noise_rng
@@ -164,17 +187,14 @@ def simulate(
     """
     if not isinstance(params, SwarmParams):
         raise TypeError(f"params must be a SwarmParams, got {type(params).__name__}")
-    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 1:
-        raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
-    if isinstance(n_paths, bool) or not isinstance(n_paths, (int, np.integer)) or n_paths < 1:
-        raise ValueError(f"n_paths must be an integer >= 1, got {n_paths!r}")
-    if not divergence_threshold > 0:
-        raise ValueError(f"divergence_threshold must be > 0, got {divergence_threshold}")
-    scheme = (
-        integrator
-        if isinstance(integrator, Integrator)
-        else make_integrator(integrator, jacobian=jacobian, phi_method=phi_method)
-    )
+    n_steps = check_int("n_steps", n_steps, 1)
+    n_paths = check_int("n_paths", n_paths, 1)
+    divergence_threshold = check_positive("divergence_threshold", divergence_threshold)
+    if isinstance(integrator, Integrator):
+        scheme = integrator
+    else:
+        scheme = make_integrator(integrator, jacobian=jacobian, phi_method=phi_method)
+        check_phi_method_fits_kernel(params, integrator, jacobian, phi_method)
     n, d = params.n_agents, params.dim
     control = _validate_control_array(control, n_steps, n, d, "control")
     control_rate = _validate_control_array(control_rate, n_steps, n, d, "control_rate")

@@ -170,12 +170,85 @@ def test_frozen_exponential_euler_stays_in_the_convex_hull(m):
     assert np.all(np.diff(spread) <= 1e-12)
 
 
+def test_serb_one_step_matches_its_closed_form():
+    """Frozen L, eq:serb with H = sigma I: x+ = e^{tau L}(x + sigma dW) + tau phi1(tau L) u."""
+    from scipy.linalg import expm
+
+    from agent_envs.integrators.phi_functions import phi_action
+
+    params = SwarmParams(n_agents=6, epsilon=0.05, sigma=0.3)
+    model = SwarmModel(params)
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1, 1, (1, 6, 1))
+    u = rng.normal(size=(1, 6, 1))
+    dw = 0.2 * rng.normal(size=x.shape)
+    dt = 0.1
+    lx = model.frozen_linearization(x)[0]
+    expected = expm(dt * lx) @ (x[0] + 0.3 * dw[0]) + dt * phi_action(
+        dt * lx, u[0], 1, method="expm"
+    )
+    got = make_integrator("serb", jacobian="frozen").step(model, x, u, 0.0, dt, dw)[0]
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
+    # ERB adds the noise without the sigma J dW correction
+    erb = make_integrator("erb", jacobian="frozen").step(model, x, u, 0.0, dt, dw)[0]
+    expected_erb = (
+        expm(dt * lx) @ x[0] + dt * phi_action(dt * lx, u[0], 1, method="expm") + 0.3 * dw[0]
+    )
+    np.testing.assert_allclose(erb, expected_erb, rtol=1e-12, atol=1e-12)
+
+
+def test_exact_jacobian_erb_is_unstable_at_m25_where_frozen_is_not():
+    """The measured finding behind the default jacobian='frozen' (README, Section 5.1)."""
+    params = SwarmParams(n_agents=100, epsilon=0.05, alpha=0.1, sigma=0.0)
+    x0 = np.linspace(-1, 1, 100)
+    spread = {}
+    for jac in ("exact", "frozen"):
+        traj = simulate(params, "erb", jacobian=jac, n_steps=25, n_paths=1, initial_positions=x0)
+        final = traj.positions[-1, 0, :, 0]
+        spread[jac] = final.max() - final.min()
+    assert spread["exact"] > 10.0
+    assert spread["frozen"] < 1e-10
+
+
+def test_exact_jacobian_of_a_symmetric_non_radial_kernel_is_not_treated_as_symmetric():
+    class Product:
+        """p(x, y) = (1 + x^2)(1 + y^2): symmetric in (x, y) but not radial."""
+
+        symmetric = True
+
+        def value(self, xk, xl):
+            return (1 + np.sum(xk**2, -1)) * (1 + np.sum(xl**2, -1))
+
+        def grad_x(self, xk, xl):
+            return 2 * xk * (1 + np.sum(xl**2, -1))[..., None] + 0 * xl
+
+        def grad_y(self, xk, xl):
+            return 2 * xl * (1 + np.sum(xk**2, -1))[..., None] + 0 * xk
+
+    model = SwarmModel(SwarmParams(n_agents=100, kernel=Product(), sigma=0.0))
+    x = np.random.default_rng(0).uniform(-1, 1, (1, 100, 1))
+    _, lin = model.drift_and_linearization(x, None, "exact")
+    assert not lin.symmetric
+    dw = np.zeros_like(x)
+    auto = make_integrator("erb", jacobian="exact").step(model, x, None, 0.0, 0.05, dw)
+    dense = make_integrator("erb", jacobian="exact", phi_method="expm").step(
+        model, x, None, 0.0, 0.05, dw
+    )
+    np.testing.assert_allclose(auto, dense, rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="phi_method"):
+        simulate(
+            SwarmParams(n_agents=5, kernel="nonsymmetric"), "serb", phi_method="eigh", n_steps=2
+        )
+
+
 def test_registry_and_metadata():
     assert set(INTEGRATORS) == {"em", "ee", "heun", "erb", "serb"}
     for name, cls in INTEGRATORS.items():
         assert cls.name == name
-        assert isinstance(cls.needs_jacobian, bool)
-        assert make_integrator(name).strong_order in (1.0,)
+        assert cls.needs_jacobian is (name in ("erb", "serb"))
+    assert make_integrator("heun").deterministic_order == 2.0
+    assert make_integrator("erb", jacobian="exact").deterministic_order == 2.0
+    assert make_integrator("serb", jacobian="frozen").deterministic_order == 1.0
     with pytest.raises(ValueError, match="integrator must be one of"):
         make_integrator("rk4")
     with pytest.raises(ValueError, match="jacobian"):

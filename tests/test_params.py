@@ -48,3 +48,15 @@ def test_valid_params_are_normalised_and_frozen():
     with pytest.raises(AttributeError):
         p.sigma = 1.0  # type: ignore[misc]
     assert SwarmParams(dim=3, target=0.2).target == (0.2, 0.2, 0.2)
+
+
+def test_user_kernel_must_say_whether_it_is_symmetric():
+    class NoFlag:
+        def value(self, xk, xl): ...
+
+        def grad_x(self, xk, xl): ...
+
+        def grad_y(self, xk, xl): ...
+
+    with pytest.raises(TypeError, match="symmetric"):
+        SwarmParams(kernel=NoFlag())

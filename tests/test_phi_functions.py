@@ -61,6 +61,20 @@ def test_krylov_on_large_stiff_batched_matrix_matches_dense():
     np.testing.assert_allclose(auto, dense, rtol=1e-7, atol=1e-9)
 
 
+def test_krylov_that_does_not_converge_warns_and_falls_back_to_dense():
+    rng = np.random.default_rng(1)
+    n = 120
+    q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    a = (q * -np.logspace(0, 4, n)) @ q.T  # spectrum spread over [-1e4, -1]
+    a = 0.5 * (a + a.T)
+    v = rng.normal(size=(n, 1))
+    with pytest.warns(RuntimeWarning, match="falling back"):
+        got = phi_action(a, v, 1, method="krylov", symmetric=True, max_krylov_dim=10)
+    np.testing.assert_allclose(
+        got, phi_action(a, v, 1, method="eigh", symmetric=True), rtol=1e-10, atol=1e-14
+    )
+
+
 def test_phi_scalar_is_accurate_near_zero_and_far():
     z = np.array([0.0, 1e-9, 1e-3, 0.09, 0.11, -5.0, 3.0, -200.0])
     mpmath.mp.dps = 40

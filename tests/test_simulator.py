@@ -112,6 +112,7 @@ def test_divergence_is_flagged_not_silent():
         (dict(initial_positions=[np.nan] * 4), "initial_positions"),
         (dict(control=np.zeros((2, 4, 1))), "control"),
         (dict(seed="abc"), "seed"),
+        (dict(seed=-1), "seed"),
         (dict(divergence_threshold=0.0), "divergence_threshold"),
     ],
 )

@@ -9,7 +9,9 @@ length N of `value` is the index l, so a kernel that depends on the index of the
 
 Users plug in their own kernel by writing a class with these three methods and a boolean
 attribute `symmetric` (True when p(x, y) = p(y, x) for every pair, which makes the frozen
-linearization and the exact Jacobian symmetric matrices).
+linearization L(x) a symmetric matrix). The exact Jacobian is symmetric only when, in addition,
+p depends on |x - y| alone; a kernel says so with the optional attribute `radial = True`
+(otherwise the exponential integrators treat the exact Jacobian as non-symmetric).
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ class CuckerSmaleKernel:
         self.alpha = float(alpha)
         self.weights = w
         self.symmetric = bool(w.ndim == 0 or np.all(w == w.flat[0]))
+        self.radial = True  # p depends on |x_k - x_l| (and the index l): see the module doc
 
     @classmethod
     def symmetric_kernel(cls, alpha: float, epsilon: float) -> CuckerSmaleKernel:

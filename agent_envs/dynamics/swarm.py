@@ -157,4 +157,6 @@ class SwarmModel:
         symmetric = bool(self.kernel.symmetric)
         if kind == "frozen":
             return f, Linearization(frozen, True, symmetric)
+        # r ⊗ dp/dy is a symmetric block only for radial kernels (p a function of |x - y|).
+        symmetric = symmetric and bool(getattr(self.kernel, "radial", False))
         return f, Linearization(self.jacobian(x), self.dim == 1, symmetric)

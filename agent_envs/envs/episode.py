@@ -26,7 +26,6 @@ of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the iden
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,11 +39,12 @@ from agent_envs.integrators import (
     Integrator,
     make_integrator,
 )
-from agent_envs.params import SwarmParams
+from agent_envs.params import SwarmParams, check_int, check_positive
 from agent_envs.simulator import (
     DEFAULT_DIVERGENCE_THRESHOLD,
     as_positions,
     brownian_increments,
+    check_phi_method_fits_kernel,
     diverged_paths,
     uniform_positions,
 )
@@ -68,23 +68,6 @@ ENV_OPTION_NAMES = (
     "max_control",
     "divergence_threshold",
 )
-
-
-def _positive_int(name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
-    if value < 1:
-        raise ValueError(f"{name} must be an integer >= 1, got {value}")
-    return int(value)
-
-
-def _positive_real(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__}")
-    value = float(value)
-    if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be finite and > 0, got {value}")
-    return value
 
 
 def _check_target(params: SwarmParams, threshold: float) -> None:
@@ -117,11 +100,12 @@ class EpisodeConfig:
         if not isinstance(self.params, SwarmParams):
             raise TypeError(f"params must be a SwarmParams, got {type(self.params).__name__}")
         make_integrator(self.integrator, jacobian=self.jacobian, phi_method=self.phi_method)
+        check_phi_method_fits_kernel(self.params, self.integrator, self.jacobian, self.phi_method)
         set_ = object.__setattr__
-        set_(self, "n_steps", _positive_int("n_steps", self.n_steps))
-        set_(self, "n_paths", _positive_int("n_paths", self.n_paths))
-        set_(self, "max_control", _positive_real("max_control", self.max_control))
-        threshold = _positive_real("divergence_threshold", self.divergence_threshold)
+        set_(self, "n_steps", check_int("n_steps", self.n_steps, 1))
+        set_(self, "n_paths", check_int("n_paths", self.n_paths, 1))
+        set_(self, "max_control", check_positive("max_control", self.max_control))
+        threshold = check_positive("divergence_threshold", self.divergence_threshold)
         set_(self, "divergence_threshold", threshold)
         _check_target(self.params, threshold)
 

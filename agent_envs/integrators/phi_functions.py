@@ -14,7 +14,8 @@
   Q_m of span{v, Av, ..., A^{m-1} v} and H_m = Q_m^T A Q_m; then
   phi_p(A) v ~ |v| Q_m phi_p(H_m) e_1, the small phi evaluated by "expm". The dimension m grows
   until two successive approximations agree to `rtol` (checked every few steps) or a happy
-  breakdown; O(m n^2) for a dense A, so the method of choice for large n.
+  breakdown; O(m n^2) for a dense A, so the method of choice for large n. If it has not
+  converged at `max_krylov_dim`, a `RuntimeWarning` is issued and the dense method is used.
 
 ``"auto"`` picks "expm" for n <= 64, "eigh" for a single symmetric matrix with n <= 128, and
 "krylov" otherwise: the crossovers measured by benchmarks/bench_integrators.py on 2 cores with
@@ -25,6 +26,7 @@ krylov wins; at n >= 200 krylov wins by 2.5x-7x).
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import scipy.linalg
@@ -97,7 +99,7 @@ def _krylov_action(
     max_dim: int,
     symmetric: bool = False,
     check_every: int = 4,
-) -> np.ndarray:
+) -> np.ndarray | None:
     n = a.shape[-1]
     max_dim = min(max_dim, n)
     batch = np.broadcast_shapes(a.shape[:-2], v.shape[:-2])
@@ -111,6 +113,7 @@ def _krylov_action(
     scale = np.max(np.abs(a), axis=(-2, -1), keepdims=True)[..., 0]  # (..., 1) for breakdown
     prev = None
     coeffs = None
+    converged = False
     for j in range(max_dim):
         w = a @ basis[j]  # (..., n, k)
         for _ in range(2):  # CGS2: Gram-Schmidt twice keeps the basis orthonormal
@@ -124,7 +127,8 @@ def _krylov_action(
             breakdown[..., None, :], 0.0, w / np.where(breakdown, 1.0, h_next)[..., None, :]
         )
         m = j + 1
-        done = bool(np.all(breakdown)) or m == max_dim
+        converged = bool(np.all(breakdown)) or m == n
+        done = converged or m == max_dim
         if m % check_every and not done:
             continue
         coeffs = _small_phi_e1(hess[..., :m, :m], order, symmetric)  # (..., k, m)
@@ -133,11 +137,13 @@ def _krylov_action(
             diff = np.sqrt(diff**2 + np.sum(coeffs[..., prev.shape[-1] :] ** 2, axis=-1))
             size = np.linalg.norm(coeffs, axis=-1)
             if np.all(diff <= rtol * size + 1e-300):
-                done = True
+                done = converged = True
         if done:
             break
         prev = coeffs
     assert coeffs is not None
+    if not converged:
+        return None
     m = coeffs.shape[-1]
     out = np.einsum("j...nk,...kj->...nk", basis[:m], coeffs)
     return out * beta[..., None, :]
@@ -190,4 +196,14 @@ def phi_action(
         return _eigh_action(a, v, order)
     if method == "expm":
         return _augmented_expm(a, v, order)
-    return _krylov_action(a, v, order, rtol, max_krylov_dim, symmetric)
+    result = _krylov_action(a, v, order, rtol, max_krylov_dim, symmetric)
+    if result is None:
+        fallback = "eigh" if symmetric else "expm"
+        warnings.warn(
+            f"Krylov phi-action did not reach rtol={rtol} within max_krylov_dim="
+            f"{max_krylov_dim} (matrix size {a.shape[-1]}); falling back to dense '{fallback}'",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return _eigh_action(a, v, order) if symmetric else _augmented_expm(a, v, order)
+    return result
