@@ -344,3 +344,67 @@ class SwarmEpisode:
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"{name} must be finite, got NaN or inf entries")
         return self.config.max_control * np.clip(arr, -1.0, 1.0).reshape(n, d)
+
+
+class EpisodeAttributes:
+    """Read-only attributes both env adapters expose (`env.unwrapped.params`, ...).
+
+    The adapter provides `self.episode` (a `SwarmEpisode`) and `self.config` (its
+    `EpisodeConfig`).
+    """
+
+    episode: SwarmEpisode
+    config: EpisodeConfig
+
+    @property
+    def params(self) -> SwarmParams:
+        """SwarmParams of the current episode (target included)."""
+        return self.episode.params
+
+    @property
+    def model(self) -> SwarmModel:
+        """The SwarmModel the integrator and the controllers use."""
+        return self.episode.model
+
+    @property
+    def max_control(self) -> float:
+        """u = max_control * action."""
+        return self.config.max_control
+
+    @property
+    def n_steps(self) -> int:
+        """m, the number of steps of an episode."""
+        return self.config.n_steps
+
+    @property
+    def n_paths(self) -> int:
+        """Brownian paths simulated together."""
+        return self.config.n_paths
+
+    @property
+    def dt(self) -> float:
+        """tau = T / m."""
+        return self.episode.dt
+
+    @property
+    def integrator_name(self) -> str:
+        return self.config.integrator
+
+    @property
+    def jacobian(self) -> str:
+        return self.config.jacobian
+
+    @property
+    def positions(self) -> np.ndarray | None:
+        """(n_paths, N, d) current state (read-only; None before the first reset)."""
+        return self.episode.positions
+
+    @property
+    def time(self) -> float:
+        """t_n = n tau."""
+        return self.episode.time
+
+    @property
+    def step_index(self) -> int:
+        """n, the number of steps taken since reset."""
+        return self.episode.step_index

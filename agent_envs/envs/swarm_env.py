@@ -13,20 +13,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from agent_envs.dynamics.swarm import SwarmModel
-from agent_envs.envs.episode import EpisodeConfig, StepOutcome, SwarmEpisode
+from agent_envs.envs.episode import EpisodeAttributes, EpisodeConfig, StepOutcome, SwarmEpisode
 from agent_envs.envs.observation import (
     global_observation,
     interaction_drift_bound,
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
-from agent_envs.params import SwarmParams
 
 ENV_ID = "agent_envs/Swarm-v0"
 
 
-class SwarmEnv(gym.Env[np.ndarray, np.ndarray]):
+class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     r"""Drive a stochastic, possibly stiff swarm of N agents to a target at least cost.
 
     ## Description
@@ -162,53 +160,6 @@ class SwarmEnv(gym.Env[np.ndarray, np.ndarray]):
             if self.render_mode is None
             else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
         )
-
-    # ------------------------------------------------------------- attributes
-    @property
-    def params(self) -> SwarmParams:
-        """SwarmParams of the current episode (target included)."""
-        return self.episode.params
-
-    @property
-    def model(self) -> SwarmModel:
-        return self.episode.model
-
-    @property
-    def max_control(self) -> float:
-        return self.config.max_control
-
-    @property
-    def n_steps(self) -> int:
-        return self.config.n_steps
-
-    @property
-    def n_paths(self) -> int:
-        return self.config.n_paths
-
-    @property
-    def dt(self) -> float:
-        return self.episode.dt
-
-    @property
-    def integrator_name(self) -> str:
-        return self.config.integrator
-
-    @property
-    def jacobian(self) -> str:
-        return self.config.jacobian
-
-    @property
-    def positions(self) -> np.ndarray | None:
-        """(n_paths, N, d) current state (read-only; None before the first reset)."""
-        return self.episode.positions
-
-    @property
-    def time(self) -> float:
-        return self.episode.time
-
-    @property
-    def step_index(self) -> int:
-        return self.episode.step_index
 
     # ------------------------------------------------------------------ API
     def _observation(self) -> np.ndarray:

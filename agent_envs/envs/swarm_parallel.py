@@ -12,8 +12,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from agent_envs.dynamics.swarm import SwarmModel
-from agent_envs.envs.episode import EpisodeConfig, SwarmEpisode
+from agent_envs.envs.episode import EpisodeAttributes, EpisodeConfig, SwarmEpisode
 from agent_envs.envs.observation import (
     agent_observation_space,
     agent_observations,
@@ -22,10 +21,9 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
-from agent_envs.params import SwarmParams
 
 
-class SwarmParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
+class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarray]):
     r"""The swarm of `agent_envs/Swarm-v0` with each member as its own agent.
 
     ## Description
@@ -123,51 +121,6 @@ class SwarmParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         if self._np_random is None:
             self._np_random, self._np_random_seed = seeding.np_random()
         return self._np_random
-
-    # ------------------------------------------------------------- attributes
-    @property
-    def params(self) -> SwarmParams:
-        return self.episode.params
-
-    @property
-    def model(self) -> SwarmModel:
-        return self.episode.model
-
-    @property
-    def max_control(self) -> float:
-        return self.config.max_control
-
-    @property
-    def n_steps(self) -> int:
-        return self.config.n_steps
-
-    @property
-    def n_paths(self) -> int:
-        return self.config.n_paths
-
-    @property
-    def dt(self) -> float:
-        return self.episode.dt
-
-    @property
-    def integrator_name(self) -> str:
-        return self.config.integrator
-
-    @property
-    def jacobian(self) -> str:
-        return self.config.jacobian
-
-    @property
-    def positions(self) -> np.ndarray | None:
-        return self.episode.positions
-
-    @property
-    def time(self) -> float:
-        return self.episode.time
-
-    @property
-    def step_index(self) -> int:
-        return self.episode.step_index
 
     # ------------------------------------------------------------------ API
     def _observations(self) -> dict[str, np.ndarray]:
