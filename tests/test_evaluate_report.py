@@ -199,10 +199,12 @@ def test_confidence_interval_and_summary_by_hand():
         }
     )
     s = summarize(episodes).set_index("policy")
+    assert s.loc["other", "divergence_rate"] == pytest.approx(1 / 3)
+    assert np.isnan(s.loc["other", "ratio_to_reference"])  # a diverged episode: no ratio
+    s = summarize(episodes.assign(diverged=False)).set_index("policy")
     assert s.loc["other", "ratio_to_reference"] == pytest.approx(2.0)
     assert s.loc["other", "paired_ratio"] == pytest.approx(2.0)
     assert s.loc["other", "paired_ratio_ci_low"] == pytest.approx(2.0)
-    assert s.loc["other", "divergence_rate"] == pytest.approx(1 / 3)
     assert s.loc["turnpike", "cost_ci_low"] == pytest.approx(2.0 - half)
 
 
@@ -379,3 +381,47 @@ def test_paper_setting_em_unstable_after_tbar_serb_reaches_target():
     assert em["L_at_tbar"] < 2e-4 and serb["L_at_tbar"] < 3e-4  # turnpike reached at tbar
     assert em["L_at_T"] > 1e3 * em["L_at_tbar"]  # EM: unstable once the control is off
     assert serb["L_at_T"] < 1e-3  # SERB: stays at the target
+
+
+def test_ratio_is_not_reported_when_episodes_diverged():
+    """A diverged episode has a partial cost; its ratio to the reference would flatter it."""
+    import pandas as pd
+
+    from training.report import summarize
+
+    rows = []
+    for seed in range(3):
+        rows.append(
+            dict(
+                policy="turnpike",
+                seed=seed,
+                total_cost=2.0,
+                diverged=False,
+                final_distance=0.1,
+                control_energy=1.0,
+            )
+        )
+        rows.append(
+            dict(
+                policy="quitter",
+                seed=seed,
+                total_cost=0.1,
+                diverged=seed == 0,
+                final_distance=0.1,
+                control_energy=1.0,
+            )
+        )
+        rows.append(
+            dict(
+                policy="steady",
+                seed=seed,
+                total_cost=1.0,
+                diverged=False,
+                final_distance=0.1,
+                control_energy=1.0,
+            )
+        )
+    table = summarize(pd.DataFrame(rows), reference="turnpike").set_index("policy")
+    assert np.isnan(table.loc["quitter", "ratio_to_reference"])
+    assert table.loc["quitter", "divergence_rate"] == pytest.approx(1 / 3)
+    assert table.loc["steady", "ratio_to_reference"] == pytest.approx(0.5)

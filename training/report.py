@@ -91,11 +91,18 @@ def summarize(
     cost / reference cost on the same seed, mean and t-CI; only for seeds both have),
     divergence_rate, mean_final_distance (non-diverged episodes), mean_control_energy,
     mean_saturated_fraction, mean_turnpike_time.
+
+    A diverged episode ends early with the cost accumulated so far, which would make a diverging
+    policy look cheap: the ratios are NaN (shown as n/a) when the policy or the reference has a
+    diverged episode.
     """
     rows = []
     ref = None
+    ref_diverged = False
     if reference is not None and reference in set(episodes["policy"]):
-        ref = episodes[episodes["policy"] == reference].set_index("seed")["total_cost"]
+        ref_rows = episodes[episodes["policy"] == reference]
+        ref = ref_rows.set_index("seed")["total_cost"]
+        ref_diverged = bool(ref_rows["diverged"].astype(bool).any())
     for policy, group in episodes.groupby("policy", sort=False):
         mean, low, high = mean_confidence_interval(group["total_cost"], confidence)
         row: dict[str, Any] = {
@@ -113,6 +120,14 @@ def summarize(
             ratios = (paired.loc[common] / ref.loc[common]).to_numpy(float)
             pm, pl, ph = mean_confidence_interval(ratios, confidence)
             row.update(paired_ratio=pm, paired_ratio_ci_low=pl, paired_ratio_ci_high=ph)
+            if ref_diverged or bool(group["diverged"].astype(bool).any()):
+                for key in (
+                    "ratio_to_reference",
+                    "paired_ratio",
+                    "paired_ratio_ci_low",
+                    "paired_ratio_ci_high",
+                ):
+                    row[key] = float("nan")
         diverged = group["diverged"].astype(bool)
         row["divergence_rate"] = float(diverged.mean())
         row["mean_final_distance"] = float(group.loc[~diverged, "final_distance"].mean())
