@@ -1,0 +1,448 @@
+"""Training and comparison: CLI, configuration errors, smoke runs, resume, determinism, rl-zoo3.
+
+The smoke runs train for a few hundred timesteps on a tiny swarm (N = 5, m = 10) and are marked
+slow; together they take well under a minute on 2 CPU cores.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from training.config import (
+    ALGORITHMS,
+    GYM_ENV_ID,
+    HYPERPARAMS,
+    PETTINGZOO_ENV_ID,
+    TrainConfig,
+    hyperparams_file,
+)
+
+TINY_ENV = {"n_agents": 5, "n_steps": 10}
+#: rollouts / learning starts small enough for a few hundred timesteps
+TINY_HYPERPARAMS = {
+    "ppo": {"n_steps": 16, "batch_size": 32, "n_epochs": 2},
+    "a2c": {"n_steps": 5},
+    "sac": {"learning_starts": 50, "batch_size": 32},
+    "td3": {"learning_starts": 50, "batch_size": 32},
+}
+REPO = Path(__file__).resolve().parents[1]
+
+
+def tiny_config(tmp_path: Path, algo: str = "ppo", env_id: str = GYM_ENV_ID, **overrides):
+    """A config that trains in a few seconds: N = 5, m = 10, evaluations on 3 seeds."""
+    values = {
+        "algo": algo,
+        "env_id": env_id,
+        "env_kwargs": dict(TINY_ENV),
+        "timesteps": 200,
+        "seed": 0,
+        "out": str(tmp_path / "runs"),
+        "hyperparams": dict(TINY_HYPERPARAMS[algo]),
+        "eval_freq": 100,
+        "eval_episodes": 3,
+        "checkpoint_freq": 100,
+        "progress_bar": False,
+        "tensorboard": False,
+    }
+    values.update(overrides)
+    return TrainConfig(**values)
+
+
+# ---------------------------------------------------------------------------------------- CLI
+
+
+def _subcommands():
+    from training.cli import SUBCOMMANDS
+
+    return sorted(SUBCOMMANDS)
+
+
+@pytest.mark.parametrize("name", _subcommands())
+def test_every_subcommand_help_exits_zero(name, capsys):
+    from training.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main([name, "--help"])
+    assert exc.value.code == 0
+    assert "usage: agent-envs" in capsys.readouterr().out
+
+
+def test_top_level_help_and_reproduce_alias_help():
+    from training.cli import main
+
+    for argv in (["--help"], ["reproduce", "turnpike", "--help"]):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 0
+
+
+def test_train_help_documents_every_config_field(capsys):
+    from dataclasses import fields
+
+    from training.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = capsys.readouterr().out
+    for f in fields(TrainConfig):
+        assert "--" + f.name.replace("_", "-") in text
+    assert "turnpike" in text
+
+
+# ------------------------------------------------------------------------------------- errors
+
+
+def test_unknown_algorithm_names_the_option():
+    with pytest.raises(ValueError, match="--algo"):
+        TrainConfig(algo="dqn").validate()
+
+
+def test_unknown_env_id_names_the_option_and_suggests():
+    with pytest.raises(ValueError, match=r"--env-id.*Did you mean agent_envs/Swarm-v0"):
+        TrainConfig(env_id="agent_envs/Swarm-v1").validate()
+
+
+@pytest.mark.parametrize("text", ["{n_agents: 5}", "[1, 2]", "'x'"])
+def test_malformed_env_kwargs_names_the_option(text):
+    with pytest.raises(ValueError, match="--env-kwargs"):
+        TrainConfig(env_kwargs=text)
+
+
+def test_malformed_hyperparams_names_the_option():
+    with pytest.raises(ValueError, match="--hyperparams"):
+        TrainConfig(hyperparams="{learning_rate=1}")
+    with pytest.raises(ValueError, match=r"--hyperparams.*n_envs"):
+        TrainConfig(hyperparams={"n_envs": 2}).validate()
+
+
+def test_bad_env_kwarg_value_fails_before_training(tmp_path):
+    from training.train import train
+
+    with pytest.raises((ValueError, TypeError), match="n_agents"):
+        train(tiny_config(tmp_path, env_kwargs={"n_agents": 1}))
+
+
+def test_cli_reports_bad_options_with_exit_code_2(capsys):
+    from training.cli import main
+
+    assert main(["train", "--algo", "ppo", "--env-kwargs", "{oops"]) == 2
+    assert "--env-kwargs" in capsys.readouterr().err
+    assert main(["train", "--env-id", "CartPole-v2"]) == 2
+    assert "--env-id" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # argparse's own choices check
+        main(["train", "--algo", "dqn"])
+    assert main(["compare", "--learners", "ppo,dqn", "--out", "unused"]) == 2
+    assert "--learners" in capsys.readouterr().err
+
+
+def test_cli_resume_refuses_to_change_the_run(tmp_path, capsys):
+    from training.cli import main
+
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "config.json").write_text(json.dumps(TrainConfig().to_dict()))
+    assert main(["train", "--resume", str(run_dir), "--algo", "sac"]) == 2
+    assert "--algo" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------ hyperparameters
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_rl_zoo_yaml_equals_the_hyperparameters_train_uses(algo):
+    yaml = pytest.importorskip("yaml")
+    with open(hyperparams_file(algo)) as handle:
+        assert yaml.safe_load(handle) == HYPERPARAMS[algo]
+    assert set(HYPERPARAMS[algo]) == {GYM_ENV_ID, PETTINGZOO_ENV_ID}
+
+
+def test_run_name_follows_cleanrl_pattern():
+    from training.train import default_run_name
+
+    name = default_run_name(TrainConfig(algo="sac", seed=3))
+    env, algo, seed, stamp = name.split("__")
+    assert (env, algo, seed) == ("agent_envs_Swarm-v0", "sac", "3")
+    assert stamp.isdigit()
+
+
+# ------------------------------------------------------------------------------- determinism
+
+
+def test_seeded_evaluation_is_deterministic():
+    """The same policy on the same validation seeds gives the same costs, seed by seed."""
+    from baselines import TurnpikeController
+    from training.callbacks import run_seeded_episodes
+    from training.train import make_eval_vec_env
+
+    venv = make_eval_vec_env(GYM_ENV_ID, TINY_ENV, 4)
+    policy = TurnpikeController(venv.envs[0])
+    first, diverged = run_seeded_episodes(policy, venv, 1000)
+    second, _ = run_seeded_episodes(policy, venv, 1000)
+    other, _ = run_seeded_episodes(policy, venv, 2000)
+    np.testing.assert_array_equal(first, second)
+    assert not np.allclose(first, other)
+    assert first.shape == (4,) and not diverged.any() and np.all(first > 0)
+
+
+def test_seeded_evaluation_matches_training_evaluate():
+    """Sub-env i with seed s + i runs the episode `evaluate_policies` runs with seed s + i."""
+    from training.callbacks import run_seeded_episodes
+    from training.evaluate import evaluate_policies
+    from training.train import make_eval_vec_env
+
+    venv = make_eval_vec_env(GYM_ENV_ID, TINY_ENV, 3)
+    from baselines import ProportionalController
+
+    costs, _ = run_seeded_episodes(ProportionalController(venv.envs[0]), venv, 1000)
+    results = evaluate_policies(
+        ["proportional"], env_kwargs=TINY_ENV, seeds=[1000, 1001, 1002], progress=False
+    )
+    # SB3's DummyVecEnv hands rewards over as float32
+    np.testing.assert_allclose(costs, results.episodes["total_cost"].to_numpy(), rtol=1e-6)
+
+
+# ------------------------------------------------------------------------------ smoke (slow)
+
+
+def _check_run(run_dir: Path, timesteps: int) -> dict:
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["timesteps"] >= timesteps
+    for name in ("config.json", "env.json", "hyperparams.json", "final_model.zip"):
+        assert (run_dir / name).is_file(), name
+    assert (run_dir / "final_model_vecnormalize.pkl").is_file()
+    assert list((run_dir / "checkpoints").glob("rl_model_*_steps.zip"))
+    from training.callbacks import read_learning_curve
+
+    curve = read_learning_curve(run_dir / "learning_curve.csv")
+    assert curve and curve[-1]["timesteps"] == summary["timesteps"]
+    for row in curve:
+        assert np.isfinite(row["cost_mean"]) and row["turnpike_cost"] > 0
+        assert np.isfinite(row["proportional_cost"]) and np.isfinite(row["zero_cost"])
+    return summary
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_smoke_single_controller(algo, tmp_path):
+    from training.evaluate import evaluate_policies
+    from training.train import train
+
+    run_dir = train(tiny_config(tmp_path, algo))
+    assert run_dir.name.startswith(f"agent_envs_Swarm-v0__{algo}__0__")
+    _check_run(run_dir, 200)
+    if algo in ("sac", "td3"):  # the newest replay buffer only (they are large)
+        buffers = list((run_dir / "checkpoints").glob("rl_model_replay_buffer_*_steps.pkl"))
+        assert [p.name for p in buffers] == ["rl_model_replay_buffer_200_steps.pkl"]
+    # the saved model is a policy `training.evaluate` loads (VecNormalize found next to it)
+    results = evaluate_policies(
+        {"learned": str(run_dir / "final_model.zip"), "zero": "zero"},
+        env_kwargs=TINY_ENV,
+        seeds=[10_000, 10_001],
+        progress=False,
+    )
+    learned = results.meta["policies"]["learned"]
+    assert learned["algo"] == algo and learned["vecnormalize"].endswith(
+        "final_model_vecnormalize.pkl"
+    )
+    assert np.all(np.isfinite(results.episodes["total_cost"]))
+
+
+@pytest.mark.slow
+def test_smoke_parameter_shared_ppo(tmp_path):
+    """PettingZoo + SuperSuit training; the shared policy scores the same on both envs."""
+    import gymnasium as gym
+
+    from training.evaluate import evaluate_policies, load_sb3_policy
+    from training.multiagent import evaluate_per_agent
+    from training.train import train
+
+    config = tiny_config(tmp_path, "ppo", PETTINGZOO_ENV_ID, timesteps=500, eval_freq=250)
+    config.hyperparams["batch_size"] = 40  # a rollout holds n_steps * N = 80 agent-steps
+    run_dir = train(config)
+    summary = _check_run(run_dir, 500)
+    assert summary["swarm_steps"] == summary["timesteps"] // TINY_ENV["n_agents"]
+    seeds = [10_000, 10_001]
+    results = evaluate_policies(
+        {"shared": str(run_dir / "final_model.zip")},
+        env_kwargs=TINY_ENV,
+        seeds=seeds,
+        progress=False,
+    )
+    assert results.meta["policies"]["shared"]["per_agent"] is True
+    env = gym.make(GYM_ENV_ID, **TINY_ENV)
+    policy, _ = load_sb3_policy(run_dir / "final_model.zip", env)
+    per_agent = evaluate_per_agent(policy.policy, TINY_ENV, seeds)
+    assert per_agent.shape == (2, TINY_ENV["n_agents"])
+    # the agents' costs add up to the swarm's cost on the Gymnasium env, seed by seed
+    np.testing.assert_allclose(
+        per_agent.sum(axis=1), results.episodes["total_cost"].to_numpy(), rtol=1e-5
+    )
+
+
+@pytest.mark.slow
+def test_training_is_reproducible_with_a_fixed_seed(tmp_path):
+    from training.callbacks import read_learning_curve
+    from training.train import train
+
+    curves = []
+    for i in range(2):
+        run_dir = train(tiny_config(tmp_path / str(i), "ppo", checkpoint_freq=0))
+        curves.append([r["cost_mean"] for r in read_learning_curve(run_dir / "learning_curve.csv")])
+    assert curves[0] == curves[1]
+
+
+class _InterruptAt:
+    """An SB3 callback that raises KeyboardInterrupt (a Ctrl-C) at a given timestep."""
+
+    def __new__(cls, timesteps: int):
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        class Interrupt(BaseCallback):
+            def _on_step(self) -> bool:
+                if self.num_timesteps >= timesteps:
+                    raise KeyboardInterrupt
+                return True
+
+        return Interrupt()
+
+
+def _capture_start_parameters():
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Capture(BaseCallback):
+        start = None
+        start_timesteps = None
+        buffer_size = None
+
+        def _on_training_start(self) -> None:
+            Capture.start = {
+                k: v.detach().clone() for k, v in self.model.policy.state_dict().items()
+            }
+            Capture.start_timesteps = self.model.num_timesteps
+            buffer = getattr(self.model, "replay_buffer", None)
+            Capture.buffer_size = None if buffer is None else buffer.size()
+
+        def _on_step(self) -> bool:
+            return True
+
+    return Capture
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
+    import torch
+
+    from training.callbacks import read_learning_curve
+    from training.train import algorithm_class, latest_checkpoint, train
+
+    config = tiny_config(tmp_path, algo, timesteps=400, eval_freq=100, checkpoint_freq=100)
+    with pytest.raises(KeyboardInterrupt):
+        train(config, callbacks=[_InterruptAt(250)])
+    (run_dir,) = (tmp_path / "runs").iterdir()
+    assert not (run_dir / "summary.json").exists()
+    steps, model_path = latest_checkpoint(run_dir, algo == "sac", normalize=True)
+    assert steps >= 250  # the interrupt saved a checkpoint at the current timestep
+    saved = algorithm_class(algo).load(model_path, device="cpu").policy.state_dict()
+
+    capture = _capture_start_parameters()
+    resumed = train(
+        TrainConfig(resume=str(run_dir), timesteps=400, progress_bar=False, tensorboard=False),
+        callbacks=[capture()],
+    )
+    assert resumed == run_dir
+    assert capture.start_timesteps == steps  # timesteps done are kept
+    for key, value in saved.items():  # the trained weights are kept
+        assert torch.equal(capture.start[key], value), key
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["timesteps"] >= 400
+    timesteps = [r["timesteps"] for r in read_learning_curve(run_dir / "learning_curve.csv")]
+    assert timesteps == sorted(timesteps) and timesteps[0] <= 100  # history kept, in order
+    if algo == "sac":
+        # the replay buffer came back with the checkpoint (all but the transition of the
+        # interrupted step, which SB3 stores after the callbacks ran)
+        assert capture.buffer_size >= steps - 1
+
+
+@pytest.mark.slow
+def test_compare_quick_preset_smoke(tmp_path):
+    """The main job end to end on a tiny budget: trains, evaluates on shared seeds, reports."""
+    from training.cli import main
+
+    out = tmp_path / "cmp"
+    argv = [
+        "compare",
+        "--preset",
+        "quick",
+        "--out",
+        str(out),
+        "--timesteps-scale",
+        "0.01",
+        "--test-episodes",
+        "2",
+        "--eval-env-kwargs",
+        '{"integrator": "em"}',
+        "--no-progress-bar",
+    ]
+    assert main(argv) == 0
+    report = (out / "report" / "report.md").read_text()
+    for name in ("turnpike", "proportional", "zero", "ppo", "sac", "ppo-shared"):
+        assert f"| {name} |" in report
+    assert "Learning curves" in report and "learning_curves.png" in report
+    assert "Per-agent costs of ppo-shared" in report
+    assert "Evaluated on another env" in report
+    record = json.loads((out / "comparison.json").read_text())
+    assert record["seeds"] == [10_000, 10_001]
+    # a second invocation reuses the finished runs instead of training again
+    runs = sorted(p.name for p in (out / "runs").iterdir())
+    assert main(argv) == 0
+    assert sorted(p.name for p in (out / "runs").iterdir()) == runs
+
+
+@pytest.mark.slow
+def test_rl_zoo3_trains_with_the_shipped_yaml(tmp_path):
+    pytest.importorskip("rl_zoo3", reason="rl_zoo3 is the optional 'zoo' extra")
+    command = [
+        sys.executable,
+        "-m",
+        "rl_zoo3.train",
+        "--algo",
+        "ppo",
+        "--env",
+        GYM_ENV_ID,
+        "--gym-packages",
+        "agent_envs",
+        "--conf-file",
+        str(hyperparams_file("ppo")),
+        "--env-kwargs",
+        "n_agents:5",
+        "n_steps:10",
+        "-n",
+        "256",
+        "--eval-freq",
+        "128",
+        "--eval-episodes",
+        "2",
+        "-f",
+        str(tmp_path),
+        "--seed",
+        "0",
+        "--num-threads",
+        "1",
+        "--hyperparams",
+        "n_steps:32",
+        "batch_size:64",
+        "--verbose",
+        "0",
+    ]
+    done = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    (run,) = (tmp_path / "ppo").iterdir()
+    assert (run / "agent_envs-Swarm-v0.zip").is_file()
+    assert (run / "agent_envs-Swarm-v0" / "vecnormalize.pkl").is_file()

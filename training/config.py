@@ -1,0 +1,381 @@
+"""What a training run is made of: the `TrainConfig` dataclass, the algorithm registry and the
+default hyperparameters of every (algorithm, env id) pair.
+
+`TrainConfig` is the CLI (CleanRL style): one field is one option of `agent-envs train`, and the
+`help` in the field's metadata is its `--help` text, so the two cannot drift apart.
+
+The hyperparameters in `HYPERPARAMS` are the ones `agent-envs train` uses; the same values are
+shipped as rl-zoo3 YAML files in `training/hyperparams/{algo}.yml` (a test checks that they
+agree), so `python -m rl_zoo3.train --conf-file training/hyperparams/ppo.yml` trains with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import difflib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+#: The Gymnasium single-controller env (one action vector for the whole swarm).
+GYM_ENV_ID = "agent_envs/Swarm-v0"
+#: The PettingZoo parallel env (one agent per swarm member), named by its module.
+PETTINGZOO_ENV_ID = "agent_envs.swarm_v0"
+#: Algorithms `agent-envs train` knows; each maps to a Stable-Baselines3 class.
+ALGORITHMS = ("ppo", "sac", "td3", "a2c")
+#: Algorithms that keep a replay buffer (saved with each checkpoint so a resume loses nothing).
+OFF_POLICY = ("sac", "td3")
+#: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
+#: (rl-zoo3 reads them itself).
+ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs")
+#: rl-zoo3 keys turned into an SB3 action-noise object (TD3).
+NOISE_KEYS = ("noise_type", "noise_std")
+#: File names in a run directory. The VecNormalize statistics sit next to their model as
+#: ``{stem}_vecnormalize.pkl``, where `training.evaluate.find_vecnormalize` looks for them.
+BEST_MODEL = "best_model.zip"
+BEST_VECNORMALIZE = "best_model_vecnormalize.pkl"
+FINAL_MODEL = "final_model.zip"
+FINAL_VECNORMALIZE = "final_model_vecnormalize.pkl"
+#: Offset of the validation seeds (evaluation during training) from the run seed's block.
+DEFAULT_EVAL_SEED = 1_000
+
+# Measured on N = 10, m = 20 (see docs/README_training.md): the good controls are small next
+# to max_control (the proportional control 12 (xbar - x) is ~10% of it), so the policies start
+# with little action noise (PPO/A2C log_std_init = -3, TD3 noise 0.05) and SAC's entropy
+# coefficient starts at 0.01; gamma = 0.9 fits the 20-50 step episodes.
+_PPO_SWARM = {
+    "n_envs": 4,
+    "n_timesteps": 200_000,
+    "policy": "MlpPolicy",
+    "normalize": True,
+    "n_steps": 256,
+    "batch_size": 256,
+    "n_epochs": 10,
+    "gamma": 0.9,
+    "gae_lambda": 0.95,
+    "learning_rate": 3.0e-4,
+    "clip_range": 0.2,
+    "ent_coef": 0.0,
+    "policy_kwargs": {"log_std_init": -3.0, "net_arch": [64, 64]},
+}
+_OFF_POLICY_SWARM = {
+    "n_envs": 1,
+    "n_timesteps": 50_000,
+    "policy": "MlpPolicy",
+    "normalize": True,
+    "buffer_size": 100_000,
+    "batch_size": 128,
+    "learning_starts": 1_000,
+    "gamma": 0.9,
+    "tau": 0.02,
+    "train_freq": 1,
+    "gradient_steps": 1,
+    "policy_kwargs": {"net_arch": [64, 64]},
+}
+
+#: HYPERPARAMS[algo][env_id]: rl-zoo3 style entries (see `ZOO_KEYS` for the non-SB3 keys).
+HYPERPARAMS: dict[str, dict[str, dict[str, Any]]] = {
+    "ppo": {
+        GYM_ENV_ID: dict(_PPO_SWARM),
+        # parameter-shared PPO: SB3 sees one env per agent, so n_steps is per agent and a
+        # rollout holds n_steps * N * n_envs samples.
+        PETTINGZOO_ENV_ID: {**_PPO_SWARM, "n_envs": 1, "n_steps": 128, "batch_size": 640},
+    },
+    "a2c": {
+        GYM_ENV_ID: {
+            "n_envs": 4,
+            "n_timesteps": 200_000,
+            "policy": "MlpPolicy",
+            "normalize": True,
+            "n_steps": 8,
+            "gamma": 0.9,
+            "gae_lambda": 0.95,
+            "learning_rate": 7.0e-4,
+            "ent_coef": 0.0,
+            "policy_kwargs": {"log_std_init": -3.0, "net_arch": [64, 64]},
+        },
+    },
+    "sac": {
+        GYM_ENV_ID: {
+            **_OFF_POLICY_SWARM,
+            "learning_rate": 2.0e-3,
+            "ent_coef": "auto_0.01",
+        },
+    },
+    "td3": {
+        GYM_ENV_ID: {
+            **_OFF_POLICY_SWARM,
+            "learning_rate": 1.0e-3,
+            "noise_type": "normal",
+            "noise_std": 0.05,
+        },
+    },
+}
+# The PettingZoo env accepts every algorithm (one shared policy; SB3 sees one env per agent).
+for _algo in ("a2c", "sac", "td3"):
+    HYPERPARAMS[_algo][PETTINGZOO_ENV_ID] = {**HYPERPARAMS[_algo][GYM_ENV_ID], "n_envs": 1}
+
+
+def hyperparams_file(algo: str) -> Path:
+    """Path of the rl-zoo3 YAML file shipped for `algo` (for `rl_zoo3.train --conf-file`)."""
+    check_algo(algo)
+    return Path(__file__).parent / "hyperparams" / f"{algo}.yml"
+
+
+def check_algo(algo: str) -> str:
+    """Return `algo` lower-cased; raise ValueError naming --algo if it is unknown."""
+    name = str(algo).lower()
+    if name not in ALGORITHMS:
+        raise ValueError(f"--algo must be one of {', '.join(ALGORITHMS)}; got {algo!r}")
+    return name
+
+
+def is_multiagent(env_id: str) -> bool:
+    """True for the PettingZoo env id (a module path), False for a Gymnasium id."""
+    return env_id == PETTINGZOO_ENV_ID
+
+
+def check_env_id(env_id: str) -> str:
+    """Return `env_id` if it names a registered Gymnasium env or the PettingZoo swarm env.
+
+    Raises ValueError naming --env-id, with the closest known ids, otherwise.
+    """
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
+
+    if env_id == PETTINGZOO_ENV_ID or env_id in gym.registry:
+        return env_id
+    known = [PETTINGZOO_ENV_ID, *gym.registry.keys()]
+    close = difflib.get_close_matches(env_id, known, n=3)
+    hint = f" Did you mean {', '.join(close)}?" if close else ""
+    raise ValueError(
+        f"--env-id {env_id!r} is neither a registered Gymnasium env nor the PettingZoo env "
+        f"{PETTINGZOO_ENV_ID!r}; the swarm envs are {GYM_ENV_ID!r} and {PETTINGZOO_ENV_ID!r}.{hint}"
+    )
+
+
+def parse_json_object(text: str | dict | None, option: str) -> dict[str, Any]:
+    """Parse a JSON object given on the command line; ValueError naming `option` if malformed."""
+    if text is None:
+        return {}
+    if isinstance(text, dict):
+        return dict(text)
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(
+            f'{option} must be a JSON object such as \'{{"n_agents": 10, "integrator": '
+            f'"em"}}\'; could not parse {text!r}: {exc}'
+        ) from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{option} must be a JSON object ({{...}}), got {type(value).__name__}")
+    return value
+
+
+def default_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
+    """A deep copy of HYPERPARAMS[algo][env_id]."""
+    algo = check_algo(algo)
+    try:
+        entry = HYPERPARAMS[algo][env_id]
+    except KeyError:
+        raise ValueError(
+            f"no default hyperparameters for --algo {algo} on --env-id {env_id}; "
+            f"known env ids: {', '.join(HYPERPARAMS[algo])}"
+        ) from None
+    return json.loads(json.dumps(entry))
+
+
+def _opt(default: Any, help: str, **kwargs: Any) -> Any:
+    """A dataclass field with a scalar default and its --help text."""
+    return field(default=default, metadata={"help": help, **kwargs})
+
+
+@dataclass
+class TrainConfig:
+    """One training run. Every field is an `agent-envs train` option (`--field-name`)."""
+
+    algo: str = _opt("ppo", "Stable-Baselines3 algorithm", choices=ALGORITHMS)
+    env_id: str = _opt(
+        GYM_ENV_ID,
+        f"environment: the Gymnasium id {GYM_ENV_ID!r} (one controller for the swarm) or "
+        f"{PETTINGZOO_ENV_ID!r} (PettingZoo, one agent per swarm member, parameter-shared "
+        "policy trained through SuperSuit)",
+    )
+    env_kwargs: dict = field(
+        default_factory=dict,
+        metadata={
+            "help": 'env keyword arguments as a JSON object, e.g. \'{"n_agents": 10, '
+            '"n_steps": 20, "integrator": "em"}\' (default: the paper\'s stiff setting)'
+        },
+    )
+    timesteps: int = _opt(
+        100_000,
+        "total SB3 timesteps (for the PettingZoo env one timestep is one agent-step, so a swarm "
+        "step counts N times)",
+    )
+    seed: int = _opt(0, "seed of the algorithm, the networks and the training envs' resets")
+    out: str = _opt("runs", "directory under which the run directory is created")
+    run_name: str | None = _opt(
+        None, "name of the run directory (default {env}__{algo}__{seed}__{unix time})"
+    )
+    n_envs: int | None = _opt(
+        None,
+        "parallel training envs (default: the hyperparameter file's n_envs; for the PettingZoo "
+        "env, copies of the swarm)",
+    )
+    hyperparams: dict = field(
+        default_factory=dict,
+        metadata={
+            "help": "JSON object overriding SB3 keyword arguments of the algorithm, e.g. "
+            '\'{"learning_rate": 0.001, "policy_kwargs": {"net_arch": [32, 32]}}\''
+        },
+    )
+    normalize: bool | None = _opt(
+        None,
+        "VecNormalize observations and rewards (statistics saved with every checkpoint and "
+        "frozen at evaluation); default: the hyperparameter file's choice",
+    )
+    eval_freq: int = _opt(
+        10_000, "evaluate every this many timesteps on the validation seeds (0: never)"
+    )
+    eval_episodes: int = _opt(5, "validation episodes per evaluation (seeds eval_seed + i)")
+    eval_seed: int = _opt(
+        DEFAULT_EVAL_SEED,
+        "first validation seed; the turnpike, proportional and zero controllers are logged on "
+        "the same seeds",
+    )
+    checkpoint_freq: int = _opt(
+        20_000, "save model + VecNormalize stats (+ replay buffer) every this many timesteps"
+    )
+    turnpike_beta: float = _opt(
+        12.0, "beta of the turnpike (and proportional) reference controllers"
+    )
+    turnpike_delta: float = _opt(2e-4, "delta of the turnpike reference controller")
+    vec_env: str = _opt(
+        "dummy",
+        "vectorization of the training envs: dummy (in process) or subproc",
+        choices=("dummy", "subproc"),
+    )
+    device: str = _opt("cpu", "torch device")
+    torch_threads: int = _opt(
+        1,
+        "torch intra-op threads during training (1 is by far the fastest for these small "
+        "networks on CPU; 0 keeps torch's default)",
+    )
+    progress_bar: bool = _opt(True, "show a progress bar (tqdm + rich)")
+    tensorboard: bool = _opt(True, "write TensorBoard logs into the run directory (tb/)")
+    verbose: int = _opt(0, "SB3 verbosity (0, 1, 2)")
+    resume: str | None = _opt(
+        None,
+        "resume the run in this directory from its last checkpoint (its config.json is used; "
+        "--timesteps may raise the total)",
+    )
+
+    def __post_init__(self) -> None:
+        self.env_kwargs = parse_json_object(self.env_kwargs, "--env-kwargs")
+        self.hyperparams = parse_json_object(self.hyperparams, "--hyperparams")
+
+    def validate(self) -> TrainConfig:
+        """Check every option; raise ValueError naming the option. Returns self."""
+        self.algo = check_algo(self.algo)
+        check_env_id(self.env_id)
+        for name in ("timesteps",):
+            _check_int(name, getattr(self, name), 1)
+        for name in ("eval_freq", "checkpoint_freq", "seed", "eval_seed", "verbose"):
+            _check_int(name, getattr(self, name), 0)
+        for name in ("torch_threads",):
+            _check_int(name, getattr(self, name), 0)
+        _check_int("eval_episodes", self.eval_episodes, 1)
+        if self.n_envs is not None:
+            _check_int("n_envs", self.n_envs, 1)
+        if self.vec_env not in ("dummy", "subproc"):
+            raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        for name in ("turnpike_beta", "turnpike_delta"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"--{name.replace('_', '-')} must be a number > 0, got {value!r}")
+        unknown = set(self.hyperparams) & set(ZOO_KEYS)
+        if unknown:
+            raise ValueError(
+                f"--hyperparams takes SB3 keyword arguments only; {sorted(unknown)} are set by "
+                "--n-envs, --timesteps, --normalize and --env-kwargs"
+            )
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - names
+        if unknown:
+            raise ValueError(f"unknown TrainConfig fields {sorted(unknown)}")
+        return cls(**data)
+
+
+def _check_int(name: str, value: Any, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        flag = "--" + name.replace("_", "-")
+        raise ValueError(f"{flag} must be an integer >= {minimum}, got {value!r}")
+
+
+def _bool(text: str) -> bool:
+    lowered = text.lower()
+    if lowered in ("1", "true", "yes", "on"):
+        return True
+    if lowered in ("0", "false", "no", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true/false, got {text!r}")
+
+
+def add_dataclass_arguments(
+    parser: argparse.ArgumentParser,
+    cls: type,
+    *,
+    exclude: tuple[str, ...] = (),
+    suppress_defaults: bool = False,
+) -> None:
+    """Add one `--field-name` option per dataclass field, with the field's metadata help.
+
+    Booleans accept `--flag/--no-flag`; dict fields take a JSON object (parsed and checked by
+    the dataclass). With `suppress_defaults`, options left out do not appear in the namespace
+    (so a caller can tell "not given" from "given the default").
+    """
+    for f in dataclasses.fields(cls):
+        if f.name in exclude:
+            continue
+        flag = "--" + f.name.replace("_", "-")
+        meta = dict(f.metadata)
+        help_text = meta.pop("help", "")
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        kwargs: dict[str, Any] = {"dest": f.name}
+        kwargs["default"] = argparse.SUPPRESS if suppress_defaults else default
+        shown = json.dumps(default) if isinstance(default, dict) else default
+        mentioned = "default" in help_text
+        kwargs["help"] = help_text if mentioned else f"{help_text} (default: {shown})"
+        if f.type in ("bool", "bool | None", bool):
+            kwargs["action"] = argparse.BooleanOptionalAction
+        elif f.type in ("dict", dict):
+            kwargs["metavar"] = "JSON"
+            kwargs["type"] = str
+        elif f.type in ("int", "int | None"):
+            kwargs["type"] = int
+        elif f.type == "float":
+            kwargs["type"] = float
+        else:
+            kwargs["type"] = str
+        kwargs.update(meta)
+        parser.add_argument(flag, **kwargs)
+
+
+def config_from_namespace(cls: type, args: argparse.Namespace, **overrides: Any) -> Any:
+    """Build a dataclass from the namespace filled by `add_dataclass_arguments`."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    values = {k: v for k, v in vars(args).items() if k in names}
+    values.update(overrides)
+    return cls(**values)
