@@ -30,9 +30,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
 from agent_envs.costs import agent_running_cost, running_cost
 from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.envs.observation import global_observation
 from agent_envs.integrators import (
     DEFAULT_INTEGRATOR,
     DEFAULT_JACOBIAN,
@@ -408,3 +410,10 @@ class EpisodeAttributes:
     def step_index(self) -> int:
         """n, the number of steps taken since reset."""
         return self.episode.step_index
+
+    def _global_observation(self, space: spaces.Box) -> np.ndarray:
+        """The Gymnasium observation vector (= the PettingZoo global state) of the episode."""
+        ep = self.episode
+        return global_observation(
+            ep.mean_positions, ep.mean_interaction_drift, ep.target, ep.time_fraction, space
+        )

@@ -15,7 +15,6 @@ from gymnasium import spaces
 
 from agent_envs.envs.episode import EpisodeAttributes, EpisodeConfig, StepOutcome, SwarmEpisode
 from agent_envs.envs.observation import (
-    global_observation,
     interaction_drift_bound,
     observation_space,
 )
@@ -163,14 +162,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
 
     # ------------------------------------------------------------------ API
     def _observation(self) -> np.ndarray:
-        ep = self.episode
-        return global_observation(
-            ep.mean_positions,
-            ep.mean_interaction_drift,
-            ep.target,
-            ep.time_fraction,
-            self.observation_space,
-        )
+        return self._global_observation(self.observation_space)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

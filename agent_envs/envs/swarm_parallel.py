@@ -16,7 +16,6 @@ from agent_envs.envs.episode import EpisodeAttributes, EpisodeConfig, SwarmEpiso
 from agent_envs.envs.observation import (
     agent_observation_space,
     agent_observations,
-    global_observation,
     interaction_drift_bound,
     observation_space,
 )
@@ -136,14 +135,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
 
     def state(self) -> np.ndarray:
         """The global state: the Gymnasium observation vector of the current state."""
-        ep = self.episode
-        return global_observation(
-            ep.mean_positions,
-            ep.mean_interaction_drift,
-            ep.target,
-            ep.time_fraction,
-            self.state_space,
-        )
+        return self._global_observation(self.state_space)
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
