@@ -41,6 +41,12 @@ def phi_scalar(z: np.ndarray, order: int) -> np.ndarray:
     z = np.asarray(z)
     if order == 0:
         return np.exp(z)
+    if order == 1:
+        # expm1(z)/z is accurate to round-off for every z != 0 (no cancellation), and the
+        # masked Taylor branch below costs ~70 us of numpy overhead on small arrays.
+        nonzero = z != 0
+        with np.errstate(over="ignore"):
+            return np.where(nonzero, np.expm1(z) / np.where(nonzero, z, 1), 1.0)
     small = np.abs(z) < 0.1
     out = np.empty_like(z, dtype=np.result_type(z, float))
     zs = z[small]
