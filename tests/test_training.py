@@ -124,8 +124,31 @@ def test_malformed_hyperparams_names_the_option():
 def test_bad_env_kwarg_value_fails_before_training(tmp_path):
     from training.train import train
 
-    with pytest.raises((ValueError, TypeError), match="n_agents"):
-        train(tiny_config(tmp_path, env_kwargs={"n_agents": 1}))
+    for bad in ({"n_agents": 1}, {"n_agent": 5}, {"n_agents": "five"}):
+        with pytest.raises(ValueError, match="n_agent"):
+            train(tiny_config(tmp_path, env_kwargs=bad))
+    assert not (tmp_path / "runs").exists()  # nothing created for a rejected run
+
+
+def test_cli_env_kwargs_typo_is_a_clean_error(tmp_path, capsys):
+    from training.cli import main
+
+    out = str(tmp_path / "runs")
+    assert main(["train", "--env-kwargs", '{"n_agent": 5}', "--out", out]) == 2
+    assert "--env-kwargs" in capsys.readouterr().err
+
+
+def test_horizon_end_is_terminal_for_the_learner():
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401
+    from training.wrappers import HorizonAsTermination
+
+    env = HorizonAsTermination(gym.make(GYM_ENV_ID, **TINY_ENV))
+    env.reset(seed=0)
+    flags = [env.step(env.action_space.sample() * 0)[2:4] for _ in range(TINY_ENV["n_steps"])]
+    assert flags[-1] == (True, False)  # terminated, not truncated, at t = T
+    assert all(f == (False, False) for f in flags[:-1])
 
 
 def test_cli_reports_bad_options_with_exit_code_2(capsys):
@@ -368,6 +391,32 @@ def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
         # the replay buffer came back with the checkpoint (all but the transition of the
         # interrupted step, which SB3 stores after the callbacks ran)
         assert capture.buffer_size >= steps - 1
+    assert len(set(timesteps)) == len(timesteps)  # no evaluation counted twice
+
+    # a finished run continues from its final state, not from an older checkpoint
+    final_steps = summary["timesteps"]
+    assert latest_checkpoint(run_dir, algo == "sac", normalize=True)[0] == final_steps
+    capture = _capture_start_parameters()
+    train(
+        TrainConfig(
+            resume=str(run_dir), timesteps=final_steps + 100, progress_bar=False, tensorboard=False
+        ),
+        callbacks=[capture()],
+    )
+    assert capture.start_timesteps == final_steps
+
+    # asking for no more than what is done trains nothing and keeps the run as it is
+    before = (run_dir / "summary.json").read_text()
+    done = json.loads(before)["timesteps"]
+    assert (
+        train(
+            TrainConfig(
+                resume=str(run_dir), timesteps=done - 50, progress_bar=False, tensorboard=False
+            )
+        )
+        == run_dir
+    )
+    assert (run_dir / "summary.json").read_text() == before
 
 
 @pytest.mark.slow

@@ -173,10 +173,16 @@ class SwarmEvalCallback(EvalCallback):
         self.evaluations_timesteps.append(self.num_timesteps)
         self.evaluations_results.append(list(-costs))
         self.evaluations_length.append([0] * len(costs))
+        # SB3's EvalCallback layout (rl-zoo3's plot scripts read it): results and ep_lengths of
+        # shape (n_evaluations, 1); one column, the mean over the validation episodes, since a
+        # resumed curve keeps only means. ep_lengths holds the nominal episode length m.
+        means = np.array([[np.mean(r)] for r in self.evaluations_results])
+        n_steps = int(self.eval_env.get_attr("n_steps")[0])
         np.savez(
             self.log_path,
-            timesteps=self.evaluations_timesteps,
-            results=np.array([np.mean(r) for r in self.evaluations_results]),
+            timesteps=np.array(self.evaluations_timesteps),
+            results=means,
+            ep_lengths=np.full(means.shape, n_steps),
         )
         self.last_mean_reward = -mean
         self.logger.record("eval/mean_reward", -mean)

@@ -257,7 +257,18 @@ def learner_config(config: CompareConfig, learner: Learner, runs_dir: Path) -> T
     ).validate()
 
 
-_SAME_RUN_FIELDS = ("algo", "env_id", "env_kwargs", "seed", "n_envs", "hyperparams", "eval_seed")
+#: A run is reused or resumed only when all of these match, the budget included: a run resumed
+#: with another budget would keep its old evaluation and checkpoint schedule.
+_SAME_RUN_FIELDS = (
+    "algo",
+    "env_id",
+    "env_kwargs",
+    "seed",
+    "n_envs",
+    "hyperparams",
+    "eval_seed",
+    "timesteps",
+)
 
 
 def find_run(runs_dir: Path, wanted: TrainConfig) -> tuple[Path, bool] | None:

@@ -30,7 +30,9 @@ ALGORITHMS = ("ppo", "sac", "td3", "a2c")
 OFF_POLICY = ("sac", "td3")
 #: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
 #: (rl-zoo3 reads them itself).
-ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs")
+#: The training wrapper that makes the end of the horizon terminal (see training.wrappers).
+HORIZON_WRAPPER = "training.wrappers.HorizonAsTermination"
+ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "env_wrapper")
 #: rl-zoo3 keys turned into an SB3 action-noise object (TD3).
 NOISE_KEYS = ("noise_type", "noise_std")
 #: File names in a run directory. The VecNormalize statistics sit next to their model as
@@ -39,7 +41,8 @@ BEST_MODEL = "best_model.zip"
 BEST_VECNORMALIZE = "best_model_vecnormalize.pkl"
 FINAL_MODEL = "final_model.zip"
 FINAL_VECNORMALIZE = "final_model_vecnormalize.pkl"
-#: Offset of the validation seeds (evaluation during training) from the run seed's block.
+#: First validation seed (evaluation during training): episodes use seeds 1000, 1001, ...,
+#: absolute seeds, apart from the held-out test seeds 10000.. of `agent-envs evaluate`.
 DEFAULT_EVAL_SEED = 1_000
 
 # Measured on N = 10, m = 20 (see docs/README_training.md): the good controls are small next
@@ -50,6 +53,7 @@ _PPO_SWARM = {
     "n_envs": 4,
     "n_timesteps": 200_000,
     "policy": "MlpPolicy",
+    "env_wrapper": HORIZON_WRAPPER,
     "normalize": True,
     "n_steps": 256,
     "batch_size": 256,
@@ -65,6 +69,7 @@ _OFF_POLICY_SWARM = {
     "n_envs": 1,
     "n_timesteps": 50_000,
     "policy": "MlpPolicy",
+    "env_wrapper": HORIZON_WRAPPER,
     "normalize": True,
     "buffer_size": 100_000,
     "batch_size": 128,
@@ -89,6 +94,7 @@ HYPERPARAMS: dict[str, dict[str, dict[str, Any]]] = {
             "n_envs": 4,
             "n_timesteps": 200_000,
             "policy": "MlpPolicy",
+            "env_wrapper": HORIZON_WRAPPER,
             "normalize": True,
             "n_steps": 8,
             "gamma": 0.9,

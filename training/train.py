@@ -89,7 +89,10 @@ def make_gym_env(env_id: str, env_kwargs: dict[str, Any] | None = None):
 
     import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
 
-    return gym.make(env_id, **(env_kwargs or {}))
+    try:
+        return gym.make(env_id, **(env_kwargs or {}))
+    except TypeError as exc:  # unknown or mistyped keyword: a user error, not a crash
+        raise ValueError(f"--env-kwargs {env_kwargs}: {exc}") from None
 
 
 def eval_env_id(config: TrainConfig) -> str:
@@ -174,6 +177,7 @@ def make_training_env(config: TrainConfig, n_envs: int):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import agent_envs  # noqa: F401
+    from training.wrappers import HorizonAsTermination
 
     return make_vec_env(
         config.env_id,
@@ -181,6 +185,7 @@ def make_training_env(config: TrainConfig, n_envs: int):
         seed=config.seed,
         env_kwargs=config.env_kwargs,
         vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
+        wrapper_class=HorizonAsTermination,
     )
 
 
@@ -271,6 +276,7 @@ def train(config: TrainConfig, callbacks: Sequence[Any] | None = None) -> Path:
                 f"run directory {run_dir} exists; pass --resume {run_dir} to continue it or "
                 "choose another --run-name"
             )
+    env_description(eval_env_id(config), config.env_kwargs)  # validate before creating files
     run_dir.mkdir(parents=True, exist_ok=True)
     with torch_threads(config.torch_threads):
         return _train_in(config, run_dir, list(callbacks or []))
@@ -311,10 +317,15 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
     eval_id = eval_env_id(config)
     description = env_description(eval_id, config.env_kwargs)  # also validates env_kwargs
 
+    # Every run ends with a checkpoint of its final state (below), so the newest complete
+    # checkpoint is where a resumed run continues, finished or interrupted.
     checkpoint = latest_checkpoint(run_dir, off_policy, normalize) if config.resume else None
-    if config.resume and checkpoint is None and (run_dir / FINAL_MODEL).exists():
-        # finished run: continue from its final model if more timesteps are asked for
-        checkpoint = (-1, run_dir / FINAL_MODEL)
+    if checkpoint is not None and checkpoint[0] >= config.timesteps:
+        print(
+            f"{run_dir.name}: {checkpoint[0]} timesteps already done (>= --timesteps "
+            f"{config.timesteps}); nothing to train"
+        )
+        return run_dir
     stored = {**config.to_dict(), "resume": None}
     _write_json(run_dir / "config.json", stored)
     _write_json(run_dir / "env.json", description)
@@ -349,16 +360,12 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
     else:
         steps, model_path = checkpoint
         if normalize:
-            stats_path = (
-                run_dir / FINAL_VECNORMALIZE
-                if steps < 0
-                else checkpoint_file(run_dir, "vecnormalize", steps)
-            )
+            stats_path = checkpoint_file(run_dir, "vecnormalize", steps)
             venv = VecNormalize.load(str(stats_path), venv)
             venv.training = True
         model = cls.load(model_path, env=venv, device=config.device, tensorboard_log=tb_log)
         model.verbose = config.verbose
-        if off_policy and steps >= 0:
+        if off_policy:
             model.load_replay_buffer(checkpoint_file(run_dir, "replay_buffer", steps))
         done = int(model.num_timesteps)
         # a fresh, reproducible seeding of the resumed part
@@ -427,13 +434,12 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
                 file=sys.stderr,
             )
             raise
-    else:
-        print(f"{run_dir.name}: {done} timesteps already done (>= --timesteps {config.timesteps})")
     if eval_callback is not None and (
         not eval_callback.history or eval_callback.history[-1]["timesteps"] != model.num_timesteps
     ):
         eval_callback.evaluate_now()  # the final model is always on the learning curve
     wall = time.perf_counter() - start
+    save_checkpoint(model, run_dir, off_policy)  # the final state is the newest checkpoint
     model.save(run_dir / FINAL_MODEL)
     stats = model.get_vec_normalize_env()
     if stats is not None:
