@@ -396,3 +396,11 @@ def test_kernel_matrix_is_built_once_per_step():
     for _ in range(3):
         env.step(env.action_space.sample())
     assert len(calls) == 3  # one per new state; without the cache it would be 6
+
+
+def test_misspelt_reset_option_is_rejected_naming_it():
+    env = gym.make("agent_envs/Swarm-v0", n_agents=5, n_steps=4)
+    with pytest.raises(ValueError, match="initial_position"):
+        env.reset(seed=0, options={"initial_position": np.zeros(5)})
+    with pytest.raises(TypeError, match="options"):
+        env.reset(seed=0, options=[1, 2])

@@ -61,6 +61,29 @@ DEFAULT_N_STEPS = 50
 #: 95.6 / 113.1 (non-symmetric, SERB / EM). 150 leaves it unclipped with a 30 % margin.
 DEFAULT_MAX_CONTROL = 150.0
 
+#: Keys of `reset(options=...)` the swarm envs understand.
+RESET_OPTION_NAMES = ("initial_positions", "target")
+
+
+def reset_options(options: Any, strict: bool) -> dict[str, Any]:
+    """The understood reset options as a dict (missing keys are None).
+
+    With `strict`, an unknown key (a typo such as "initial_position") raises `ValueError`
+    naming it; otherwise unknown keys are ignored (PettingZoo's API tests pass
+    ``{"options": 1}`` and expect it to be accepted).
+    """
+    if options is None:
+        options = {}
+    if not isinstance(options, dict):
+        raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
+    unknown = sorted(set(options) - set(RESET_OPTION_NAMES))
+    if strict and unknown:
+        raise ValueError(
+            f"unknown reset option(s) {unknown}; the swarm envs take {list(RESET_OPTION_NAMES)}"
+        )
+    return {name: options.get(name) for name in RESET_OPTION_NAMES}
+
+
 ENV_OPTION_NAMES = (
     "integrator",
     "jacobian",

@@ -13,7 +13,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from agent_envs.envs.episode import EpisodeAttributes, EpisodeConfig, StepOutcome, SwarmEpisode
+from agent_envs.envs.episode import (
+    EpisodeAttributes,
+    EpisodeConfig,
+    StepOutcome,
+    SwarmEpisode,
+    reset_options,
+)
 from agent_envs.envs.observation import (
     interaction_drift_bound,
     observation_space,
@@ -90,7 +96,8 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     for every path. `reset(options={"initial_positions": x0})` with x0 of shape (N,) (d = 1) or
     (N, d) replaces them, and `options={"target": xbar}` replaces the target for the episode.
     The uniform draw is made either way, so the Brownian increments of a seeded episode do not
-    depend on the options. Other option keys are ignored.
+    depend on the options. Any other option key raises `ValueError` (a typo never passes
+    silently).
 
     ## Episode End
 
@@ -168,12 +175,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        options = {} if options is None else options
-        self.episode.reset(
-            self.np_random,
-            initial_positions=options.get("initial_positions"),
-            target=options.get("target"),
-        )
+        self.episode.reset(self.np_random, **reset_options(options, strict=True))
         if self._renderer is not None:
             self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)
             if self.render_mode == "human":

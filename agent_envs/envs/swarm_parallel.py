@@ -12,7 +12,12 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from agent_envs.envs.episode import EpisodeAttributes, EpisodeConfig, SwarmEpisode
+from agent_envs.envs.episode import (
+    EpisodeAttributes,
+    EpisodeConfig,
+    SwarmEpisode,
+    reset_options,
+)
 from agent_envs.envs.observation import (
     agent_observation_space,
     agent_observations,
@@ -142,12 +147,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
         if seed is not None:
             self._np_random, self._np_random_seed = seeding.np_random(seed)
-        options = {} if options is None else options
-        self.episode.reset(
-            self.np_random,
-            initial_positions=options.get("initial_positions"),
-            target=options.get("target"),
-        )
+        # unknown keys ignored: PettingZoo's API tests pass {"options": 1}
+        self.episode.reset(self.np_random, **reset_options(options, strict=False))
         self.agents = self.possible_agents[:]
         self.last_control = None
         if self._renderer is not None:
