@@ -41,6 +41,7 @@ from training.config import (
     TrainConfig,
     add_dataclass_arguments,
     config_from_namespace,
+    option_field,
     parse_json_object,
 )
 
@@ -141,23 +142,19 @@ PRESETS: dict[str, Preset] = {
 }
 
 
-def _opt(default: Any, help: str, **kwargs: Any) -> Any:
-    return field(default=default, metadata={"help": help, **kwargs})
-
-
 @dataclass
 class CompareConfig:
     """Options of `agent-envs compare` (one field = one option)."""
 
-    preset: str = _opt("quick", "comparison setting", choices=tuple(PRESETS))
-    out: str | None = _opt(None, "output directory (default compare-{preset})")
-    learners: str | None = _opt(
+    preset: str = option_field("quick", "comparison setting", choices=tuple(PRESETS))
+    out: str | None = option_field(None, "output directory (default compare-{preset})")
+    learners: str | None = option_field(
         None,
         "comma-separated learners to train (default: all of the preset: "
         + "; ".join(f"{k}: {','.join(x.name for x in p.learners)}" for k, p in PRESETS.items())
         + ")",
     )
-    seed: int = _opt(0, "training seed of every learner")
+    seed: int = option_field(0, "training seed of every learner")
     env_kwargs: dict = field(
         default_factory=dict,
         metadata={
@@ -172,16 +169,18 @@ class CompareConfig:
             'changed (train on one, evaluate on another), e.g. \'{"integrator": "serb"}\''
         },
     )
-    timesteps_scale: float = _opt(
+    timesteps_scale: float = option_field(
         1.0, "multiply every learner's training timesteps (e.g. 0.1 for a smoke run)"
     )
-    test_episodes: int | None = _opt(
+    test_episodes: int | None = option_field(
         None, "held-out test episodes per policy (seeds 10000 + i; default: the preset's)"
     )
-    retrain: bool = _opt(False, "train anew even when a finished run of the same setting exists")
-    progress_bar: bool = _opt(True, "progress bars")
-    verbose: int = _opt(0, "SB3 verbosity")
-    torch_threads: int = _opt(1, "torch threads (1 is fastest for these small networks)")
+    retrain: bool = option_field(
+        False, "train anew even when a finished run of the same setting exists"
+    )
+    progress_bar: bool = option_field(True, "progress bars")
+    verbose: int = option_field(0, "SB3 verbosity")
+    torch_threads: int = option_field(1, "torch threads (1 is fastest for these small networks)")
 
     def __post_init__(self) -> None:
         self.env_kwargs = parse_json_object(self.env_kwargs, "--env-kwargs")

@@ -195,7 +195,7 @@ def default_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     return json.loads(json.dumps(entry))
 
 
-def _opt(default: Any, help: str, **kwargs: Any) -> Any:
+def option_field(default: Any, help: str, **kwargs: Any) -> Any:
     """A dataclass field with a scalar default and its --help text."""
     return field(default=default, metadata={"help": help, **kwargs})
 
@@ -204,8 +204,8 @@ def _opt(default: Any, help: str, **kwargs: Any) -> Any:
 class TrainConfig:
     """One training run. Every field is an `agent-envs train` option (`--field-name`)."""
 
-    algo: str = _opt("ppo", "Stable-Baselines3 algorithm", choices=ALGORITHMS)
-    env_id: str = _opt(
+    algo: str = option_field("ppo", "Stable-Baselines3 algorithm", choices=ALGORITHMS)
+    env_id: str = option_field(
         GYM_ENV_ID,
         f"environment: the Gymnasium id {GYM_ENV_ID!r} (one controller for the swarm) or "
         f"{PETTINGZOO_ENV_ID!r} (PettingZoo, one agent per swarm member, parameter-shared "
@@ -218,17 +218,17 @@ class TrainConfig:
             '"n_steps": 20, "integrator": "em"}\' (default: the paper\'s stiff setting)'
         },
     )
-    timesteps: int = _opt(
+    timesteps: int = option_field(
         100_000,
         "total SB3 timesteps (for the PettingZoo env one timestep is one agent-step, so a swarm "
         "step counts N times)",
     )
-    seed: int = _opt(0, "seed of the algorithm, the networks and the training envs' resets")
-    out: str = _opt("runs", "directory under which the run directory is created")
-    run_name: str | None = _opt(
+    seed: int = option_field(0, "seed of the algorithm, the networks and the training envs' resets")
+    out: str = option_field("runs", "directory under which the run directory is created")
+    run_name: str | None = option_field(
         None, "name of the run directory (default {env}__{algo}__{seed}__{unix time})"
     )
-    n_envs: int | None = _opt(
+    n_envs: int | None = option_field(
         None,
         "parallel training envs (default: the hyperparameter file's n_envs; for the PettingZoo "
         "env, copies of the swarm)",
@@ -240,42 +240,42 @@ class TrainConfig:
             '\'{"learning_rate": 0.001, "policy_kwargs": {"net_arch": [32, 32]}}\''
         },
     )
-    normalize: bool | None = _opt(
+    normalize: bool | None = option_field(
         None,
         "VecNormalize observations and rewards (statistics saved with every checkpoint and "
         "frozen at evaluation); default: the hyperparameter file's choice",
     )
-    eval_freq: int = _opt(
+    eval_freq: int = option_field(
         10_000, "evaluate every this many timesteps on the validation seeds (0: never)"
     )
-    eval_episodes: int = _opt(5, "validation episodes per evaluation (seeds eval_seed + i)")
-    eval_seed: int = _opt(
+    eval_episodes: int = option_field(5, "validation episodes per evaluation (seeds eval_seed + i)")
+    eval_seed: int = option_field(
         DEFAULT_EVAL_SEED,
         "first validation seed; the turnpike, proportional and zero controllers are logged on "
         "the same seeds",
     )
-    checkpoint_freq: int = _opt(
+    checkpoint_freq: int = option_field(
         20_000, "save model + VecNormalize stats (+ replay buffer) every this many timesteps"
     )
-    turnpike_beta: float = _opt(
+    turnpike_beta: float = option_field(
         12.0, "beta of the turnpike (and proportional) reference controllers"
     )
-    turnpike_delta: float = _opt(2e-4, "delta of the turnpike reference controller")
-    vec_env: str = _opt(
+    turnpike_delta: float = option_field(2e-4, "delta of the turnpike reference controller")
+    vec_env: str = option_field(
         "dummy",
         "vectorization of the training envs: dummy (in process) or subproc",
         choices=("dummy", "subproc"),
     )
-    device: str = _opt("cpu", "torch device")
-    torch_threads: int = _opt(
+    device: str = option_field("cpu", "torch device")
+    torch_threads: int = option_field(
         1,
         "torch intra-op threads during training (1 is by far the fastest for these small "
         "networks on CPU; 0 keeps torch's default)",
     )
-    progress_bar: bool = _opt(True, "show a progress bar (tqdm + rich)")
-    tensorboard: bool = _opt(True, "write TensorBoard logs into the run directory (tb/)")
-    verbose: int = _opt(0, "SB3 verbosity (0, 1, 2)")
-    resume: str | None = _opt(
+    progress_bar: bool = option_field(True, "show a progress bar (tqdm + rich)")
+    tensorboard: bool = option_field(True, "write TensorBoard logs into the run directory (tb/)")
+    verbose: int = option_field(0, "SB3 verbosity (0, 1, 2)")
+    resume: str | None = option_field(
         None,
         "resume the run in this directory from its last checkpoint (its config.json is used; "
         "--timesteps may raise the total)",

@@ -84,16 +84,6 @@ def make_shared_vec_env(
     return VecMonitor(_seedable_wrapper_class()(vec.venv))
 
 
-def swarm_shape(env_kwargs: dict[str, Any] | None) -> tuple[int, int]:
-    """(N, d) of the swarm the kwargs describe."""
-    env = parallel_env(env_kwargs)
-    try:
-        params = env.unwrapped.params
-        return int(params.n_agents), int(params.dim)
-    finally:
-        env.close()
-
-
 def evaluate_per_agent(
     policy: Any, env_kwargs: dict[str, Any] | None, seeds: Sequence[int]
 ) -> np.ndarray:
