@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from agent_envs.params import SwarmParams
+from agent_envs.plotting import headless_pyplot
 from agent_envs.simulator import Trajectory, simulate
 
 
@@ -105,10 +106,7 @@ def _label(row: dict) -> str:
 
 def plot_figure(path: Path, panels: list[tuple[dict, Trajectory]]) -> None:
     """One panel per run: every agent's path-mean position against time."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = headless_pyplot()
 
     fig, axes = plt.subplots(len(panels), 1, figsize=(7, 2.6 * len(panels)), squeeze=False)
     for ax, (row, traj) in zip(axes[:, 0], panels, strict=True):
@@ -127,10 +125,7 @@ def plot_figure(path: Path, panels: list[tuple[dict, Trajectory]]) -> None:
 
 def plot_jacobian_study(path: Path, rows: list[dict]) -> None:
     """Spread of the agents at T against m for ERB with the exact and the frozen Jacobian."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = headless_pyplot()
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
     for jac, marker in (("exact", "o"), ("frozen", "s")):

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from agent_envs.plotting import headless_pyplot
 from training.evaluate import EvaluationResults
 
 DEFAULT_REFERENCE = "turnpike"
@@ -170,22 +171,13 @@ def merge_results(results: Sequence[EvaluationResults]) -> EvaluationResults:
 # --------------------------------------------------------------------------------------------
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def _color(i: int) -> str:
     return f"C{i % 10}"
 
 
 def plot_trajectories(results: EvaluationResults, path: str | os.PathLike, seed_index: int = 0):
     """One panel per policy: every agent's path-mean position (coordinate 0) against time."""
-    plt = _pyplot()
+    plt = headless_pyplot()
     policies = [p for p in results.policies if p in results.trajectories]
     ncols = min(3, max(1, len(policies)))
     nrows = int(np.ceil(len(policies) / ncols))
@@ -214,7 +206,7 @@ def plot_trajectories(results: EvaluationResults, path: str | os.PathLike, seed_
 
 
 def _band_plot(results, key, path, ylabel, title, times_slice):
-    plt = _pyplot()
+    plt = headless_pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
     for i, policy in enumerate(p for p in results.policies if p in results.trajectories):
         tr = results.trajectories[policy]

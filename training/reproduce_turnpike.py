@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from agent_envs.plotting import headless_pyplot
 from baselines import CheapClosedLoopModel, TurnpikeController, turnpike_time
 
 BETA = 12.0
@@ -228,18 +229,9 @@ def summarize_record(run: TurnpikeRun, mode: str, seed: int, rec: RunRecord) -> 
     }
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> None:
     """One panel per run: every agent's path-mean position against time, tbar marked."""
-    plt = _pyplot()
+    plt = headless_pyplot()
     ncols = 2
     nrows = int(np.ceil(len(panels) / ncols))
     fig, axes = plt.subplots(nrows, ncols, figsize=(11, 3.1 * nrows), squeeze=False)
@@ -267,7 +259,7 @@ def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> N
 
 def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, RunRecord]]]) -> None:
     """L^n = ||E x^n - xbar||^2 against t, one panel per mode, one curve per run."""
-    plt = _pyplot()
+    plt = headless_pyplot()
     fig, axes = plt.subplots(1, len(by_mode), figsize=(6 * len(by_mode), 4), squeeze=False)
     for ax, (mode, panels) in zip(axes[0], by_mode.items(), strict=True):
         for i, (row, rec) in enumerate(panels):
