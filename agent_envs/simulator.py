@@ -159,14 +159,14 @@ def simulate(
     params: SwarmParams,
     integrator: str | Integrator = "serb",
     *,
-    jacobian: str = DEFAULT_JACOBIAN,
+    jacobian: str | None = None,
     n_steps: int = 50,
     n_paths: int = 20,
     seed: int | np.random.Generator | None = None,
     initial_positions: Any = None,
     control: ControlSpec = None,
     control_rate: ControlSpec = None,
-    phi_method: str = "auto",
+    phi_method: str | None = None,
     divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD,
 ) -> Trajectory:
     """Integrate the swarm SDE on [0, T] with m = `n_steps` steps for `n_paths` Brownian paths.
@@ -174,7 +174,8 @@ def simulate(
     Args:
         params: the model.
         integrator: a registry name ("em", "ee", "heun", "erb", "serb") or an Integrator.
-        jacobian: "frozen" (default, L(x)) or "exact" (dF/dx), for "erb"/"serb".
+        jacobian: "frozen" (default, L(x)) or "exact" (dF/dx), for "erb"/"serb"; with an
+            integrator instance, leave it None (the instance's own choice is used).
         n_steps: m >= 1; tau = T / m.
         n_paths: number of Brownian paths simulated together (all from the same start).
         seed: int, `numpy.random.Generator` or None.
@@ -182,7 +183,7 @@ def simulate(
         control: None, an array (n_steps, N, d) or (n_steps, n_paths, N, d), or a callable
             ``control(t, x) -> u`` with x of shape (n_paths, N, d) and u broadcastable to it.
         control_rate: du/dt in the same forms, for the phi2 term of `eq:serbaut` (optional).
-        phi_method: "auto", "expm", "eigh" or "krylov" (see `phi_action`).
+        phi_method: "auto" (default), "expm", "eigh" or "krylov" (see `phi_action`).
         divergence_threshold: max |x| beyond which a path counts as diverged.
     """
     if not isinstance(params, SwarmParams):
@@ -192,7 +193,16 @@ def simulate(
     divergence_threshold = check_positive("divergence_threshold", divergence_threshold)
     if isinstance(integrator, Integrator):
         scheme = integrator
+        for name, given in (("jacobian", jacobian), ("phi_method", phi_method)):
+            own = getattr(scheme, name, None)
+            if given is not None and given != own:
+                raise ValueError(
+                    f"{name}={given!r} conflicts with the integrator instance's {name}={own!r}; "
+                    f"set it when building the integrator (make_integrator(..., {name}=...))"
+                )
     else:
+        jacobian = DEFAULT_JACOBIAN if jacobian is None else jacobian
+        phi_method = "auto" if phi_method is None else phi_method
         scheme = make_integrator(integrator, jacobian=jacobian, phi_method=phi_method)
         check_phi_method_fits_kernel(params, integrator, jacobian, phi_method)
     n, d = params.n_agents, params.dim

@@ -91,6 +91,17 @@ def test_constant_control_moves_the_mean_exactly():
         np.testing.assert_allclose(means - means[0], 0.5 * traj.times, atol=1e-12)
 
 
+def test_integrator_instance_with_conflicting_options_is_rejected():
+    from agent_envs import make_integrator
+
+    params = SwarmParams(n_agents=4)
+    scheme = make_integrator("serb", jacobian="exact")
+    traj = simulate(params, scheme, n_steps=3, seed=0)  # the instance's own choice
+    assert traj.jacobian == "exact"
+    with pytest.raises(ValueError, match="jacobian"):
+        simulate(params, scheme, jacobian="frozen", n_steps=3)
+
+
 def test_divergence_is_flagged_not_silent():
     params = SwarmParams(n_agents=20, epsilon=1e-4, sigma=0.0)
     traj = simulate(params, "em", n_steps=5, n_paths=1, seed=0, divergence_threshold=5.0)

@@ -363,10 +363,10 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
 
 def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], path: Path) -> None:
     """Validation cost against swarm steps and wall time, one line per learner (log scale)."""
+    from agent_envs.plotting import headless_pyplot
     from training.callbacks import read_learning_curve
-    from training.report import _pyplot
 
-    plt = _pyplot()
+    plt = headless_pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
     for i, (name, run_dir) in enumerate(runs.items()):
         rows = read_learning_curve(run_dir / "learning_curve.csv")
