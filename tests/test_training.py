@@ -342,8 +342,11 @@ def _capture_start_parameters():
         start = None
         start_timesteps = None
         buffer_size = None
+        obs_rms_count = None
 
         def _on_training_start(self) -> None:
+            stats = self.model.get_vec_normalize_env()
+            Capture.obs_rms_count = None if stats is None else float(stats.obs_rms.count)
             Capture.start = {
                 k: v.detach().clone() for k, v in self.model.policy.state_dict().items()
             }
@@ -381,6 +384,19 @@ def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
     )
     assert resumed == run_dir
     assert capture.start_timesteps == steps  # timesteps done are kept
+    # the VecNormalize statistics come back with the checkpoint (not rebuilt from scratch)
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from training.train import checkpoint_file
+
+    saved_stats = VecNormalize.load(
+        str(checkpoint_file(run_dir, "vecnormalize", steps)),
+        DummyVecEnv([lambda: __import__("gymnasium").make(GYM_ENV_ID, **TINY_ENV)]),
+    )
+    saved_count = float(saved_stats.obs_rms.count)
+    assert saved_count > 100
+    # learn() resets the envs first, which adds one observation per env to the statistics
+    assert saved_count <= capture.obs_rms_count <= saved_count + 8
     for key, value in saved.items():  # the trained weights are kept
         assert torch.equal(capture.start[key], value), key
     summary = json.loads((run_dir / "summary.json").read_text())
