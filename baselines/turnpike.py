@@ -23,7 +23,8 @@ The controller reads everything it needs from the env it is built for: N, d, T, 
 the path-mean interaction drift (computed by the env's own `SwarmModel`), the target and t/T from
 each observation (layouts in docs/CONTRACT.md). It never re-derives the kernel.
 
-Discretization note (measured, see docs/README_baselines.md): an env holds each action constant
+Discretization note (measured; README.md, "Paper's controlled experiments"): an env holds
+each action constant
 over a time step (zero-order hold). With Euler-Maruyama the held cheap control gives exactly the
 explicit Euler scheme of `eq:dyn_mean`. With SERB/ERB the exponential integrator treats the
 interaction implicitly (phi1(tau L)) while the held control cancels it only at the step's start,

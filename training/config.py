@@ -45,7 +45,7 @@ FINAL_VECNORMALIZE = "final_model_vecnormalize.pkl"
 #: absolute seeds, apart from the held-out test seeds 10000.. of `agent-envs evaluate`.
 DEFAULT_EVAL_SEED = 1_000
 
-# Measured on N = 10, m = 20 (see docs/README_training.md): the good controls are small next
+# Measured on N = 10, m = 20 (README.md, "Training agents"): the good controls are small next
 # to max_control (the proportional control 12 (xbar - x) is ~10% of it), so the policies start
 # with little action noise (PPO/A2C log_std_init = -3, TD3 noise 0.05) and SAC's entropy
 # coefficient starts at 0.01; gamma = 0.9 fits the 20-50 step episodes.
