@@ -25,9 +25,9 @@ each observation (layouts in docs/CONTRACT.md). It never re-derives the kernel.
 
 Discretization note (measured; README.md, "Paper's controlled experiments"): an env holds
 each action constant over a time step (zero-order hold). With Euler-Maruyama the held cheap
-control gives exactly the
-explicit Euler scheme of `eq:dyn_mean`. With SERB/ERB the exponential integrator treats the
-interaction implicitly (phi1(tau L)) while the held control cancels it only at the step's start,
+control gives exactly the explicit Euler scheme of `eq:dyn_mean`. With SERB/ERB the
+exponential integrator treats the interaction implicitly (phi1(tau L)) while the held control
+cancels it only at the step's start,
 so in stiff directions the cheap phase barely contracts the spread of the swarm. The paper's own
 procedure integrates the closed loop `eq:dyn_mean` in [0, tbar] instead; `CheapClosedLoopModel`
 provides that closed loop to the core's integrators (used by `training.reproduce_turnpike`).
