@@ -16,7 +16,7 @@ from collections.abc import Sequence
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "reproduce-uncontrolled": (
         "agent_envs.reproduction",
-        "paper Section 5.1 (Figs. 1-4): uncontrolled runs, figures and a results table",
+        "paper Section 5.1 (Figs. 1-4 and the m = 1500 runs): uncontrolled runs, figures, table",
     ),
     "reproduce-turnpike": (
         "training.reproduce_turnpike",
