@@ -83,6 +83,33 @@ def _sac_target_entropy(env_kwargs: dict[str, Any], per_dim: float = -5.0) -> fl
 
 
 _QUICK_ENV = {"n_agents": 10, "n_steps": 20}
+
+
+def _default_learners(
+    env_kwargs: dict[str, Any], *, ppo: int, sac: int, ppo_shared: int
+) -> tuple[Learner, ...]:
+    """PPO and SAC on the Gymnasium env and parameter-shared PPO on the PettingZoo env,
+    with the given timestep budgets (the shared learner counts agent-steps)."""
+    return (
+        Learner("ppo", "ppo", GYM_ENV_ID, ppo, description="PPO, one controller"),
+        Learner(
+            "sac",
+            "sac",
+            GYM_ENV_ID,
+            sac,
+            {"target_entropy": _sac_target_entropy(env_kwargs)},
+            description="SAC, one controller",
+        ),
+        Learner(
+            "ppo-shared",
+            "ppo",
+            PETTINGZOO_ENV_ID,
+            ppo_shared,
+            description="parameter-shared PPO, one agent per swarm member (SuperSuit)",
+        ),
+    )
+
+
 PRESETS: dict[str, Preset] = {
     "quick": Preset(
         name="quick",
@@ -91,24 +118,7 @@ PRESETS: dict[str, Preset] = {
             "alpha = 0.1, sigma = 0.01, T = 1, target 0.7, SERB); a few minutes on 2 CPU cores"
         ),
         env_kwargs=_QUICK_ENV,
-        learners=(
-            Learner("ppo", "ppo", GYM_ENV_ID, 40_000, description="PPO, one controller"),
-            Learner(
-                "sac",
-                "sac",
-                GYM_ENV_ID,
-                20_000,
-                {"target_entropy": _sac_target_entropy(_QUICK_ENV)},
-                description="SAC, one controller",
-            ),
-            Learner(
-                "ppo-shared",
-                "ppo",
-                PETTINGZOO_ENV_ID,
-                150_000,
-                description="parameter-shared PPO, one agent per swarm member (SuperSuit)",
-            ),
-        ),
+        learners=_default_learners(_QUICK_ENV, ppo=40_000, sac=20_000, ppo_shared=150_000),
     ),
     "paper": Preset(
         name="paper",
@@ -117,24 +127,7 @@ PRESETS: dict[str, Preset] = {
             "sigma = 0.01, T = 1, target 0.7, SERB (the env defaults)"
         ),
         env_kwargs={},
-        learners=(
-            Learner("ppo", "ppo", GYM_ENV_ID, 400_000, description="PPO, one controller"),
-            Learner(
-                "sac",
-                "sac",
-                GYM_ENV_ID,
-                60_000,
-                {"target_entropy": _sac_target_entropy({})},
-                description="SAC, one controller",
-            ),
-            Learner(
-                "ppo-shared",
-                "ppo",
-                PETTINGZOO_ENV_ID,
-                3_000_000,
-                description="parameter-shared PPO, one agent per swarm member (SuperSuit)",
-            ),
-        ),
+        learners=_default_learners({}, ppo=400_000, sac=60_000, ppo_shared=3_000_000),
         validation_episodes=10,
         evaluations=10,
         test_episodes=20,
