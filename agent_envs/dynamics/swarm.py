@@ -73,8 +73,9 @@ class Linearization:
 class SwarmModel:
     """Drift, Jacobian and frozen linearization of the swarm SDE for given `SwarmParams`.
 
-    The integrators see only `drift`, `linearization` and `sigma`; the controllers and envs use
-    `interaction_drift` and `interaction_matrix`. Every method is batched over leading axes.
+    The integrators see only `drift`, `drift_and_linearization` and `sigma`; the controllers and
+    envs use `interaction_drift` and `interaction_matrix`. Every method is batched over leading
+    axes.
     """
 
     def __init__(self, params: SwarmParams) -> None:
@@ -138,10 +139,6 @@ class SwarmModel:
         # (..., N, N, d, d) -> (..., N, d, N, d) -> (..., Nd, Nd)
         blocks = np.swapaxes(blocks, -3, -2)
         return blocks.reshape(*x.shape[:-2], n * d, n * d)
-
-    def linearization(self, x: np.ndarray, kind: str) -> Linearization:
-        """The matrix an exponential integrator uses: ``"exact"`` J(x) or ``"frozen"`` L(x)."""
-        return self.drift_and_linearization(x, None, kind)[1]
 
     def drift_and_linearization(
         self, x: np.ndarray, u: np.ndarray | None, kind: str
