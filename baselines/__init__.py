@@ -1,6 +1,6 @@
 """Reference controllers for the swarm envs, all SB3 `PolicyPredictor`s.
 
-    from baselines import TurnpikeController
+    from agent_envs.baselines import TurnpikeController
     ctrl = TurnpikeController(env)                    # beta = 12, delta = 2e-4 (paper)
     action, state = ctrl.predict(obs, state)          # actions in [-1, 1]
 
@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from baselines.simple import ProportionalController, ZeroController
-from baselines.turnpike import (
+from agent_envs.baselines.simple import ProportionalController, ZeroController
+from agent_envs.baselines.turnpike import (
     DEFAULT_BETA,
     DEFAULT_DELTA,
     CheapClosedLoopModel,

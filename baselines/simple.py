@@ -7,7 +7,8 @@
   report shows what the cancellation buys. Set ``switch_off=False`` to keep it on until T.
 
 Both are SB3 `PolicyPredictor`s with the observation/action handling of
-`baselines.turnpike.FeedbackController` (Gym vectors, VecEnv batches, PettingZoo per-agent rows
+`agent_envs.baselines.turnpike.FeedbackController` (Gym vectors, VecEnv batches, PettingZoo
+per-agent rows
 and dicts).
 """
 
@@ -17,7 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from baselines.turnpike import DEFAULT_BETA, DEFAULT_DELTA, FeedbackController, cheap_control
+from agent_envs.baselines.turnpike import (
+    DEFAULT_BETA,
+    DEFAULT_DELTA,
+    FeedbackController,
+    cheap_control,
+)
 
 
 class ZeroController(FeedbackController):

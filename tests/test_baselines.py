@@ -7,11 +7,7 @@ import numpy as np
 import pytest
 
 import agent_envs  # noqa: F401  (registers the env id)
-from agent_envs.dynamics.swarm import SwarmModel
-from agent_envs.envs.observation import split_observation
-from agent_envs.params import SwarmParams
-from agent_envs.simulator import uniform_positions
-from baselines import (
+from agent_envs.baselines import (
     CheapClosedLoopModel,
     ProportionalController,
     TurnpikeController,
@@ -21,6 +17,10 @@ from baselines import (
     make_baseline,
     turnpike_time,
 )
+from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.envs.observation import split_observation
+from agent_envs.params import SwarmParams
+from agent_envs.simulator import uniform_positions
 
 ENV_ID = "agent_envs/Swarm-v0"
 #: the paper's tbar (Section 5.2) for N = 100 uniform on [-1, 1], beta = 12, delta = 2e-4
@@ -220,7 +220,7 @@ def test_evaluate_policy_on_dummy_vec_env_with_different_seeds():
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from training.evaluate import rollout
+    from agent_envs.training.evaluate import rollout
 
     # env 0 is truncated after 5 of its 8 steps, so the two envs reset at different times.
     venv = DummyVecEnv([lambda: small_env(max_episode_steps=5), lambda: small_env(target=-0.3)])

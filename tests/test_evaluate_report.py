@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 
 import agent_envs  # noqa: F401
-from baselines import TurnpikeController, ZeroController
-from training.cli import main as cli_main
-from training.evaluate import (
+from agent_envs.baselines import TurnpikeController, ZeroController
+from agent_envs.training.cli import main as cli_main
+from agent_envs.training.evaluate import (
     EvaluationResults,
     PerAgentPolicy,
     detect_algo,
@@ -23,7 +23,12 @@ from training.evaluate import (
     parse_seeds,
     rollout,
 )
-from training.report import ReportSection, build_report, mean_confidence_interval, summarize
+from agent_envs.training.report import (
+    ReportSection,
+    build_report,
+    mean_confidence_interval,
+    summarize,
+)
 
 ENV_ID = "agent_envs/Swarm-v0"
 SMALL = {"n_agents": 5, "n_steps": 6, "n_paths": 2}
@@ -369,7 +374,11 @@ def test_cli_evaluate_report_and_reproduce(tmp_path, capsys):
 def test_paper_setting_em_unstable_after_tbar_serb_reaches_target():
     # Section 5.2 at the paper's setting (N = 100, m = 50, 20 paths), the paper's procedure.
     from agent_envs.simulator import uniform_positions
-    from training.reproduce_turnpike import PAPER_RUNS, run_closed_loop_mode, summarize_record
+    from agent_envs.training.reproduce_turnpike import (
+        PAPER_RUNS,
+        run_closed_loop_mode,
+        summarize_record,
+    )
 
     x0 = uniform_positions(np.random.default_rng(0), 100, 1)
     rows = {}
@@ -387,7 +396,7 @@ def test_ratio_is_not_reported_when_episodes_diverged():
     """A diverged episode has a partial cost; its ratio to the reference would flatter it."""
     import pandas as pd
 
-    from training.report import summarize
+    from agent_envs.training.report import summarize
 
     rows = []
     for seed in range(3):

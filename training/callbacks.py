@@ -10,8 +10,9 @@
    (`eval/turnpike_cost`, `eval/cost_ratio_to_turnpike`, ...), so the learning curve is read
    against the reference lines in TensorBoard and in ``learning_curve.csv``;
 3. the learner is evaluated as a `PolicyPredictor` on the raw env
-   (`training.evaluate.NormalizedObservationPolicy` applies the live `VecNormalize`
-   statistics; `training.evaluate.PerAgentPolicy` runs a parameter-shared PettingZoo policy on
+   (`agent_envs.training.evaluate.NormalizedObservationPolicy` applies the live `VecNormalize`
+   statistics; `agent_envs.training.evaluate.PerAgentPolicy` runs a parameter-shared PettingZoo
+   policy on
    the Gymnasium env), and the `VecNormalize` statistics are saved with the best model
    (SB3's own `EvalCallback` saves only the model).
 
@@ -33,12 +34,12 @@ import numpy as np
 from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from training.config import BEST_MODEL, BEST_VECNORMALIZE
+from agent_envs.training.config import BEST_MODEL, BEST_VECNORMALIZE
 
 
 def mean_ci95(values: np.ndarray) -> tuple[float, float]:
     """Mean and half-width of the t 95% interval (the report's `mean_confidence_interval`)."""
-    from training.report import mean_confidence_interval
+    from agent_envs.training.report import mean_confidence_interval
 
     mean, low, high = mean_confidence_interval(values, 0.95)
     return mean, (high - low) / 2

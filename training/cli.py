@@ -19,13 +19,22 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "paper Section 5.1 (Figs. 1-4 and the m = 1500 runs): uncontrolled runs, figures, table",
     ),
     "reproduce-turnpike": (
-        "training.reproduce_turnpike",
+        "agent_envs.training.reproduce_turnpike",
         "paper Section 5.2 (Figs. 5-6): turnpike-controlled runs, figures and a results table",
     ),
-    "evaluate": ("training.evaluate", "run policies on an env over fixed seeds, store results"),
-    "report": ("training.report", "write a Markdown/HTML report with plots from results"),
-    "train": ("training.train", "train a Stable-Baselines3 agent on a swarm env"),
-    "compare": ("training.compare", "train learners and compare them with the turnpike controller"),
+    "evaluate": (
+        "agent_envs.training.evaluate",
+        "run policies on an env over fixed seeds, store results",
+    ),
+    "report": (
+        "agent_envs.training.report",
+        "write a Markdown/HTML report with plots from results",
+    ),
+    "train": ("agent_envs.training.train", "train a Stable-Baselines3 agent on a swarm env"),
+    "compare": (
+        "agent_envs.training.compare",
+        "train learners and compare them with the turnpike controller",
+    ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.
 REPRODUCTIONS = ("uncontrolled", "turnpike")

@@ -3,16 +3,20 @@
     agent-envs compare --preset quick            # a few minutes on 2 CPU cores
     agent-envs compare --preset paper            # N = 100, stiff, SERB, m = 50; much longer
 
-Steps: (1) train every learner of the preset (`training.train.train`; a finished run of the same
+Steps: (1) train every learner of the preset (`agent_envs.training.train.train`; a finished run of
+the same
 configuration in ``OUT/runs`` is reused, an interrupted one resumed from its last checkpoint);
 (2) evaluate the learners' best models (chosen on the validation seeds) and the turnpike,
-proportional and zero controllers on the same held-out test seeds (`training.evaluate`), plus the
+proportional and zero controllers on the same held-out test seeds (`agent_envs.training.evaluate`),
+plus the
 parameter-shared policy agent by agent on the PettingZoo env; (3) write the report of
-`training.report` with the learning curves added (``OUT/report/report.md`` and ``.html``).
+`agent_envs.training.report` with the learning curves added (``OUT/report/report.md`` and
+``.html``).
 
 Seeds: the training envs start from the run seed; validation (best-model choice and the
 learning curves, turnpike logged on the same seeds) uses seeds ``1000 + i``; the comparison uses
-the held-out test seeds ``10000 + i`` (`training.evaluate.DEFAULT_SEEDS`). Costs are minus the
+the held-out test seeds ``10000 + i`` (`agent_envs.training.evaluate.DEFAULT_SEEDS`). Costs are
+minus the
 episode return, i.e. the paper's discrete cost functional.
 
 Train on one, evaluate on another: ``--eval-env-kwargs '{"integrator": "serb"}'`` evaluates
@@ -33,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from training.config import (
+from agent_envs.training.config import (
     BEST_MODEL,
     FINAL_MODEL,
     GYM_ENV_ID,
@@ -46,7 +50,8 @@ from training.config import (
 )
 
 BASELINE_POLICIES = ("turnpike", "proportional", "zero")
-#: first held-out test seed (seeds TEST_SEED .. TEST_SEED + n - 1), as `training.evaluate`
+#: first held-out test seed (seeds TEST_SEED .. TEST_SEED + n - 1), as
+#: `agent_envs.training.evaluate`
 TEST_SEED = 10_000
 
 
@@ -288,7 +293,7 @@ def find_run(runs_dir: Path, wanted: TrainConfig) -> tuple[Path, bool] | None:
 
 def train_learner(config: CompareConfig, learner: Learner, runs_dir: Path) -> Path:
     """Train (or reuse / resume) one learner; return its run directory."""
-    from training.train import train
+    from agent_envs.training.train import train
 
     wanted = learner_config(config, learner, runs_dir)
     existing = None if config.retrain else find_run(runs_dir, wanted)
@@ -314,7 +319,7 @@ def best_model_path(run_dir: Path) -> Path:
 def evaluate_all(
     policies: dict[str, Any], env_kwargs: dict[str, Any], seeds: list[int], out_dir: Path, progress
 ):
-    from training.evaluate import evaluate_policies
+    from agent_envs.training.evaluate import evaluate_policies
 
     return evaluate_policies(
         policies,
@@ -332,8 +337,8 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
     import pandas as pd
 
     import agent_envs  # noqa: F401
-    from training.evaluate import load_sb3_policy
-    from training.multiagent import evaluate_per_agent
+    from agent_envs.training.evaluate import load_sb3_policy
+    from agent_envs.training.multiagent import evaluate_per_agent
 
     env = gym.make(GYM_ENV_ID, **env_kwargs)
     try:
@@ -357,7 +362,7 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
 def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], path: Path) -> None:
     """Validation cost against swarm steps and wall time, one line per learner (log scale)."""
     from agent_envs.plotting import headless_pyplot
-    from training.callbacks import read_learning_curve
+    from agent_envs.training.callbacks import read_learning_curve
 
     plt = headless_pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
@@ -396,7 +401,7 @@ def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], pa
 
 def _reference_costs(run_dirs: dict[str, Path]) -> dict[str, float]:
     """The baselines' costs the eval callback logged on the validation seeds (same for all)."""
-    from training.callbacks import read_learning_curve
+    from agent_envs.training.callbacks import read_learning_curve
 
     for run_dir in run_dirs.values():
         rows = read_learning_curve(run_dir / "learning_curve.csv")
@@ -412,7 +417,7 @@ def _reference_costs(run_dirs: dict[str, Path]) -> dict[str, float]:
 def training_table(run_dirs: dict[str, Path], learners: dict[str, Learner]):
     import pandas as pd
 
-    from training.callbacks import read_learning_curve
+    from agent_envs.training.callbacks import read_learning_curve
 
     rows = []
     for name, run_dir in run_dirs.items():
@@ -437,8 +442,8 @@ def training_table(run_dirs: dict[str, Path], learners: dict[str, Learner]):
 
 def compare(config: CompareConfig) -> dict[str, Any]:
     """Run the whole comparison; returns paths and the summary table (see module docstring)."""
-    from training.report import ReportSection, build_report, display_table, summarize
-    from training.train import torch_threads
+    from agent_envs.training.report import ReportSection, build_report, display_table, summarize
+    from agent_envs.training.train import torch_threads
 
     started = time.perf_counter()
     preset = PRESETS[config.preset]
@@ -605,7 +610,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
-    from training.cli import main
+    from agent_envs.training.cli import main
 
     raise SystemExit(main(["compare", *sys.argv[1:]]))
 

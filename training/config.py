@@ -30,13 +30,15 @@ ALGORITHMS = ("ppo", "sac", "td3", "a2c")
 OFF_POLICY = ("sac", "td3")
 #: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
 #: (rl-zoo3 reads them itself).
-#: The training wrapper that makes the end of the horizon terminal (see training.wrappers).
-HORIZON_WRAPPER = "training.wrappers.HorizonAsTermination"
+#: The training wrapper that makes the end of the horizon terminal (see
+#: agent_envs.training.wrappers).
+HORIZON_WRAPPER = "agent_envs.training.wrappers.HorizonAsTermination"
 ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "env_wrapper")
 #: rl-zoo3 keys turned into an SB3 action-noise object (TD3).
 NOISE_KEYS = ("noise_type", "noise_std")
 #: File names in a run directory. The VecNormalize statistics sit next to their model as
-#: ``{stem}_vecnormalize.pkl``, where `training.evaluate.find_vecnormalize` looks for them.
+#: ``{stem}_vecnormalize.pkl``, where `agent_envs.training.evaluate.find_vecnormalize` looks for
+#: them.
 BEST_MODEL = "best_model.zip"
 BEST_VECNORMALIZE = "best_model_vecnormalize.pkl"
 FINAL_MODEL = "final_model.zip"

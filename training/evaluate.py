@@ -1,6 +1,6 @@
 """Evaluate policies on a swarm env over a fixed list of seeds, and store the results.
 
-    from training.evaluate import evaluate_policies
+    from agent_envs.training.evaluate import evaluate_policies
     results = evaluate_policies(
         {"turnpike": "turnpike", "zero": "zero", "ppo": "runs/x/best_model.zip"},
         env_id="agent_envs/Swarm-v0", env_kwargs={"n_agents": 20}, seeds=range(10),
@@ -243,7 +243,7 @@ def resolve_policy(
     spec: PolicySpec, env: Any, baseline_kwargs: Mapping[str, Any] | None = None
 ) -> tuple[Any, dict]:
     """A PolicyPredictor for `env` from a spec (see the module docstring) and its description."""
-    from baselines import BASELINES, make_baseline
+    from agent_envs.baselines import BASELINES, make_baseline
 
     if isinstance(spec, (str, os.PathLike)):
         name = os.fspath(spec)
@@ -549,7 +549,7 @@ def evaluate_policies(
     from tqdm.auto import tqdm
 
     import agent_envs  # noqa: F401  (registers the env ids)
-    from baselines import FeedbackController
+    from agent_envs.baselines import FeedbackController
 
     if not isinstance(policies, Mapping):
         policies = {
@@ -742,7 +742,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         out_dir=args.out,
     )
-    from training.report import display_table, summarize
+    from agent_envs.training.report import display_table, summarize
 
     reference = "turnpike" if "turnpike" in policies else None
     table = display_table(summarize(results.episodes, reference), reference)
@@ -750,7 +750,7 @@ def run(args: argparse.Namespace) -> int:
         print(table.to_string(index=False))
     print(f"results written to {args.out}")
     if args.report:
-        from training.report import build_report
+        from agent_envs.training.report import build_report
 
         paths = build_report([results], args.out / "report")
         print(f"report: {paths['markdown']} and {paths['html']}")

@@ -7,7 +7,8 @@ acts for every agent from its own observation ``[x_k | drift_k | target | t/T]``
 sharing, decentralized execution. SB3 counts one timestep per agent-step.
 
 Evaluation: the trained shared policy runs on the Gymnasium env through
-`training.evaluate.PerAgentPolicy` (same seeds, same cost units as every other policy), and
+`agent_envs.training.evaluate.PerAgentPolicy` (same seeds, same cost units as every other policy),
+and
 `evaluate_per_agent` runs it on the PettingZoo env itself to report each agent's cost (the
 agents' costs add up to the swarm's cost).
 """
@@ -20,7 +21,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
-from training.config import PETTINGZOO_ENV_ID
+from agent_envs.training.config import PETTINGZOO_ENV_ID
 
 
 def parallel_env(env_kwargs: dict[str, Any] | None = None):

@@ -12,7 +12,7 @@ policy (one seed), the running cost over time (log scale) and the turnpike dista
 
 Library use (the training comparison adds its learning curves as an extra section):
 
-    from training.report import build_report, ReportSection
+    from agent_envs.training.report import build_report, ReportSection
     build_report([results], "report/", extra_sections=[
         ReportSection("Learning curves", text="...", images=["curves.png"])])
 
@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from agent_envs.plotting import headless_pyplot
-from training.evaluate import EvaluationResults
+from agent_envs.training.evaluate import EvaluationResults
 
 DEFAULT_REFERENCE = "turnpike"
 

@@ -44,8 +44,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from agent_envs.baselines import CheapClosedLoopModel, TurnpikeController, turnpike_time
 from agent_envs.plotting import headless_pyplot
-from baselines import CheapClosedLoopModel, TurnpikeController, turnpike_time
 
 BETA = 12.0
 DELTA = 2e-4
@@ -116,7 +116,7 @@ def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_pat
     import gymnasium as gym
 
     import agent_envs  # noqa: F401
-    from training.evaluate import rollout
+    from agent_envs.training.evaluate import rollout
 
     env = gym.make("agent_envs/Swarm-v0", **run.env_kwargs(n_agents, n_steps, n_paths))
     try:

@@ -9,7 +9,7 @@ Everything is SB3's own machinery: vectorized envs (`make_vec_env`, or SuperSuit
 PettingZoo env), `VecNormalize` (statistics saved with every checkpoint and the model, frozen at
 evaluation), `CheckpointCallback` (model + VecNormalize + replay buffer), an `EvalCallback`
 subclass that logs the turnpike controller's cost on the same validation seeds
-(`training.callbacks.SwarmEvalCallback`), TensorBoard and the progress bar.
+(`agent_envs.training.callbacks.SwarmEvalCallback`), TensorBoard and the progress bar.
 
 A run directory ``{out}/{env}__{algo}__{seed}__{unix time}`` holds:
 
@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from training.config import (
+from agent_envs.training.config import (
     FINAL_MODEL,
     FINAL_VECNORMALIZE,
     NOISE_KEYS,
@@ -97,7 +97,7 @@ def make_gym_env(env_id: str, env_kwargs: dict[str, Any] | None = None):
 
 def eval_env_id(config: TrainConfig) -> str:
     """The Gymnasium env on which a run is evaluated (the PettingZoo env's Gymnasium twin)."""
-    from training.config import GYM_ENV_ID
+    from agent_envs.training.config import GYM_ENV_ID
 
     return GYM_ENV_ID if is_multiagent(config.env_id) else config.env_id
 
@@ -170,14 +170,14 @@ def _sb3_kwargs(kwargs: dict[str, Any], action_dim: int) -> dict[str, Any]:
 def make_training_env(config: TrainConfig, n_envs: int):
     """The vectorized training env (Monitor-wrapped), seeded from config.seed by SB3."""
     if is_multiagent(config.env_id):
-        from training.multiagent import make_shared_vec_env
+        from agent_envs.training.multiagent import make_shared_vec_env
 
         return make_shared_vec_env(config.env_kwargs, n_copies=n_envs)
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import agent_envs  # noqa: F401
-    from training.wrappers import HorizonAsTermination
+    from agent_envs.training.wrappers import HorizonAsTermination
 
     return make_vec_env(
         config.env_id,
@@ -193,9 +193,9 @@ def live_policy(model: Any, agent_shape: tuple[int, int] | None = None) -> Any:
     """`model` as a PolicyPredictor on the raw Gymnasium env, following its live VecNormalize.
 
     `agent_shape` = (N, d) for a parameter-shared per-agent model (PettingZoo training), which
-    then acts on the Gymnasium env through `training.evaluate.PerAgentPolicy`.
+    then acts on the Gymnasium env through `agent_envs.training.evaluate.PerAgentPolicy`.
     """
-    from training.evaluate import NormalizedObservationPolicy, PerAgentPolicy
+    from agent_envs.training.evaluate import NormalizedObservationPolicy, PerAgentPolicy
 
     stats = model.get_vec_normalize_env()
     policy = model if stats is None else NormalizedObservationPolicy(model, stats)
@@ -230,7 +230,7 @@ def checkpoint_file(run_dir: str | Path, kind: str, steps: int) -> Path:
 
 def save_checkpoint(model: Any, run_dir: str | Path, off_policy: bool) -> Path:
     """Save model, VecNormalize statistics and replay buffer as CheckpointCallback does."""
-    from training.callbacks import prune_replay_buffers
+    from agent_envs.training.callbacks import prune_replay_buffers
 
     steps = int(model.num_timesteps)
     folder = Path(run_dir) / "checkpoints"
@@ -304,8 +304,8 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from baselines import ProportionalController, TurnpikeController, ZeroController
-    from training.callbacks import (
+    from agent_envs.baselines import ProportionalController, TurnpikeController, ZeroController
+    from agent_envs.training.callbacks import (
         ReplayBufferPruningCheckpointCallback,
         SwarmEvalCallback,
         read_learning_curve,

@@ -1,0 +1,124 @@
+"""The package's shape: one installed top-level package, layered imports, a torch-free core.
+
+The folders baselines/ and training/ install as `agent_envs.baselines` and
+`agent_envs.training` (setuptools `package-dir`). import-linter's graph builder walks the
+folder of the root package, so it cannot see those two in the source tree: the contract is
+checked on a copy laid out as the installed wheel is.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+try:
+    import tomllib
+except ImportError:  # Python 3.10
+    tomllib = pytest.importorskip("tomli")
+
+ROOT = Path(__file__).resolve().parents[1]
+MAPPED = {"agent_envs.baselines": "baselines", "agent_envs.training": "training"}
+
+
+def _pyproject() -> dict:
+    with open(ROOT / "pyproject.toml", "rb") as fh:
+        return tomllib.load(fh)
+
+
+def _installed_layout(dest: Path) -> Path:
+    """Copy the packages into dest as the wheel lays them out; return dest."""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    shutil.copytree(ROOT / "agent_envs", dest / "agent_envs", ignore=ignore)
+    for name, folder in MAPPED.items():
+        shutil.copytree(ROOT / folder, dest / Path(*name.split(".")), ignore=ignore)
+    return dest
+
+
+def test_package_dir_maps_the_folders():
+    setup = _pyproject()["tool"]["setuptools"]
+    assert setup["package-dir"] == MAPPED
+
+
+def test_every_package_folder_is_listed():
+    """A new subpackage must be added to [tool.setuptools].packages or it is not installed."""
+    listed = set(_pyproject()["tool"]["setuptools"]["packages"])
+    found = set()
+    roots = {"agent_envs": ROOT / "agent_envs"} | {n: ROOT / f for n, f in MAPPED.items()}
+    for name, folder in roots.items():
+        for init in folder.rglob("__init__.py"):
+            rel = init.parent.relative_to(folder).parts
+            found.add(".".join((name, *rel)))
+    assert found == listed
+
+
+def test_import_contract(tmp_path):
+    """core <- baselines <- training (pyproject's [tool.importlinter]), via lint-imports."""
+    lint = shutil.which("lint-imports", path=os.path.dirname(sys.executable))
+    if lint is None:
+        pytest.skip("import-linter is not installed (it comes with the dev extra)")
+    view = _installed_layout(tmp_path / "view")
+    env = {**os.environ, "PYTHONPATH": str(view)}
+    proc = subprocess.run(
+        [lint, "--config", str(ROOT / "pyproject.toml")],
+        cwd=view,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "1 kept, 0 broken" in proc.stdout
+
+
+def test_core_imports_no_torch_and_steps_the_env():
+    """`import agent_envs` and a few env steps must not import torch (or SB3)."""
+    code = (
+        "import sys, gymnasium as gym, agent_envs\n"
+        "from agent_envs import swarm_v0\n"
+        "from agent_envs.baselines import TurnpikeController\n"
+        "env = gym.make('agent_envs/Swarm-v0', n_agents=5, n_steps=3)\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "ctrl = TurnpikeController(env)\n"
+        "for _ in range(3):\n"
+        "    obs, *_ = env.step(ctrl.predict(obs)[0])\n"
+        "bad = sorted(m for m in ('torch', 'stable_baselines3', 'pandas') if m in sys.modules)\n"
+        "assert not bad, bad\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT
+    )
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_bare_layer_imports_are_banned():
+    """ruff's banned-api rule rejects `import baselines` / `import training` in the repo."""
+    banned = _pyproject()["tool"]["ruff"]["lint"]["flake8-tidy-imports"]["banned-api"]
+    assert set(banned) == {"baselines", "training"}
+    ruff = shutil.which("ruff", path=os.path.dirname(sys.executable)) or shutil.which("ruff")
+    if ruff is None:
+        pytest.skip("ruff is not installed (it comes with the dev extra)")
+    probe = "from baselines import TurnpikeController\nimport training.train\n"
+    proc = subprocess.run(
+        [
+            ruff,
+            "check",
+            "--config",
+            str(ROOT / "pyproject.toml"),
+            "--select",
+            "TID251",
+            "--stdin-filename",
+            "probe.py",
+            "-",
+        ],
+        input=probe,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 1
+    assert proc.stdout.count("TID251") == 2, proc.stdout
