@@ -31,7 +31,7 @@ cancels it only at the step's start,
 so in stiff directions the cheap phase barely contracts the spread of the swarm. The paper's own
 procedure integrates the closed loop `eq:dyn_mean` in [0, tbar] instead; `CheapClosedLoopModel`
 provides that closed loop to the core's integrators (used by
-`agent_envs.training.reproduce_turnpike`).
+`agent_envs.training.experiments.turnpike_controlled`).
 With several paths, the env's control (one for all paths, from path means) also cannot cancel
 each path's own stiff interaction; we measured single paths scattering under SERB.
 """

@@ -15,11 +15,11 @@ from collections.abc import Sequence
 #: subcommand -> (module, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "reproduce-uncontrolled": (
-        "agent_envs.reproduction",
+        "agent_envs.training.experiments.uncontrolled",
         "paper Section 5.1 (Figs. 1-4 and the m = 1500 runs): uncontrolled runs, figures, table",
     ),
     "reproduce-turnpike": (
-        "agent_envs.training.reproduce_turnpike",
+        "agent_envs.training.experiments.turnpike_controlled",
         "paper Section 5.2 (Figs. 5-6): turnpike-controlled runs, figures and a results table",
     ),
     "evaluate": (
