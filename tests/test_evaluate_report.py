@@ -256,15 +256,12 @@ def _synthetic_results(seed: int = 0) -> EvaluationResults:
 
 
 def test_build_report_from_synthetic_results(tmp_path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     curve = tmp_path / "curves.png"
-    plt.plot([0, 1], [1, 0])
-    plt.savefig(curve)
-    plt.close()
+    fig = Figure()
+    fig.subplots().plot([0, 1], [1, 0])
+    fig.savefig(curve)
     res = _synthetic_results()
     res.save(tmp_path / "res")
     paths = build_report(
@@ -289,6 +286,20 @@ def test_build_report_from_synthetic_results(tmp_path):
     assert html_text.count("data:image/png;base64,") == 4 and "<table>" in html_text
     summary = pd.read_csv(paths["summary"])
     assert set(summary["policy"]) == {"turnpike", "zero", "learned"}
+
+
+def test_report_leaves_the_matplotlib_backend_alone(tmp_path):
+    """Reports draw on `Figure` objects: a notebook user's backend stays what it was."""
+    import matplotlib
+
+    before = matplotlib.get_backend()
+    matplotlib.use("pdf")  # any backend other than the Agg a global switch would set
+    try:
+        paths = build_report(_synthetic_results(), tmp_path / "rep")
+        assert paths["trajectories"].stat().st_size > 1000
+        assert matplotlib.get_backend() == "pdf"
+    finally:
+        matplotlib.use(before)
 
 
 def test_report_merges_results_with_clashing_names(tmp_path):

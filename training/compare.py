@@ -361,11 +361,12 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
 
 def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], path: Path) -> None:
     """Validation cost against swarm steps and wall time, one line per learner (log scale)."""
-    from agent_envs.plotting import headless_pyplot
+    from matplotlib.figure import Figure
+
     from agent_envs.training.callbacks import read_learning_curve
 
-    plt = headless_pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
+    fig = Figure(figsize=(11, 4.2))
+    axes = fig.subplots(1, 2, sharey=True)
     for i, (name, run_dir) in enumerate(runs.items()):
         rows = read_learning_curve(run_dir / "learning_curve.csv")
         if not rows:
@@ -396,7 +397,6 @@ def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], pa
     fig.suptitle("Learning curves on the validation seeds (band: 95% CI)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def _reference_costs(run_dirs: dict[str, Path]) -> dict[str, float]:

@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
-from agent_envs.plotting import headless_pyplot
 from agent_envs.training.evaluate import EvaluationResults
 
 DEFAULT_REFERENCE = "turnpike"
@@ -177,13 +177,11 @@ def _color(i: int) -> str:
 
 def plot_trajectories(results: EvaluationResults, path: str | os.PathLike, seed_index: int = 0):
     """One panel per policy: every agent's path-mean position (coordinate 0) against time."""
-    plt = headless_pyplot()
     policies = [p for p in results.policies if p in results.trajectories]
     ncols = min(3, max(1, len(policies)))
     nrows = int(np.ceil(len(policies) / ncols))
-    fig, axes = plt.subplots(
-        nrows, ncols, figsize=(4.6 * ncols, 3.2 * nrows), squeeze=False, sharey=True
-    )
+    fig = Figure(figsize=(4.6 * ncols, 3.2 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     for ax in axes.flat[len(policies) :]:
         ax.set_visible(False)
     for ax, policy in zip(axes.flat, policies, strict=False):
@@ -202,12 +200,11 @@ def plot_trajectories(results: EvaluationResults, path: str | os.PathLike, seed_
         ax.set_ylabel("E x_k(t)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def _band_plot(results, key, path, ylabel, title, times_slice):
-    plt = headless_pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    fig = Figure(figsize=(7.5, 4.2))
+    ax = fig.subplots()
     for i, policy in enumerate(p for p in results.policies if p in results.trajectories):
         tr = results.trajectories[policy]
         values = np.asarray(tr[key], dtype=float)
@@ -228,7 +225,6 @@ def _band_plot(results, key, path, ylabel, title, times_slice):
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_running_cost(results: EvaluationResults, path: str | os.PathLike) -> None:

@@ -43,9 +43,9 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
 from agent_envs.baselines import CheapClosedLoopModel, TurnpikeController, turnpike_time
-from agent_envs.plotting import headless_pyplot
 
 BETA = 12.0
 DELTA = 2e-4
@@ -231,10 +231,10 @@ def summarize_record(run: TurnpikeRun, mode: str, seed: int, rec: RunRecord) -> 
 
 def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> None:
     """One panel per run: every agent's path-mean position against time, tbar marked."""
-    plt = headless_pyplot()
     ncols = 2
     nrows = int(np.ceil(len(panels) / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(11, 3.1 * nrows), squeeze=False)
+    fig = Figure(figsize=(11, 3.1 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax in axes.flat[len(panels) :]:
         ax.set_visible(False)
     for ax, (row, rec) in zip(axes.flat, panels, strict=False):
@@ -254,13 +254,12 @@ def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> N
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, RunRecord]]]) -> None:
     """L^n = ||E x^n - xbar||^2 against t, one panel per mode, one curve per run."""
-    plt = headless_pyplot()
-    fig, axes = plt.subplots(1, len(by_mode), figsize=(6 * len(by_mode), 4), squeeze=False)
+    fig = Figure(figsize=(6 * len(by_mode), 4))
+    axes = fig.subplots(1, len(by_mode), squeeze=False)
     for ax, (mode, panels) in zip(axes[0], by_mode.items(), strict=True):
         for i, (row, rec) in enumerate(panels):
             lyap = np.sum((rec.mean_positions - rec.target) ** 2, axis=(-2, -1))
@@ -275,7 +274,6 @@ def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, RunRecord]]]) 
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 TABLE_COLUMNS = (

@@ -25,9 +25,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from agent_envs.params import SwarmParams
-from agent_envs.plotting import headless_pyplot
 from agent_envs.simulator import Trajectory, simulate
 
 
@@ -106,9 +106,8 @@ def _label(row: dict) -> str:
 
 def plot_figure(path: Path, panels: list[tuple[dict, Trajectory]]) -> None:
     """One panel per run: every agent's path-mean position against time."""
-    plt = headless_pyplot()
-
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 2.6 * len(panels)), squeeze=False)
+    fig = Figure(figsize=(7, 2.6 * len(panels)))
+    axes = fig.subplots(len(panels), 1, squeeze=False)
     for ax, (row, traj) in zip(axes[:, 0], panels, strict=True):
         mean = traj.mean_positions[..., 0]
         ax.plot(traj.times, mean, lw=0.6, color="tab:blue", alpha=0.6)
@@ -120,14 +119,12 @@ def plot_figure(path: Path, panels: list[tuple[dict, Trajectory]]) -> None:
         ax.set_ylim(-lim, lim)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_jacobian_study(path: Path, rows: list[dict]) -> None:
     """Spread of the agents at T against m for ERB with the exact and the frozen Jacobian."""
-    plt = headless_pyplot()
-
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig = Figure(figsize=(6, 3.5))
+    ax = fig.subplots()
     for jac, marker in (("exact", "o"), ("frozen", "s")):
         sel = [r for r in rows if r["jacobian"] == jac]
         spreads = [max(r["spread_at_T"], 1e-17) for r in sel]
@@ -139,7 +136,6 @@ def plot_jacobian_study(path: Path, rows: list[dict]) -> None:
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def markdown_table(rows: list[dict]) -> str:
