@@ -12,23 +12,12 @@ import pytest
 import agent_envs  # noqa: F401
 from agent_envs.baselines import TurnpikeController, ZeroController
 from agent_envs.training.cli import main as cli_main
-from agent_envs.training.evaluate import (
-    EvaluationResults,
-    PerAgentPolicy,
-    detect_algo,
-    evaluate_policies,
-    find_vecnormalize,
-    parse_env_kwargs,
-    parse_policy_specs,
-    parse_seeds,
-    rollout,
-)
-from agent_envs.training.report import (
-    ReportSection,
-    build_report,
-    mean_confidence_interval,
-    summarize,
-)
+from agent_envs.training.cli import parse_policy_specs, parse_seeds
+from agent_envs.training.defaults import parse_env_kwargs
+from agent_envs.training.evaluate import evaluate_policies, rollout
+from agent_envs.training.policies import PerAgentPolicy, detect_algo, find_vecnormalize
+from agent_envs.training.report import ReportSection, build_report
+from agent_envs.training.results import EvaluationResults, mean_confidence_interval, summarize
 
 ENV_ID = "agent_envs/Swarm-v0"
 SMALL = {"n_agents": 5, "n_steps": 6, "n_paths": 2}
@@ -318,14 +307,16 @@ def test_report_merges_results_with_clashing_names(tmp_path):
 
 def test_parsers():
     assert parse_seeds(["0-2", "7", "10:12"]) == [0, 1, 2, 7, 10, 11]
-    assert parse_env_kwargs(['{"n_agents": 5}']) == {"n_agents": 5}
-    assert parse_env_kwargs(["n_agents=5", "integrator=em", "target=2.3"]) == {
+    assert parse_env_kwargs('{"n_agents": 5, "integrator": "em"}') == {
         "n_agents": 5,
         "integrator": "em",
-        "target": 2.3,
     }
-    with pytest.raises(ValueError, match="key=value"):
-        parse_env_kwargs(["n_agents"])
+    assert parse_env_kwargs(None) == {}
+    # one syntax for every subcommand: a JSON object (the key=value form is gone)
+    with pytest.raises(ValueError, match="--env-kwargs must be a JSON object"):
+        parse_env_kwargs("n_agents=5")
+    with pytest.raises(ValueError, match="JSON object"):
+        parse_env_kwargs("[1, 2]")
     assert parse_policy_specs(["turnpike", "ppo=runs/x/best.zip", "sac:m/final.zip"]) == {
         "turnpike": "turnpike",
         "ppo": "runs/x/best.zip",
@@ -343,8 +334,7 @@ def test_cli_evaluate_report_and_reproduce(tmp_path, capsys):
         "-p",
         "zero",
         "--env-kwargs",
-        "n_agents=5",
-        "n_steps=6",
+        '{"n_agents": 5, "n_steps": 6}',
         "--seeds",
         "0-1",
         "--out",
@@ -354,6 +344,11 @@ def test_cli_evaluate_report_and_reproduce(tmp_path, capsys):
     ]
     assert cli_main(argv) == 0
     assert (out / "episodes.csv").is_file() and (out / "report" / "report.html").is_file()
+    # the one error path: a bad option is one line on stderr and exit code 2
+    capsys.readouterr()
+    assert cli_main(["evaluate", "--env-kwargs", "n_agents=5", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("agent-envs evaluate: error: --env-kwargs must be a JSON object")
     assert cli_main(["report", str(out), "--out", str(tmp_path / "rep")]) == 0
     assert "ratio to turnpike" in (tmp_path / "rep" / "report.md").read_text()
     rt = tmp_path / "rt"
@@ -407,7 +402,7 @@ def test_ratio_is_not_reported_when_episodes_diverged():
     """A diverged episode has a partial cost; its ratio to the reference would flatter it."""
     import pandas as pd
 
-    from agent_envs.training.report import summarize
+    from agent_envs.training.results import summarize
 
     rows = []
     for seed in range(3):

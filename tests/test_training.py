@@ -14,14 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent_envs.training.config import (
-    ALGORITHMS,
-    GYM_ENV_ID,
-    HYPERPARAMS,
-    PETTINGZOO_ENV_ID,
-    TrainConfig,
-    hyperparams_file,
-)
+from agent_envs.training.config import HYPERPARAMS, TrainConfig, hyperparams_file
+from agent_envs.training.defaults import ALGORITHMS, GYM_ENV_ID, PETTINGZOO_ENV_ID
 
 TINY_ENV = {"n_agents": 5, "n_steps": 10}
 #: rollouts / learning starts small enough for a few hundred timesteps
@@ -201,7 +195,7 @@ def test_seeded_evaluation_is_deterministic():
     """The same policy on the same validation seeds gives the same costs, seed by seed."""
     from agent_envs.baselines import TurnpikeController
     from agent_envs.training.callbacks import run_seeded_episodes
-    from agent_envs.training.train import make_eval_vec_env
+    from agent_envs.training.environments import make_eval_vec_env
 
     venv = make_eval_vec_env(GYM_ENV_ID, TINY_ENV, 4)
     policy = TurnpikeController(venv.envs[0])
@@ -217,7 +211,7 @@ def test_seeded_evaluation_matches_training_evaluate():
     """Sub-env i with seed s + i runs the episode `evaluate_policies` runs with seed s + i."""
     from agent_envs.training.callbacks import run_seeded_episodes
     from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.train import make_eval_vec_env
+    from agent_envs.training.environments import make_eval_vec_env
 
     venv = make_eval_vec_env(GYM_ENV_ID, TINY_ENV, 3)
     from agent_envs.baselines import ProportionalController
@@ -282,7 +276,8 @@ def test_smoke_parameter_shared_ppo(tmp_path):
     """PettingZoo + SuperSuit training; the shared policy scores the same on both envs."""
     import gymnasium as gym
 
-    from agent_envs.training.evaluate import evaluate_policies, load_sb3_policy
+    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.policies import load_sb3_policy
     from agent_envs.training.multiagent import evaluate_per_agent
     from agent_envs.training.train import train
 
@@ -367,7 +362,9 @@ def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
     import torch
 
     from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.train import algorithm_class, latest_checkpoint, train
+    from agent_envs.training.checkpoints import latest_checkpoint
+    from agent_envs.training.defaults import algorithm_class
+    from agent_envs.training.train import train
 
     config = tiny_config(tmp_path, algo, timesteps=400, eval_freq=100, checkpoint_freq=100)
     with pytest.raises(KeyboardInterrupt):
@@ -388,7 +385,7 @@ def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
     # the VecNormalize statistics come back with the checkpoint (not rebuilt from scratch)
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from agent_envs.training.train import checkpoint_file
+    from agent_envs.training.checkpoints import checkpoint_file
 
     saved_stats = VecNormalize.load(
         str(checkpoint_file(run_dir, "vecnormalize", steps)),

@@ -10,10 +10,9 @@
    (`eval/turnpike_cost`, `eval/cost_ratio_to_turnpike`, ...), so the learning curve is read
    against the reference lines in TensorBoard and in ``learning_curve.csv``;
 3. the learner is evaluated as a `PolicyPredictor` on the raw env
-   (`agent_envs.training.evaluate.NormalizedObservationPolicy` applies the live `VecNormalize`
-   statistics; `agent_envs.training.evaluate.PerAgentPolicy` runs a parameter-shared PettingZoo
-   policy on
-   the Gymnasium env), and the `VecNormalize` statistics are saved with the best model
+   (`agent_envs.training.policies.NormalizedObservationPolicy` applies the live `VecNormalize`
+   statistics; `agent_envs.training.policies.PerAgentPolicy` runs a parameter-shared PettingZoo
+   policy on the Gymnasium env), and the `VecNormalize` statistics are saved with the best model
    (SB3's own `EvalCallback` saves only the model).
 
 Costs are minus the episode's summed reward, which the env defines as the paper's discrete
@@ -31,16 +30,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
+from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from agent_envs.training.config import BEST_MODEL, BEST_VECNORMALIZE
+from agent_envs.training.checkpoints import BEST_MODEL, BEST_VECNORMALIZE
+from agent_envs.training.results import mean_confidence_interval
 
 
 def mean_ci95(values: np.ndarray) -> tuple[float, float]:
-    """Mean and half-width of the t 95% interval (the report's `mean_confidence_interval`)."""
-    from agent_envs.training.report import mean_confidence_interval
-
+    """Mean and half-width of the t 95% interval (`results.mean_confidence_interval`)."""
     mean, low, high = mean_confidence_interval(values, 0.95)
     return mean, (high - low) / 2
 
@@ -245,23 +243,4 @@ def read_learning_curve(path: str | os.PathLike, max_timesteps: int | None = Non
     return rows
 
 
-class ReplayBufferPruningCheckpointCallback(CheckpointCallback):
-    """SB3's `CheckpointCallback` that keeps only the newest replay buffer on disk.
 
-    SB3 pickles the whole preallocated buffer (22.8 MB per checkpoint for N = 10 and
-    buffer_size = 100k; about ten times more for N = 100). Older checkpoints keep their model and
-    VecNormalize statistics; resuming uses the newest checkpoint, which has all three.
-    """
-
-    def _on_step(self) -> bool:
-        result = super()._on_step()
-        if self.save_replay_buffer and self.n_calls % self.save_freq == 0:
-            prune_replay_buffers(self.save_path, keep_timesteps=self.num_timesteps)
-        return result
-
-
-def prune_replay_buffers(folder: str | os.PathLike, keep_timesteps: int) -> None:
-    """Delete ``*_replay_buffer_{t}_steps.pkl`` files in `folder` except for t = keep."""
-    for path in Path(folder).glob("*_replay_buffer_*_steps.pkl"):
-        if not path.name.endswith(f"_replay_buffer_{keep_timesteps}_steps.pkl"):
-            path.unlink()

@@ -1,23 +1,20 @@
-"""`agent-envs compare`: train learners, then compare them with the reference controllers.
+"""Train learners, then compare them with the reference controllers (`agent-envs compare`).
 
     agent-envs compare --preset quick            # a few minutes on 2 CPU cores
     agent-envs compare --preset paper            # N = 100, stiff, SERB, m = 50; much longer
 
-Steps: (1) train every learner of the preset (`agent_envs.training.train.train`; a finished run of
-the same
-configuration in ``OUT/runs`` is reused, an interrupted one resumed from its last checkpoint);
-(2) evaluate the learners' best models (chosen on the validation seeds) and the turnpike,
-proportional and zero controllers on the same held-out test seeds (`agent_envs.training.evaluate`),
-plus the
-parameter-shared policy agent by agent on the PettingZoo env; (3) write the report of
-`agent_envs.training.report` with the learning curves added (``OUT/report/report.md`` and
-``.html``).
+Steps: (1) train every learner of the preset (`agent_envs.training.train.train`; a finished run
+of the same configuration in ``OUT/runs`` is reused, an interrupted one resumed from its last
+checkpoint); (2) evaluate the learners' best models (chosen on the validation seeds) and the
+turnpike, proportional and zero controllers on the same held-out test seeds
+(`agent_envs.training.evaluate`), plus the parameter-shared policy agent by agent on the
+PettingZoo env; (3) write the report of `agent_envs.training.report` with the learning curves
+added (``OUT/report/report.md`` and ``.html``).
 
 Seeds: the training envs start from the run seed; validation (best-model choice and the
 learning curves, turnpike logged on the same seeds) uses seeds ``1000 + i``; the comparison uses
-the held-out test seeds ``10000 + i`` (`agent_envs.training.evaluate.DEFAULT_SEEDS`). Costs are
-minus the
-episode return, i.e. the paper's discrete cost functional.
+the held-out test seeds ``10000 + i`` (`agent_envs.training.defaults.DEFAULT_TEST_SEEDS`). Costs
+are minus the episode return, i.e. the paper's discrete cost functional.
 
 Train on one, evaluate on another: ``--eval-env-kwargs '{"integrator": "serb"}'`` evaluates
 every policy also on that modified env, e.g. policies trained with Euler-Maruyama
@@ -26,10 +23,8 @@ every policy also on that modified env, e.g. policies trained with Euler-Maruyam
 
 from __future__ import annotations
 
-import argparse
 import json
 import shlex
-import sys
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -37,22 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.training.config import (
-    BEST_MODEL,
-    FINAL_MODEL,
+from agent_envs.training.config import TrainConfig, option_field
+from agent_envs.training.defaults import (
+    BASELINE_POLICIES,
+    DEFAULT_TEST_SEED,
     GYM_ENV_ID,
     PETTINGZOO_ENV_ID,
-    TrainConfig,
-    add_dataclass_arguments,
-    config_from_namespace,
-    option_field,
-    parse_json_object,
+    parse_env_kwargs,
 )
-
-BASELINE_POLICIES = ("turnpike", "proportional", "zero")
-#: first held-out test seed (seeds TEST_SEED .. TEST_SEED + n - 1), as
-#: `agent_envs.training.evaluate`
-TEST_SEED = 10_000
 
 
 @dataclass(frozen=True)
@@ -181,8 +168,8 @@ class CompareConfig:
     torch_threads: int = option_field(1, "torch threads (1 is fastest for these small networks)")
 
     def __post_init__(self) -> None:
-        self.env_kwargs = parse_json_object(self.env_kwargs, "--env-kwargs")
-        self.eval_env_kwargs = parse_json_object(self.eval_env_kwargs, "--eval-env-kwargs")
+        self.env_kwargs = parse_env_kwargs(self.env_kwargs)
+        self.eval_env_kwargs = parse_env_kwargs(self.eval_env_kwargs, "--eval-env-kwargs")
         if self.preset not in PRESETS:
             raise ValueError(f"--preset must be one of {', '.join(PRESETS)}; got {self.preset!r}")
         if not (isinstance(self.timesteps_scale, (int, float)) and self.timesteps_scale > 0):
@@ -312,6 +299,8 @@ def train_learner(config: CompareConfig, learner: Learner, runs_dir: Path) -> Pa
 
 def best_model_path(run_dir: Path) -> Path:
     """The model to compare: the best on the validation seeds, else the final one."""
+    from agent_envs.training.checkpoints import BEST_MODEL, FINAL_MODEL
+
     best = run_dir / BEST_MODEL
     return best if best.exists() else run_dir / FINAL_MODEL
 
@@ -337,8 +326,8 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
     import pandas as pd
 
     import agent_envs  # noqa: F401
-    from agent_envs.training.evaluate import load_sb3_policy
     from agent_envs.training.multiagent import evaluate_per_agent
+    from agent_envs.training.policies import load_sb3_policy
 
     env = gym.make(GYM_ENV_ID, **env_kwargs)
     try:
@@ -453,7 +442,7 @@ def compare(config: CompareConfig) -> dict[str, Any]:
     runs_dir.mkdir(parents=True, exist_ok=True)
     env_kwargs = {**preset.env_kwargs, **config.env_kwargs}
     n_test = config.test_episodes or preset.test_episodes
-    seeds = list(range(TEST_SEED, TEST_SEED + n_test))
+    seeds = list(range(DEFAULT_TEST_SEED, DEFAULT_TEST_SEED + n_test))
     print(f"compare --preset {config.preset}: {preset.description}")
     print(f"env kwargs {env_kwargs}; output {out}")
 
@@ -585,34 +574,6 @@ def compare(config: CompareConfig) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------------------- CLI
 
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.description = (
-        "Train the preset's learners (PPO and SAC on the single-controller env, parameter-shared "
-        "PPO on the PettingZoo env) and compare them with the turnpike, proportional and zero "
-        "controllers on the same held-out seeds; writes OUT/report/report.md and .html."
-    )
-    add_dataclass_arguments(parser, CompareConfig)
-
-
-def run(args: argparse.Namespace) -> int:
-    try:
-        config = config_from_namespace(CompareConfig, args)
-        config.selected_learners()
-        compare(config)
-    except ValueError as exc:
-        print(f"agent-envs compare: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("\ninterrupted; run the same command again to resume", file=sys.stderr)
-        return 130
-    return 0
-
-
-if __name__ == "__main__":
-    from agent_envs.training.cli import main
-
-    raise SystemExit(main(["compare", *sys.argv[1:]]))
 
 
 __all__ = ["PRESETS", "CompareConfig", "Learner", "Preset", "compare"]

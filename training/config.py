@@ -1,5 +1,5 @@
-"""What a training run is made of: the `TrainConfig` dataclass, the algorithm registry and the
-default hyperparameters of every (algorithm, env id) pair.
+"""What a training run is made of: the `TrainConfig` dataclass and the default hyperparameters
+of every (algorithm, env id) pair, resolved into SB3 keyword arguments by `resolve_hyperparams`.
 
 `TrainConfig` is the CLI (CleanRL style): one field is one option of `agent-envs train`, and the
 `help` in the field's metadata is its `--help` text, so the two cannot drift apart.
@@ -11,41 +11,35 @@ agree), so `python -m rl_zoo3.train --conf-file training/hyperparams/ppo.yml` tr
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import difflib
 import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-#: The Gymnasium single-controller env (one action vector for the whole swarm).
-GYM_ENV_ID = "agent_envs/Swarm-v0"
-#: The PettingZoo parallel env (one agent per swarm member), named by its module.
-PETTINGZOO_ENV_ID = "agent_envs.swarm_v0"
-#: Algorithms `agent-envs train` knows; each maps to a Stable-Baselines3 class.
-ALGORITHMS = ("ppo", "sac", "td3", "a2c")
-#: Algorithms that keep a replay buffer (saved with each checkpoint so a resume loses nothing).
-OFF_POLICY = ("sac", "td3")
-#: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
-#: (rl-zoo3 reads them itself).
+import numpy as np
+
+from agent_envs.training.defaults import (
+    ALGORITHMS,
+    DEFAULT_BETA,
+    DEFAULT_DELTA,
+    DEFAULT_EVAL_SEED,
+    GYM_ENV_ID,
+    PETTINGZOO_ENV_ID,
+    check_algo,
+    check_env_id,
+    parse_json_object,
+)
+
 #: The training wrapper that makes the end of the horizon terminal (see
 #: agent_envs.training.wrappers).
 HORIZON_WRAPPER = "agent_envs.training.wrappers.HorizonAsTermination"
+#: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
+#: (rl-zoo3 reads them itself).
 ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "env_wrapper")
 #: rl-zoo3 keys turned into an SB3 action-noise object (TD3).
 NOISE_KEYS = ("noise_type", "noise_std")
-#: File names in a run directory. The VecNormalize statistics sit next to their model as
-#: ``{stem}_vecnormalize.pkl``, where `agent_envs.training.evaluate.find_vecnormalize` looks for
-#: them.
-BEST_MODEL = "best_model.zip"
-BEST_VECNORMALIZE = "best_model_vecnormalize.pkl"
-FINAL_MODEL = "final_model.zip"
-FINAL_VECNORMALIZE = "final_model_vecnormalize.pkl"
-#: First validation seed (evaluation during training): episodes use seeds 1000, 1001, ...,
-#: absolute seeds, apart from the held-out test seeds 10000.. of `agent-envs evaluate`.
-DEFAULT_EVAL_SEED = 1_000
 
 # Measured on N = 10, m = 20 (README.md, "Training agents"): the good controls are small next
 # to max_control (the proportional control 12 (xbar - x) is ~10% of it), so the policies start
@@ -133,56 +127,6 @@ def hyperparams_file(algo: str) -> Path:
     return Path(__file__).parent / "hyperparams" / f"{algo}.yml"
 
 
-def check_algo(algo: str) -> str:
-    """Return `algo` lower-cased; raise ValueError naming --algo if it is unknown."""
-    name = str(algo).lower()
-    if name not in ALGORITHMS:
-        raise ValueError(f"--algo must be one of {', '.join(ALGORITHMS)}; got {algo!r}")
-    return name
-
-
-def is_multiagent(env_id: str) -> bool:
-    """True for the PettingZoo env id (a module path), False for a Gymnasium id."""
-    return env_id == PETTINGZOO_ENV_ID
-
-
-def check_env_id(env_id: str) -> str:
-    """Return `env_id` if it names a registered Gymnasium env or the PettingZoo swarm env.
-
-    Raises ValueError naming --env-id, with the closest known ids, otherwise.
-    """
-    import gymnasium as gym
-
-    import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
-
-    if env_id == PETTINGZOO_ENV_ID or env_id in gym.registry:
-        return env_id
-    known = [PETTINGZOO_ENV_ID, *gym.registry.keys()]
-    close = difflib.get_close_matches(env_id, known, n=3)
-    hint = f" Did you mean {', '.join(close)}?" if close else ""
-    raise ValueError(
-        f"--env-id {env_id!r} is neither a registered Gymnasium env nor the PettingZoo env "
-        f"{PETTINGZOO_ENV_ID!r}; the swarm envs are {GYM_ENV_ID!r} and {PETTINGZOO_ENV_ID!r}.{hint}"
-    )
-
-
-def parse_json_object(text: str | dict | None, option: str) -> dict[str, Any]:
-    """Parse a JSON object given on the command line; ValueError naming `option` if malformed."""
-    if text is None:
-        return {}
-    if isinstance(text, dict):
-        return dict(text)
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(
-            f'{option} must be a JSON object such as \'{{"n_agents": 10, "integrator": '
-            f'"em"}}\'; could not parse {text!r}: {exc}'
-        ) from None
-    if not isinstance(value, dict):
-        raise ValueError(f"{option} must be a JSON object ({{...}}), got {type(value).__name__}")
-    return value
-
 
 def default_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     """A deep copy of HYPERPARAMS[algo][env_id]."""
@@ -206,7 +150,7 @@ def option_field(default: Any, help: str, **kwargs: Any) -> Any:
 class TrainConfig:
     """One training run. Every field is an `agent-envs train` option (`--field-name`)."""
 
-    algo: str = option_field("ppo", "Stable-Baselines3 algorithm", choices=ALGORITHMS)
+    algo: str = option_field("ppo", "Stable-Baselines3 algorithm", choices=tuple(ALGORITHMS))
     env_id: str = option_field(
         GYM_ENV_ID,
         f"environment: the Gymnasium id {GYM_ENV_ID!r} (one controller for the swarm) or "
@@ -260,9 +204,11 @@ class TrainConfig:
         20_000, "save model + VecNormalize stats (+ replay buffer) every this many timesteps"
     )
     turnpike_beta: float = option_field(
-        12.0, "beta of the turnpike (and proportional) reference controllers"
+        DEFAULT_BETA, "beta of the turnpike (and proportional) reference controllers"
     )
-    turnpike_delta: float = option_field(2e-4, "delta of the turnpike reference controller")
+    turnpike_delta: float = option_field(
+        DEFAULT_DELTA, "delta of the turnpike reference controller"
+    )
     vec_env: str = option_field(
         "dummy",
         "vectorization of the training envs: dummy (in process) or subproc",
@@ -332,58 +278,40 @@ def _check_int(name: str, value: Any, minimum: int) -> None:
         raise ValueError(f"{flag} must be an integer >= {minimum}, got {value!r}")
 
 
-def _bool(text: str) -> bool:
-    lowered = text.lower()
-    if lowered in ("1", "true", "yes", "on"):
-        return True
-    if lowered in ("0", "false", "no", "off"):
-        return False
-    raise argparse.ArgumentTypeError(f"expected true/false, got {text!r}")
+def resolve_hyperparams(
+    config: TrainConfig,
+) -> tuple[dict[str, Any], int, dict[str, Any] | None, str]:
+    """(SB3 kwargs, n_envs, VecNormalize kwargs or None, policy) for a config.
 
-
-def add_dataclass_arguments(
-    parser: argparse.ArgumentParser,
-    cls: type,
-    *,
-    exclude: tuple[str, ...] = (),
-    suppress_defaults: bool = False,
-) -> None:
-    """Add one `--field-name` option per dataclass field, with the field's metadata help.
-
-    Booleans accept `--flag/--no-flag`; dict fields take a JSON object (parsed and checked by
-    the dataclass). With `suppress_defaults`, options left out do not appear in the namespace
-    (so a caller can tell "not given" from "given the default").
+    The defaults come from `HYPERPARAMS` (rl-zoo3 format: ``normalize`` is a bool or a dict of
+    VecNormalize keyword arguments such as ``{norm_obs: true, norm_reward: false}``);
+    `config.hyperparams`, `config.n_envs` and `config.normalize` override them.
     """
-    for f in dataclasses.fields(cls):
-        if f.name in exclude:
-            continue
-        flag = "--" + f.name.replace("_", "-")
-        meta = dict(f.metadata)
-        help_text = meta.pop("help", "")
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
-        kwargs: dict[str, Any] = {"dest": f.name}
-        kwargs["default"] = argparse.SUPPRESS if suppress_defaults else default
-        shown = json.dumps(default) if isinstance(default, dict) else default
-        mentioned = "default" in help_text
-        kwargs["help"] = help_text if mentioned else f"{help_text} (default: {shown})"
-        if f.type in ("bool", "bool | None", bool):
-            kwargs["action"] = argparse.BooleanOptionalAction
-        elif f.type in ("dict", dict):
-            kwargs["metavar"] = "JSON"
-            kwargs["type"] = str
-        elif f.type in ("int", "int | None"):
-            kwargs["type"] = int
-        elif f.type == "float":
-            kwargs["type"] = float
-        else:
-            kwargs["type"] = str
-        kwargs.update(meta)
-        parser.add_argument(flag, **kwargs)
+    entry = default_hyperparams(config.algo, config.env_id)
+    n_envs = int(config.n_envs or entry.get("n_envs", 1))
+    normalize = entry.get("normalize", False)
+    normalize_kwargs = dict(normalize) if isinstance(normalize, dict) else {}
+    if config.normalize is not None:
+        normalize = config.normalize
+    policy = entry.get("policy", "MlpPolicy")
+    kwargs = {k: v for k, v in entry.items() if k not in ZOO_KEYS}
+    kwargs.update(config.hyperparams)
+    if not normalize:
+        return kwargs, n_envs, None, policy
+    normalize_kwargs.setdefault("gamma", float(kwargs.get("gamma", 0.99)))
+    return kwargs, n_envs, normalize_kwargs, policy
 
 
-def config_from_namespace(cls: type, args: argparse.Namespace, **overrides: Any) -> Any:
-    """Build a dataclass from the namespace filled by `add_dataclass_arguments`."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    values = {k: v for k, v in vars(args).items() if k in names}
-    values.update(overrides)
-    return cls(**values)
+def sb3_kwargs(kwargs: dict[str, Any], action_dim: int) -> dict[str, Any]:
+    """Turn rl-zoo3's noise keys into an SB3 action-noise object."""
+    out = {k: v for k, v in kwargs.items() if k not in NOISE_KEYS}
+    noise_type = kwargs.get("noise_type")
+    if noise_type is not None:
+        from stable_baselines3.common.noise import NormalActionNoise
+
+        if noise_type != "normal":
+            raise ValueError(f"--hyperparams noise_type must be 'normal', got {noise_type!r}")
+        sigma = float(kwargs.get("noise_std", 0.1))
+        out["action_noise"] = NormalActionNoise(np.zeros(action_dim), sigma * np.ones(action_dim))
+    return out
+

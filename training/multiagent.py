@@ -7,10 +7,9 @@ acts for every agent from its own observation ``[x_k | drift_k | target | t/T]``
 sharing, decentralized execution. SB3 counts one timestep per agent-step.
 
 Evaluation: the trained shared policy runs on the Gymnasium env through
-`agent_envs.training.evaluate.PerAgentPolicy` (same seeds, same cost units as every other policy),
-and
-`evaluate_per_agent` runs it on the PettingZoo env itself to report each agent's cost (the
-agents' costs add up to the swarm's cost).
+`agent_envs.training.policies.PerAgentPolicy` (same seeds, same cost units as every other
+policy), and `evaluate_per_agent` runs it on the PettingZoo env itself to report each agent's
+cost (the agents' costs add up to the swarm's cost).
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
-from agent_envs.training.config import PETTINGZOO_ENV_ID
+from agent_envs.training.defaults import PETTINGZOO_ENV_ID
 
 
 def parallel_env(env_kwargs: dict[str, Any] | None = None):

@@ -22,7 +22,6 @@ mailed on its own.
 
 from __future__ import annotations
 
-import argparse
 import base64
 import html
 import os
@@ -36,9 +35,12 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from agent_envs.training.evaluate import EvaluationResults
-
-DEFAULT_REFERENCE = "turnpike"
+from agent_envs.training.results import (
+    DEFAULT_REFERENCE,
+    EvaluationResults,
+    merge_results,
+    summarize,
+)
 
 
 @dataclass
@@ -55,115 +57,6 @@ class ReportSection:
     images: Sequence[str | os.PathLike] = ()
     code: str | None = None
     captions: Sequence[str] = field(default_factory=tuple)
-
-
-# --------------------------------------------------------------------------------------------
-# Statistics
-# --------------------------------------------------------------------------------------------
-
-
-def mean_confidence_interval(values: Sequence[float], confidence: float = 0.95):
-    """(mean, low, high) with the t-distribution: mean +- t_{(1+c)/2, n-1} s / sqrt(n).
-
-    NaNs are dropped. One value gives (v, nan, nan); none gives three NaNs.
-    """
-    from scipy import stats
-
-    arr = np.asarray(values, dtype=float)
-    arr = arr[np.isfinite(arr)]
-    if arr.size == 0:
-        return float("nan"), float("nan"), float("nan")
-    mean = float(arr.mean())
-    if arr.size < 2:
-        return mean, float("nan"), float("nan")
-    half = float(
-        stats.t.ppf(0.5 + confidence / 2, arr.size - 1) * arr.std(ddof=1) / np.sqrt(arr.size)
-    )
-    return mean, mean - half, mean + half
-
-
-def summarize(
-    episodes: pd.DataFrame, reference: str | None = DEFAULT_REFERENCE, confidence: float = 0.95
-) -> pd.DataFrame:
-    """One row per policy: cost statistics, ratio to `reference`, divergence rate, etc.
-
-    Columns: policy, episodes, mean_cost, cost_ci_low, cost_ci_high, ratio_to_reference
-    (mean cost / reference mean cost), paired_ratio, paired_ratio_ci_low/high (per-seed
-    cost / reference cost on the same seed, mean and t-CI; only for seeds both have),
-    divergence_rate, mean_final_distance (non-diverged episodes), mean_control_energy,
-    mean_saturated_fraction, mean_turnpike_time.
-
-    A diverged episode ends early with the cost accumulated so far, which would make a diverging
-    policy look cheap: the ratios are NaN (shown as n/a) when the policy or the reference has a
-    diverged episode.
-    """
-    rows = []
-    ref = None
-    ref_diverged = False
-    if reference is not None and reference in set(episodes["policy"]):
-        ref_rows = episodes[episodes["policy"] == reference]
-        ref = ref_rows.set_index("seed")["total_cost"]
-        ref_diverged = bool(ref_rows["diverged"].astype(bool).any())
-    for policy, group in episodes.groupby("policy", sort=False):
-        mean, low, high = mean_confidence_interval(group["total_cost"], confidence)
-        row: dict[str, Any] = {
-            "policy": policy,
-            "episodes": len(group),
-            "mean_cost": mean,
-            "cost_ci_low": low,
-            "cost_ci_high": high,
-        }
-        if ref is not None:
-            ref_mean = float(ref.mean())
-            row["ratio_to_reference"] = mean / ref_mean if ref_mean else float("nan")
-            paired = group.set_index("seed")["total_cost"]
-            common = paired.index.intersection(ref.index)
-            ratios = (paired.loc[common] / ref.loc[common]).to_numpy(float)
-            pm, pl, ph = mean_confidence_interval(ratios, confidence)
-            row.update(paired_ratio=pm, paired_ratio_ci_low=pl, paired_ratio_ci_high=ph)
-            if ref_diverged or bool(group["diverged"].astype(bool).any()):
-                for key in (
-                    "ratio_to_reference",
-                    "paired_ratio",
-                    "paired_ratio_ci_low",
-                    "paired_ratio_ci_high",
-                ):
-                    row[key] = float("nan")
-        diverged = group["diverged"].astype(bool)
-        row["divergence_rate"] = float(diverged.mean())
-        row["mean_final_distance"] = float(group.loc[~diverged, "final_distance"].mean())
-        row["mean_control_energy"] = float(group["control_energy"].mean())
-        if "saturated_fraction" in group:
-            row["mean_saturated_fraction"] = float(group["saturated_fraction"].mean())
-        if "turnpike_time" in group:
-            tb = pd.to_numeric(group["turnpike_time"], errors="coerce")
-            row["mean_turnpike_time"] = float(tb.mean()) if tb.notna().any() else float("nan")
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def merge_results(results: Sequence[EvaluationResults]) -> EvaluationResults:
-    """Concatenate several evaluations; clashing policy names get a ``@folder`` suffix."""
-    if len(results) == 1:
-        return results[0]
-    frames, trajectories, metas = [], {}, []
-    seen: set[str] = set()
-    for i, res in enumerate(results):
-        tag = res.source.name if res.source is not None else f"run{i}"
-        rename = {}
-        for p in res.policies:
-            new = p if p not in seen else f"{p}@{tag}"
-            rename[p] = new
-            seen.add(new)
-        frames.append(res.episodes.assign(policy=res.episodes["policy"].map(rename)))
-        for p, arrays in res.trajectories.items():
-            trajectories[rename.get(p, p)] = arrays
-        metas.append(res.meta)
-    meta = dict(metas[0])
-    meta["merged_from"] = [str(r.source) if r.source else None for r in results]
-    keys = ("env_id", "env_kwargs", "seeds", "reset_options")
-    meta["consistent"] = all(all(m.get(k) == metas[0].get(k) for k in keys) for m in metas)
-    return EvaluationResults(pd.concat(frames, ignore_index=True), trajectories, meta)
 
 
 # --------------------------------------------------------------------------------------------
@@ -523,45 +416,11 @@ def _seed_text(seeds: Sequence[int]) -> str:
     return ", ".join(map(str, seeds))
 
 
-# --------------------------------------------------------------------------------------------
-# CLI
-# --------------------------------------------------------------------------------------------
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("results", nargs="+", type=Path, help="evaluation folder(s)")
-    parser.add_argument("--out", required=True, type=Path, help="report folder")
-    parser.add_argument("--title", default="Swarm control: policy evaluation")
-    parser.add_argument(
-        "--reference",
-        default=DEFAULT_REFERENCE,
-        help="policy the cost ratios refer to (default: turnpike)",
-    )
-    parser.add_argument("--seed-index", type=int, default=0, help="seed shown in trajectories")
-
-
-def run(args: argparse.Namespace) -> int:
-    paths = build_report(
-        list(args.results),
-        args.out,
-        title=args.title,
-        reference=args.reference,
-        seed_index=args.seed_index,
-    )
-    summary = pd.read_csv(paths["summary"])
-    print(display_table(summary, args.reference).to_string(index=False))
-    print(f"report: {paths['markdown']} and {paths['html']}")
-    return 0
-
-
 __all__ = [
     "ReportSection",
     "build_report",
     "display_table",
-    "mean_confidence_interval",
-    "merge_results",
     "plot_running_cost",
     "plot_trajectories",
     "plot_turnpike_distance",
-    "summarize",
 ]

@@ -1,4 +1,6 @@
-"""`agent-envs train`: train a Stable-Baselines3 agent on a swarm env (thin CLI over `train`).
+"""The training loop: `train(TrainConfig)` trains a Stable-Baselines3 agent on a swarm env.
+
+The command line is `agent-envs train` (`agent_envs.training.cli`):
 
     agent-envs train --algo ppo --env-id agent_envs/Swarm-v0 \\
         --env-kwargs '{"n_agents": 10, "n_steps": 20}' --timesteps 50000 --seed 0 --out runs
@@ -32,9 +34,7 @@ learning curve up to that point).
 
 from __future__ import annotations
 
-import argparse
 import contextlib
-import dataclasses
 import json
 import re
 import sys
@@ -45,17 +45,13 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.training.config import (
-    FINAL_MODEL,
-    FINAL_VECNORMALIZE,
-    NOISE_KEYS,
-    OFF_POLICY,
-    ZOO_KEYS,
-    TrainConfig,
-    add_dataclass_arguments,
-    check_algo,
-    default_hyperparams,
-    is_multiagent,
+from agent_envs.training.config import TrainConfig, resolve_hyperparams, sb3_kwargs
+from agent_envs.training.defaults import OFF_POLICY, algorithm_class, is_multiagent
+from agent_envs.training.environments import (
+    env_description,
+    eval_env_id,
+    make_eval_vec_env,
+    make_training_env,
 )
 
 #: Options that may change when resuming; all others come from the run's config.json.
@@ -67,14 +63,6 @@ RESUME_OVERRIDES = (
     "tensorboard",
     "torch_threads",
 )
-CHECKPOINT_PREFIX = "rl_model"
-
-
-def algorithm_class(algo: str):
-    """The SB3 class of `algo` (ppo, sac, td3, a2c); ValueError naming --algo otherwise."""
-    import stable_baselines3 as sb3
-
-    return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3, "a2c": sb3.A2C}[check_algo(algo)]
 
 
 def default_run_name(config: TrainConfig) -> str:
@@ -82,168 +70,6 @@ def default_run_name(config: TrainConfig) -> str:
     env = re.sub(r"[^A-Za-z0-9._-]", "_", config.env_id)
     return f"{env}__{config.algo}__{config.seed}__{int(time.time())}"
 
-
-def make_gym_env(env_id: str, env_kwargs: dict[str, Any] | None = None):
-    """`gym.make(env_id, **env_kwargs)` after registering the swarm envs."""
-    import gymnasium as gym
-
-    import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
-
-    try:
-        return gym.make(env_id, **(env_kwargs or {}))
-    except TypeError as exc:  # unknown or mistyped keyword: a user error, not a crash
-        raise ValueError(f"--env-kwargs {env_kwargs}: {exc}") from None
-
-
-def eval_env_id(config: TrainConfig) -> str:
-    """The Gymnasium env on which a run is evaluated (the PettingZoo env's Gymnasium twin)."""
-    from agent_envs.training.config import GYM_ENV_ID
-
-    return GYM_ENV_ID if is_multiagent(config.env_id) else config.env_id
-
-
-def make_eval_vec_env(env_id: str, env_kwargs: dict[str, Any] | None, n_episodes: int):
-    """Raw (unnormalized) DummyVecEnv with one sub-env per evaluation episode."""
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    kwargs = dict(env_kwargs or {})
-    return DummyVecEnv([lambda: make_gym_env(env_id, kwargs)] * int(n_episodes))
-
-
-def env_description(env_id: str, env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
-    """N, d, n_steps, integrator and the full kwargs of the Gymnasium env a run uses."""
-    env = make_gym_env(env_id, env_kwargs)
-    try:
-        base = env.unwrapped
-        params = base.params
-        return {
-            "env_id": env_id,
-            "env_kwargs": dict(env_kwargs or {}),
-            "n_agents": int(params.n_agents),
-            "dim": int(params.dim),
-            "n_steps": int(base.n_steps),
-            "integrator": str(base.integrator_name),
-            "max_control": float(base.max_control),
-        }
-    finally:
-        env.close()
-
-
-def resolve_hyperparams(
-    config: TrainConfig,
-) -> tuple[dict[str, Any], int, dict[str, Any] | None, str]:
-    """(SB3 kwargs, n_envs, VecNormalize kwargs or None, policy) for a config.
-
-    The defaults come from `HYPERPARAMS` (rl-zoo3 format: ``normalize`` is a bool or a dict of
-    VecNormalize keyword arguments such as ``{norm_obs: true, norm_reward: false}``);
-    `config.hyperparams`, `config.n_envs` and `config.normalize` override them.
-    """
-    entry = default_hyperparams(config.algo, config.env_id)
-    n_envs = int(config.n_envs or entry.get("n_envs", 1))
-    normalize = entry.get("normalize", False)
-    normalize_kwargs = dict(normalize) if isinstance(normalize, dict) else {}
-    if config.normalize is not None:
-        normalize = config.normalize
-    policy = entry.get("policy", "MlpPolicy")
-    kwargs = {k: v for k, v in entry.items() if k not in ZOO_KEYS}
-    kwargs.update(config.hyperparams)
-    if not normalize:
-        return kwargs, n_envs, None, policy
-    normalize_kwargs.setdefault("gamma", float(kwargs.get("gamma", 0.99)))
-    return kwargs, n_envs, normalize_kwargs, policy
-
-
-def _sb3_kwargs(kwargs: dict[str, Any], action_dim: int) -> dict[str, Any]:
-    """Turn rl-zoo3's noise keys into an SB3 action-noise object."""
-    out = {k: v for k, v in kwargs.items() if k not in NOISE_KEYS}
-    noise_type = kwargs.get("noise_type")
-    if noise_type is not None:
-        from stable_baselines3.common.noise import NormalActionNoise
-
-        if noise_type != "normal":
-            raise ValueError(f"--hyperparams noise_type must be 'normal', got {noise_type!r}")
-        sigma = float(kwargs.get("noise_std", 0.1))
-        out["action_noise"] = NormalActionNoise(np.zeros(action_dim), sigma * np.ones(action_dim))
-    return out
-
-
-def make_training_env(config: TrainConfig, n_envs: int):
-    """The vectorized training env (Monitor-wrapped), seeded from config.seed by SB3."""
-    if is_multiagent(config.env_id):
-        from agent_envs.training.multiagent import make_shared_vec_env
-
-        return make_shared_vec_env(config.env_kwargs, n_copies=n_envs)
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
-    import agent_envs  # noqa: F401
-    from agent_envs.training.wrappers import HorizonAsTermination
-
-    return make_vec_env(
-        config.env_id,
-        n_envs=n_envs,
-        seed=config.seed,
-        env_kwargs=config.env_kwargs,
-        vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
-        wrapper_class=HorizonAsTermination,
-    )
-
-
-def live_policy(model: Any, agent_shape: tuple[int, int] | None = None) -> Any:
-    """`model` as a PolicyPredictor on the raw Gymnasium env, following its live VecNormalize.
-
-    `agent_shape` = (N, d) for a parameter-shared per-agent model (PettingZoo training), which
-    then acts on the Gymnasium env through `agent_envs.training.evaluate.PerAgentPolicy`.
-    """
-    from agent_envs.training.evaluate import NormalizedObservationPolicy, PerAgentPolicy
-
-    stats = model.get_vec_normalize_env()
-    policy = model if stats is None else NormalizedObservationPolicy(model, stats)
-    if agent_shape is not None:
-        policy = PerAgentPolicy(policy, *agent_shape)
-    return policy
-
-
-def latest_checkpoint(
-    run_dir: str | Path, off_policy: bool, normalize: bool
-) -> tuple[int, Path] | None:
-    """(timesteps, model path) of the newest checkpoint with all its files, or None."""
-    folder = Path(run_dir) / "checkpoints"
-    found = []
-    for path in folder.glob(f"{CHECKPOINT_PREFIX}_*_steps.zip"):
-        match = re.fullmatch(rf"{CHECKPOINT_PREFIX}_(\d+)_steps\.zip", path.name)
-        if not match:
-            continue
-        steps = int(match.group(1))
-        if normalize and not checkpoint_file(run_dir, "vecnormalize", steps).exists():
-            continue
-        if off_policy and not checkpoint_file(run_dir, "replay_buffer", steps).exists():
-            continue
-        found.append((steps, path))
-    return max(found) if found else None
-
-
-def checkpoint_file(run_dir: str | Path, kind: str, steps: int) -> Path:
-    """Path of a checkpoint part as CheckpointCallback names it (kind: vecnormalize, ...)."""
-    return Path(run_dir) / "checkpoints" / f"{CHECKPOINT_PREFIX}_{kind}_{steps}_steps.pkl"
-
-
-def save_checkpoint(model: Any, run_dir: str | Path, off_policy: bool) -> Path:
-    """Save model, VecNormalize statistics and replay buffer as CheckpointCallback does."""
-    from agent_envs.training.callbacks import prune_replay_buffers
-
-    steps = int(model.num_timesteps)
-    folder = Path(run_dir) / "checkpoints"
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{CHECKPOINT_PREFIX}_{steps}_steps.zip"
-    if off_policy:
-        model.save_replay_buffer(checkpoint_file(run_dir, "replay_buffer", steps))
-        prune_replay_buffers(folder, keep_timesteps=steps)
-    stats = model.get_vec_normalize_env()
-    if stats is not None:
-        stats.save(str(checkpoint_file(run_dir, "vecnormalize", steps)))
-    model.save(path)  # last: a checkpoint counts once its model file exists
-    return path
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -305,11 +131,17 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agent_envs.baselines import ProportionalController, TurnpikeController, ZeroController
-    from agent_envs.training.callbacks import (
+    from agent_envs.training.callbacks import SwarmEvalCallback, read_learning_curve
+    from agent_envs.training.checkpoints import (
+        CHECKPOINT_PREFIX,
+        FINAL_MODEL,
+        FINAL_VECNORMALIZE,
         ReplayBufferPruningCheckpointCallback,
-        SwarmEvalCallback,
-        read_learning_curve,
+        checkpoint_file,
+        latest_checkpoint,
+        save_checkpoint,
     )
+    from agent_envs.training.policies import live_policy
 
     algo_kwargs, n_envs, normalize_kwargs, policy_name = resolve_hyperparams(config)
     normalize = normalize_kwargs is not None
@@ -354,7 +186,7 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
             device=config.device,
             verbose=config.verbose,
             tensorboard_log=tb_log,
-            **_sb3_kwargs(algo_kwargs, action_dim),
+            **sb3_kwargs(algo_kwargs, action_dim),
         )
         done = 0
     else:
@@ -464,19 +296,14 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
 # --------------------------------------------------------------------------------------- CLI
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """`agent-envs train` options: one per TrainConfig field."""
-    parser.description = (
-        "Train a Stable-Baselines3 agent on a swarm env. The validation cost is logged next to "
-        "the turnpike controller's on the same seeds (learning_curve.csv, TensorBoard)."
-    )
-    add_dataclass_arguments(parser, TrainConfig, suppress_defaults=True)
 
+def config_from_options(options: dict[str, Any]) -> TrainConfig:
+    """The TrainConfig of the options given (with ``resume``: the run's config + overrides).
 
-def config_from_args(args: argparse.Namespace) -> TrainConfig:
-    """The TrainConfig of the parsed options (with --resume: the run's config + overrides)."""
-    names = {f.name for f in dataclasses.fields(TrainConfig)}
-    given = {k: v for k, v in vars(args).items() if k in names}
+    `options` holds only the options the user gave (field name -> value). With ``resume`` set,
+    only `RESUME_OVERRIDES` may be among them; ValueError naming the others otherwise.
+    """
+    given = dict(options)
     if given.get("resume"):
         run_dir = Path(given["resume"])
         saved_path = run_dir / "config.json"
@@ -493,34 +320,3 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         base.update(given)
         return TrainConfig.from_dict(base)
     return TrainConfig(**given)
-
-
-def run(args: argparse.Namespace) -> int:
-    try:
-        config = config_from_args(args)
-        run_dir = train(config)
-    except ValueError as exc:
-        print(f"agent-envs train: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-    summary = json.loads((run_dir / "summary.json").read_text())
-    print(f"run directory: {run_dir}")
-    last = summary.get("last_eval")
-    if last:
-        print(
-            f"validation cost {last['cost_mean']:.4g} ± {last['cost_ci95']:.2g} "
-            f"(turnpike {last.get('turnpike_cost', float('nan')):.4g}) after "
-            f"{summary['timesteps']} timesteps, {summary['train_wall_time_s']:.0f} s"
-        )
-    return 0
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="agent-envs train")
-    add_arguments(parser)
-    return run(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

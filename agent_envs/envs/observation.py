@@ -165,3 +165,30 @@ def split_agent_observation(obs: Any, dim: int) -> dict[str, np.ndarray]:
         "target": arr[..., 2 * dim : 3 * dim],
         "time_fraction": arr[..., -1],
     }
+
+
+def agent_observations_from_global(obs: Any, n_agents: int, dim: int) -> np.ndarray:
+    """The N per-agent (PettingZoo) observations held in Gymnasium observations, batched.
+
+    Args:
+        obs: (..., 2 N d + d + 1) Gymnasium observations.
+        n_agents, dim: N and d of the env.
+
+    Returns:
+        (..., N, 3 d + 1) float32: row k is ``[E x_k | E drift on k | target | t/T]``, the row
+        `agent_observations` builds from the same path means (without its clipping, which the
+        Gymnasium observation has already had).
+    """
+    parts = split_observation(obs, n_agents, dim)
+    lead = parts["positions"].shape[:-2]
+    shape = (*lead, n_agents, dim)
+    rows = np.concatenate(
+        [
+            parts["positions"],
+            parts["interaction_drift"],
+            np.broadcast_to(parts["target"][..., None, :], shape),
+            np.broadcast_to(parts["time_fraction"][..., None, None], (*lead, n_agents, 1)),
+        ],
+        axis=-1,
+    )
+    return rows.astype(np.float32)

@@ -16,10 +16,10 @@ Runs:
 Each run is done in two modes, from the same initial positions (the env's seeded draw):
 
 - ``env``: the public API. ``gym.make("agent_envs/Swarm-v0", n_paths=20, ...)`` driven by
-  `baselines.TurnpikeController`: the cheap control `eq:cheap_ctr` (path means), held constant
+  `TurnpikeController`: the cheap control `eq:cheap_ctr` (path means), held constant
   over each step (zero-order hold, as every RL policy acts), until tbar, then u = 0.
 - ``closed-loop``: the paper's procedure (Section 5.2): in [0, tbar] the closed loop
-  `eq:dyn_mean` is integrated with the run's scheme (`baselines.CheapClosedLoopModel`: the
+  `eq:dyn_mean` is integrated with the run's scheme (`CheapClosedLoopModel`: the
   cheap control cancels each path's interaction, dx = beta (xbar - x) dt + sigma dW; for SERB the
   mean follows `eq:expint_mean`, exact), then the uncontrolled swarm (static control u = 0,
   `eq:stationary_solution`) with the same scheme. Uses the core's integrators and its Brownian
@@ -34,7 +34,6 @@ trajectories per mode (one panel per run, tbar marked), and lyapunov.png (L^n ag
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -46,9 +45,11 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from agent_envs.baselines import CheapClosedLoopModel, TurnpikeController, turnpike_time
+from agent_envs.training.defaults import DEFAULT_BETA, DEFAULT_DELTA, GYM_ENV_ID
+from agent_envs.training.results import Episode
 
-BETA = 12.0
-DELTA = 2e-4
+BETA = DEFAULT_BETA
+DELTA = DEFAULT_DELTA
 N_AGENTS = 100
 N_STEPS = 50
 N_PATHS = 20
@@ -94,23 +95,6 @@ PAPER_RUNS: tuple[TurnpikeRun, ...] = (
 )
 
 
-@dataclass
-class RunRecord:
-    """Path-mean trajectory and controls of one run, plus what the table needs."""
-
-    times: np.ndarray  # (m+1,)
-    mean_positions: np.ndarray  # (m+1, N, d), NaN after a divergence
-    controls: np.ndarray  # (m, N, d)
-    running_cost: np.ndarray  # (m,)
-    target: float
-    tbar: float
-    dt: float
-    diverged: bool
-    divergence_step: int | None
-    wall_time: float
-    max_abs_u: float | None = None  # over the applied controls (per path); None: from controls
-
-
 def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_paths: int):
     """The run through `agent_envs/Swarm-v0` and the TurnpikeController (public API)."""
     import gymnasium as gym
@@ -118,29 +102,18 @@ def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_pat
     import agent_envs  # noqa: F401
     from agent_envs.training.evaluate import rollout
 
-    env = gym.make("agent_envs/Swarm-v0", **run.env_kwargs(n_agents, n_steps, n_paths))
+    env = gym.make(GYM_ENV_ID, **run.env_kwargs(n_agents, n_steps, n_paths))
     try:
         ctrl = TurnpikeController(env, beta=BETA, delta=DELTA)
         ep = rollout(ctrl, env, seed)
     finally:
         env.close()
-    return RunRecord(
-        times=ep.times,
-        mean_positions=ep.mean_positions,
-        controls=ep.controls,
-        running_cost=ep.running_cost,
-        target=run.target,
-        tbar=ep.turnpike_time,
-        dt=ep.dt,
-        diverged=ep.diverged,
-        divergence_step=ep.divergence_step,
-        wall_time=ep.wall_time,
-    ), ep.mean_positions[0]
+    return ep, ep.mean_positions[0]
 
 
 def run_closed_loop_mode(
     run: TurnpikeRun, seed: int, x0: np.ndarray, n_steps: int, n_paths: int
-) -> RunRecord:
+) -> Episode:
     """The paper's procedure: closed-loop `eq:dyn_mean` on [0, tbar], then u = 0 (core API)."""
     from agent_envs.costs import running_cost
     from agent_envs.dynamics.swarm import SwarmModel
@@ -184,27 +157,31 @@ def run_closed_loop_mode(
             diverged, divergence_step = True, step + 1
             break
         mean_positions[step + 1] = x.mean(axis=0)
-    return RunRecord(
+    return Episode(
+        seed=seed,
         times=np.linspace(0.0, params.horizon, n_steps + 1),
         mean_positions=mean_positions,
         controls=controls,
         running_cost=costs,
-        target=run.target,
-        tbar=float(tbar),
+        rewards=-dt * costs,
+        target=np.asarray(target, dtype=float),
         dt=dt,
+        max_control=float("inf"),  # the closed loop's feedback is not bounded
         diverged=diverged,
         divergence_step=divergence_step,
+        n_steps_run=divergence_step if diverged else n_steps,
+        turnpike_time=float(tbar),
         wall_time=time.perf_counter() - start,
-        max_abs_u=max_u,
+        max_abs_control=max_u,
     )
 
 
-def summarize_record(run: TurnpikeRun, mode: str, seed: int, rec: RunRecord) -> dict[str, Any]:
+def summarize_record(run: TurnpikeRun, mode: str, seed: int, rec: Episode) -> dict[str, Any]:
     """The table row of one run."""
     err = rec.mean_positions - rec.target  # (m+1, N, d)
     lyap = np.sum(err**2, axis=(-2, -1))  # L^n
     rms = np.sqrt(np.mean(np.sum(err**2, axis=-1), axis=-1))
-    nbar = min(int(np.ceil(rec.tbar / rec.dt - 1e-9)), len(rec.times) - 1)
+    nbar = min(int(np.ceil(rec.turnpike_time / rec.dt - 1e-9)), len(rec.times) - 1)
     finite = np.isfinite(rms)
     after = rms[nbar:][finite[nbar:]]
     return {
@@ -215,21 +192,21 @@ def summarize_record(run: TurnpikeRun, mode: str, seed: int, rec: RunRecord) -> 
         "integrator": run.integrator.upper() + (" (exact J)" if run.jacobian == "exact" else ""),
         "kernel": run.kernel,
         "target": run.target,
-        "tbar": rec.tbar,
+        "tbar": rec.turnpike_time,
         "L_at_tbar": float(lyap[nbar]),
         "L_at_T": float(lyap[-1]),
         "rms_distance_at_T": float(rms[-1]),
         "max_rms_after_tbar": float(after.max()) if after.size else float("nan"),
         "total_cost": float(rec.dt * np.sum(rec.running_cost)),
         "max_abs_u": float(
-            np.max(np.abs(rec.controls)) if rec.max_abs_u is None else rec.max_abs_u
+            np.max(np.abs(rec.controls)) if rec.max_abs_control is None else rec.max_abs_control
         ),
         "diverged": bool(rec.diverged),
         "wall_time_s": rec.wall_time,
     }
 
 
-def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> None:
+def plot_runs(path: Path, panels: list[tuple[dict, Episode]], title: str) -> None:
     """One panel per run: every agent's path-mean position against time, tbar marked."""
     ncols = 2
     nrows = int(np.ceil(len(panels) / ncols))
@@ -239,8 +216,8 @@ def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> N
         ax.set_visible(False)
     for ax, (row, rec) in zip(axes.flat, panels, strict=False):
         ax.plot(rec.times, rec.mean_positions[..., 0], lw=0.5, color="tab:blue", alpha=0.6)
-        ax.axhline(rec.target, color="k", ls="--", lw=1)
-        ax.axvline(rec.tbar, color="tab:red", ls=":", lw=1.3)
+        ax.axhline(rec.target[0], color="k", ls="--", lw=1)
+        ax.axvline(rec.turnpike_time, color="tab:red", ls=":", lw=1.3)
         status = (
             "DIVERGED" if row["diverged"] else f"RMS dist. at T = {row['rms_distance_at_T']:.2g}"
         )
@@ -256,7 +233,7 @@ def plot_runs(path: Path, panels: list[tuple[dict, RunRecord]], title: str) -> N
     fig.savefig(path, dpi=110)
 
 
-def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, RunRecord]]]) -> None:
+def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, Episode]]]) -> None:
     """L^n = ||E x^n - xbar||^2 against t, one panel per mode, one curve per run."""
     fig = Figure(figsize=(6 * len(by_mode), 4))
     axes = fig.subplots(1, len(by_mode), squeeze=False)
@@ -264,7 +241,7 @@ def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, RunRecord]]]) 
         for i, (row, rec) in enumerate(panels):
             lyap = np.sum((rec.mean_positions - rec.target) ** 2, axis=(-2, -1))
             ax.plot(rec.times, lyap, color=f"C{i}", lw=1.4, label=row["run"])
-            ax.axvline(rec.tbar, color=f"C{i}", ls=":", lw=0.9)
+            ax.axvline(rec.turnpike_time, color=f"C{i}", ls=":", lw=0.9)
         ax.axhline(DELTA, color="k", ls="--", lw=0.8, label="delta")
         ax.set_yscale("log")
         ax.set_xlabel("t")
@@ -331,7 +308,7 @@ def reproduce(
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     rows: list[dict[str, Any]] = []
-    panels: dict[str, list[tuple[dict, RunRecord]]] = {m: [] for m in modes}
+    panels: dict[str, list[tuple[dict, Episode]]] = {m: [] for m in modes}
     bar = tqdm(total=len(runs) * len(seeds), desc="reproduce turnpike", disable=not progress)
     for seed in seeds:
         for run in runs:
@@ -399,47 +376,4 @@ def reproduce(
     return table
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=Path("reproduction_turnpike"),
-        help="output folder (default: reproduction_turnpike)",
-    )
-    parser.add_argument(
-        "--seeds",
-        type=int,
-        nargs="+",
-        default=[0],
-        help="seeds of the initial positions and noise (default: 0)",
-    )
-    parser.add_argument(
-        "--modes",
-        nargs="+",
-        choices=MODES,
-        default=list(MODES),
-        help="env (public API, zero-order hold) and/or closed-loop (paper)",
-    )
-    parser.add_argument("--n-agents", type=int, default=N_AGENTS)
-    parser.add_argument("--n-paths", type=int, default=N_PATHS)
-    parser.add_argument("--n-steps", type=int, default=N_STEPS)
-    parser.add_argument("--no-progress", action="store_true")
 
-
-def run(args: argparse.Namespace) -> int:
-    table = reproduce(
-        args.out,
-        tuple(args.seeds),
-        modes=tuple(args.modes),
-        n_agents=args.n_agents,
-        n_steps=args.n_steps,
-        n_paths=args.n_paths,
-        progress=not args.no_progress,
-    )
-    cols = [c for c in TABLE_COLUMNS if c in table.columns]
-    with pd.option_context(
-        "display.width", 200, "display.max_columns", 30, "display.float_format", "{:.3g}".format
-    ):
-        print(table[cols].to_string(index=False))
-    print(f"written: {args.out}/results.md, results.csv, results.json and PNGs")
-    return 0

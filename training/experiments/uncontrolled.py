@@ -19,7 +19,6 @@ that, and "max |E x|" flags oscillation/blow-up.
 
 from __future__ import annotations
 
-import argparse
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -183,22 +182,4 @@ def reproduce(out: Path, n_agents: int = 100, n_paths: int = 20, seed: int = 0) 
     return rows
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """CLI arguments of `agent-envs reproduce uncontrolled`."""
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=Path("out/uncontrolled"),
-        help="output folder (default: out/uncontrolled)",
-    )
-    parser.add_argument("--n-agents", type=int, default=100, help="number of agents N (100)")
-    parser.add_argument("--n-paths", type=int, default=20, help="Brownian paths (20)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the start and noise (0)")
 
-
-def run(args: argparse.Namespace) -> int:
-    """Entry point of `agent-envs reproduce uncontrolled`."""
-    rows = reproduce(args.out, args.n_agents, args.n_paths, args.seed)
-    print(markdown_table(rows))
-    print(f"wrote {args.out}/results.md, results.json and the figures")
-    return 0

@@ -1,0 +1,77 @@
+"""The envs a training run uses: the Gymnasium env, the vectorized training env and the raw
+evaluation env, and the description of the env a run was trained on (``env.json``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from agent_envs.training.config import TrainConfig
+from agent_envs.training.defaults import GYM_ENV_ID, is_multiagent
+
+
+def make_gym_env(env_id: str, env_kwargs: dict[str, Any] | None = None):
+    """`gym.make(env_id, **env_kwargs)` after registering the swarm envs."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
+
+    try:
+        return gym.make(env_id, **(env_kwargs or {}))
+    except TypeError as exc:  # unknown or mistyped keyword: a user error, not a crash
+        raise ValueError(f"--env-kwargs {env_kwargs}: {exc}") from None
+
+
+def eval_env_id(config: TrainConfig) -> str:
+    """The Gymnasium env on which a run is evaluated (the PettingZoo env's Gymnasium twin)."""
+    return GYM_ENV_ID if is_multiagent(config.env_id) else config.env_id
+
+
+def make_eval_vec_env(env_id: str, env_kwargs: dict[str, Any] | None, n_episodes: int):
+    """Raw (unnormalized) DummyVecEnv with one sub-env per evaluation episode."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    kwargs = dict(env_kwargs or {})
+    return DummyVecEnv([lambda: make_gym_env(env_id, kwargs)] * int(n_episodes))
+
+
+def env_description(env_id: str, env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """N, d, n_steps, integrator and the full kwargs of the Gymnasium env a run uses."""
+    env = make_gym_env(env_id, env_kwargs)
+    try:
+        base = env.unwrapped
+        params = base.params
+        return {
+            "env_id": env_id,
+            "env_kwargs": dict(env_kwargs or {}),
+            "n_agents": int(params.n_agents),
+            "dim": int(params.dim),
+            "n_steps": int(base.n_steps),
+            "integrator": str(base.integrator_name),
+            "max_control": float(base.max_control),
+        }
+    finally:
+        env.close()
+
+
+def make_training_env(config: TrainConfig, n_envs: int):
+    """The vectorized training env (Monitor-wrapped), seeded from config.seed by SB3."""
+    if is_multiagent(config.env_id):
+        from agent_envs.training.multiagent import make_shared_vec_env
+
+        return make_shared_vec_env(config.env_kwargs, n_copies=n_envs)
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    import agent_envs  # noqa: F401
+    from agent_envs.training.wrappers import HorizonAsTermination
+
+    return make_vec_env(
+        config.env_id,
+        n_envs=n_envs,
+        seed=config.seed,
+        env_kwargs=config.env_kwargs,
+        vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
+        wrapper_class=HorizonAsTermination,
+    )
+
