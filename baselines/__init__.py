@@ -7,20 +7,25 @@
 - `TurnpikeController`: cheap control `eq:cheap_ctr` until tbar (`eq:tptime`), then u = 0.
 - `ProportionalController`: beta (xbar - x_k) until tbar, no interaction cancellation.
 - `ZeroController`: u = 0 (static control, `eq:stationary_solution`).
-- `turnpike_time`, `cheap_control`: the formulas on arrays.
+- `turnpike_time`, `cheap_control`: the formulas on arrays (`turnpike`).
+- `CheapClosedLoopModel`: the closed loop `eq:dyn_mean` as a drift model for the core's
+  integrators (`closed_loop`).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from agent_envs.baselines.simple import ProportionalController, ZeroController
+from agent_envs.baselines.closed_loop import CheapClosedLoopModel
+from agent_envs.baselines.controllers import (
+    ProportionalController,
+    TurnpikeController,
+    ZeroController,
+)
+from agent_envs.baselines.feedback import FeedbackController
 from agent_envs.baselines.turnpike import (
     DEFAULT_BETA,
     DEFAULT_DELTA,
-    CheapClosedLoopModel,
-    FeedbackController,
-    TurnpikeController,
     cheap_control,
     cheap_control_from_model,
     turnpike_time,

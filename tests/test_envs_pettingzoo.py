@@ -207,3 +207,20 @@ def test_rgb_array_render_two_dimensions():
     assert aec.render().shape[2] == 3
     aec.close()
     par_env.close()
+
+
+@pytest.mark.parametrize("dim", [1, 2])
+def test_agent_rows_of_the_global_observation_are_the_agents_observations(dim):
+    """`agent_observations_from_global` reads the per-agent layout out of the Gymnasium one."""
+    from agent_envs.envs.observation import agent_observations_from_global
+
+    par_env = swarm_v0.parallel_env(**SMALL, dim=dim)
+    observations, _ = par_env.reset(seed=3)
+    for _ in range(2):
+        rows = agent_observations_from_global(par_env.state(), SMALL["n_agents"], dim)
+        expected = np.stack([observations[a] for a in par_env.agents])
+        assert rows.shape == (SMALL["n_agents"], 3 * dim + 1) and rows.dtype == np.float32
+        np.testing.assert_array_equal(rows, expected)
+        batch = agent_observations_from_global(np.stack([par_env.state()] * 3), 5, dim)
+        assert batch.shape == (3, SMALL["n_agents"], 3 * dim + 1)
+        observations, *_ = par_env.step(all_actions(par_env, np.full((5, dim), 0.1)))

@@ -210,8 +210,8 @@ def test_seeded_evaluation_is_deterministic():
 def test_seeded_evaluation_matches_training_evaluate():
     """Sub-env i with seed s + i runs the episode `evaluate_policies` runs with seed s + i."""
     from agent_envs.training.callbacks import run_seeded_episodes
-    from agent_envs.training.evaluate import evaluate_policies
     from agent_envs.training.environments import make_eval_vec_env
+    from agent_envs.training.evaluate import evaluate_policies
 
     venv = make_eval_vec_env(GYM_ENV_ID, TINY_ENV, 3)
     from agent_envs.baselines import ProportionalController
@@ -277,8 +277,8 @@ def test_smoke_parameter_shared_ppo(tmp_path):
     import gymnasium as gym
 
     from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.policies import load_sb3_policy
     from agent_envs.training.multiagent import evaluate_per_agent
+    from agent_envs.training.policies import load_sb3_policy
     from agent_envs.training.train import train
 
     config = tiny_config(tmp_path, "ppo", PETTINGZOO_ENV_ID, timesteps=500, eval_freq=250)
