@@ -64,4 +64,3 @@ class CheapClosedLoopModel:
         eye = np.broadcast_to(np.eye(self.n_agents), (*x.shape[:-2], self.n_agents, self.n_agents))
         lin = Linearization(-self.beta * eye, per_coordinate=True, symmetric=True)
         return self.drift(x, u), lin
-

@@ -79,4 +79,3 @@ class TurnpikeController(FeedbackController):
 
     def control(self, positions, drift, target):
         return cheap_control(positions, drift, target, self.beta, cancel_interaction=True)
-

@@ -329,4 +329,3 @@ class FeedbackController:
             f"{type(self).__name__}(beta={self.beta:g}, delta={self.delta:g}, "
             f"max_control={self.max_control:g}, switch_off={self.switch_off})"
         )
-

@@ -241,6 +241,3 @@ def read_learning_curve(path: str | os.PathLike, max_timesteps: int | None = Non
             if max_timesteps is None or row["timesteps"] <= max_timesteps:
                 rows.append(row)
     return rows
-
-
-

@@ -66,13 +66,12 @@ def save_checkpoint(model: Any, run_dir: str | Path, off_policy: bool) -> Path:
     return path
 
 
-
 class ReplayBufferPruningCheckpointCallback(CheckpointCallback):
     """SB3's `CheckpointCallback` that keeps only the newest replay buffer on disk.
 
-    SB3 pickles the whole preallocated buffer (22.8 MB per checkpoint for N = 10 and
-    buffer_size = 100k; about ten times more for N = 100). Older checkpoints keep their model and
-    VecNormalize statistics; resuming uses the newest checkpoint, which has all three.
+    SB3 pickles the whole preallocated buffer, whose size grows with N and `buffer_size` (README.md
+    has the sizes). Older checkpoints keep their model and VecNormalize statistics; resuming uses
+    the newest checkpoint, which has all three.
     """
 
     def _on_step(self) -> bool:
@@ -87,4 +86,3 @@ def prune_replay_buffers(folder: str | os.PathLike, keep_timesteps: int) -> None
     for path in Path(folder).glob("*_replay_buffer_*_steps.pkl"):
         if not path.name.endswith(f"_replay_buffer_{keep_timesteps}_steps.pkl"):
             path.unlink()
-

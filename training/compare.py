@@ -431,7 +431,8 @@ def training_table(run_dirs: dict[str, Path], learners: dict[str, Learner]):
 
 def compare(config: CompareConfig) -> dict[str, Any]:
     """Run the whole comparison; returns paths and the summary table (see module docstring)."""
-    from agent_envs.training.report import ReportSection, build_report, display_table, summarize
+    from agent_envs.training.report import ReportSection, build_report, display_table
+    from agent_envs.training.results import summarize
     from agent_envs.training.train import torch_threads
 
     started = time.perf_counter()
@@ -573,7 +574,6 @@ def compare(config: CompareConfig) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------------------- CLI
-
 
 
 __all__ = ["PRESETS", "CompareConfig", "Learner", "Preset", "compare"]

@@ -127,7 +127,6 @@ def hyperparams_file(algo: str) -> Path:
     return Path(__file__).parent / "hyperparams" / f"{algo}.yml"
 
 
-
 def default_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     """A deep copy of HYPERPARAMS[algo][env_id]."""
     algo = check_algo(algo)
@@ -314,4 +313,3 @@ def sb3_kwargs(kwargs: dict[str, Any], action_dim: int) -> dict[str, Any]:
         sigma = float(kwargs.get("noise_std", 0.1))
         out["action_noise"] = NormalActionNoise(np.zeros(action_dim), sigma * np.ones(action_dim))
     return out
-

@@ -74,4 +74,3 @@ def make_training_env(config: TrainConfig, n_envs: int):
         vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
         wrapper_class=HorizonAsTermination,
     )
-

@@ -105,7 +105,6 @@ def rollout(
     )
 
 
-
 def evaluate_policies(
     policies: Mapping[str, PolicySpec] | Sequence[str],
     env_id: str = GYM_ENV_ID,

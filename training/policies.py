@@ -208,4 +208,3 @@ def live_policy(model: Any, agent_shape: tuple[int, int] | None = None) -> Any:
     if agent_shape is not None:
         policy = PerAgentPolicy(policy, *agent_shape)
     return policy
-

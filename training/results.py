@@ -226,9 +226,6 @@ def stack_episodes(episodes: Sequence[Episode]) -> dict[str, np.ndarray]:
     }
 
 
-
-
-
 def mean_confidence_interval(values: Sequence[float], confidence: float = 0.95):
     """(mean, low, high) with the t-distribution: mean +- t_{(1+c)/2, n-1} s / sqrt(n).
 
@@ -331,5 +328,3 @@ def merge_results(results: Sequence[EvaluationResults]) -> EvaluationResults:
     keys = ("env_id", "env_kwargs", "seeds", "reset_options")
     meta["consistent"] = all(all(m.get(k) == metas[0].get(k) for k in keys) for m in metas)
     return EvaluationResults(pd.concat(frames, ignore_index=True), trajectories, meta)
-
-

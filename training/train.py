@@ -71,7 +71,6 @@ def default_run_name(config: TrainConfig) -> str:
     return f"{env}__{config.algo}__{config.seed}__{int(time.time())}"
 
 
-
 def _write_json(path: Path, data: Any) -> None:
     path.write_text(json.dumps(data, indent=2, default=str) + "\n")
 
@@ -112,8 +111,8 @@ def train(config: TrainConfig, callbacks: Sequence[Any] | None = None) -> Path:
 def torch_threads(n: int):
     """Run with `n` torch intra-op threads (0: unchanged), restoring the previous number after.
 
-    With torch's default (one thread per core), a 64x64 MLP forward pass on a busy 2-core
-    machine measured 5.5 ms instead of 17 us with one thread: the threads spin-wait.
+    Small networks on a busy CPU run far faster with one thread than with torch's default of
+    one per core (the threads spin-wait; README.md, "Training agents", has the measurement).
     """
     import torch
 
@@ -294,7 +293,6 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
 
 
 # --------------------------------------------------------------------------------------- CLI
-
 
 
 def config_from_options(options: dict[str, Any]) -> TrainConfig:

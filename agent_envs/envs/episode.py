@@ -54,11 +54,9 @@ from agent_envs.simulator import (
 #: Default number of time steps m (the paper's turnpike experiments).
 DEFAULT_N_STEPS = 50
 #: Default bound on each coordinate of u_k: an action a in [-1, 1] is the control u = 150 a.
-#: benchmarks/max_control.py measures the turnpike cheap control (eq:cheap_ctr, beta = 12) in
-#: the paper's settings (N = 100, m = 50, 20 seeds): max |u| = 67.7 (symmetric, eps = 0.05,
-#: xbar = 0.7 / -1.7) and 83.6 (non-symmetric, eps in [1e-2, 1e-1], xbar = 2.3) with the
-#: paper's 20 paths; with one path (the env default) 75.3 / 86.4 (symmetric, SERB / EM) and
-#: 95.6 / 113.1 (non-symmetric, SERB / EM). 150 leaves it unclipped with a 30 % margin.
+#: It leaves the turnpike cheap control (eq:cheap_ctr, beta = 12) unclipped in the paper's
+#: settings: benchmarks/max_control.py measures its largest |u|, README.md ("Why
+#: max_control = 150") has the figures.
 DEFAULT_MAX_CONTROL = 150.0
 
 #: Keys of `reset(options=...)` the swarm envs understand.

@@ -55,13 +55,8 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     The control is u = max_control * clip(action, -1, 1), reshaped (N, d): an action outside
     [-1, 1] is clipped (not an error); a NaN or infinite entry, or a shape other than (N d,) or
     (N, d), raises `ValueError`. The default `max_control = 150` leaves the paper's turnpike
-    cheap control (`eq:cheap_ctr`, beta = 12, N = 100, m = 50) unclipped. Measured by
-    benchmarks/max_control.py, largest |u_k^n| over 20 seeds:
-
-    | kernel (N = 100, m = 50)             | SERB 20 paths | EM 20 | SERB 1 path | EM 1 |
-    |--------------------------------------|---------------|-------|-------------|------|
-    | symmetric eps=0.05, xbar=0.7 or -1.7 | 67.7          | 67.0  | 75.3        | 86.4 |
-    | non-symmetric eps in [0.01, 0.1], 2.3| 83.6          | 81.8  | 95.6        | 113.1|
+    cheap control (`eq:cheap_ctr`, beta = 12, N = 100, m = 50) unclipped: benchmarks/max_control.py
+    measures its largest |u_k^n|; README.md ("Why max_control = 150") has the figures.
 
     ## Observation Space
 

@@ -18,9 +18,8 @@
   converged at `max_krylov_dim`, a `RuntimeWarning` is issued and the dense method is used.
 
 ``"auto"`` picks "expm" for n <= 64, "eigh" for a single symmetric matrix with n <= 128, and
-"krylov" otherwise: the crossovers measured by benchmarks/bench_integrators.py on 2 cores with
-one BLAS thread (at n = 100, one path: eigh 0.7 ms, expm 1.2 ms, krylov 1.0 ms; with 20 paths
-krylov wins; at n >= 200 krylov wins by 2.5x-7x).
+"krylov" otherwise: crossovers measured by benchmarks/bench_integrators.py (its output and
+README.md, "Benchmarks", have the timings).
 """
 
 from __future__ import annotations

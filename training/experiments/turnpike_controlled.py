@@ -374,6 +374,3 @@ def reproduce(
     ]
     (out / "results.md").write_text("\n".join(md))
     return table
-
-
-

@@ -180,6 +180,3 @@ def reproduce(out: Path, n_agents: int = 100, n_paths: int = 20, seed: int = 0) 
     )
     (out / "results.md").write_text(text)
     return rows
-
-
-
