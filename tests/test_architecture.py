@@ -72,7 +72,7 @@ def test_import_contract(tmp_path):
         timeout=120,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "1 kept, 0 broken" in proc.stdout
+    assert "2 kept, 0 broken" in proc.stdout
 
 
 def test_core_imports_no_torch_and_steps_the_env():
