@@ -178,19 +178,20 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             )
         n, d = self.config.params.n_agents, self.config.params.dim
         agent_shapes = ((d,), ()) if d == 1 else ((d,),)
-        try:
-            stacked = np.asarray([actions[a] for a in self.possible_agents])
-        except (TypeError, ValueError):  # ragged or unconvertible: the slow path names the agent
-            stacked = None
-        fast = (
-            stacked is not None
-            and stacked.dtype.kind in "iuf"
-            and stacked.shape in ((n, d), (n,) if d == 1 else (n, d))
-        )
+        values = [actions[a] for a in self.possible_agents]
+        # fast path: numpy arrays of a real dtype (stacking would promote a bool or an int
+        # action among float ones silently, so every value's own dtype is checked)
+        stacked = None
+        if all(isinstance(v, (np.ndarray, np.generic)) and v.dtype.kind in "iuf" for v in values):
+            try:
+                stacked = np.asarray(values)
+            except ValueError:  # ragged: the slow path names the agent
+                stacked = None
+        fast = stacked is not None and stacked.shape in ((n, d), (n,) if d == 1 else (n, d))
         if not fast:  # slow path: check every agent's action to name the offending one
             rows = []
             for agent in self.possible_agents:
-                arr = real_array(f"actions[{agent!r}]", actions[agent])
+                arr = real_array(f"actions[{agent!r}]", actions[agent])  # names the agent
                 if arr.shape not in agent_shapes:
                     raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {arr.shape}")
                 rows.append(arr.reshape(d))
