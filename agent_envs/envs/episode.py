@@ -342,7 +342,10 @@ class SwarmEpisode:
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
         drift = self._mean_drift_at(x)
         if not np.all(np.isfinite(drift)):
-            raise ValueError("the interaction drift is not finite at the initial positions")
+            raise ValueError(
+                "kernel: the interaction drift is not finite at the initial positions (a user "
+                "kernel must return finite values there)"
+            )
         self.positions, self._mean_drift = x, drift
         self.step_index = 0
         self.diverged = False
