@@ -26,6 +26,7 @@ from agent_envs.validation import (
     MAX_STEPS,
     check_int,
     check_positive,
+    check_seed,
     check_size,
     real_array,
 )
@@ -158,10 +159,7 @@ def _generators(seed: int | np.random.Generator | None):
     if isinstance(seed, np.random.Generator):
         init_rng, noise_rng = seed.spawn(2)
     else:
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
-            raise TypeError(f"seed must be an int, a numpy Generator or None, got {seed!r}")
-        if seed is not None and seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed}")
+        seed = check_seed(seed)  # or a numpy Generator, handled above
         init_ss, noise_ss = np.random.SeedSequence(seed).spawn(2)
         init_rng, noise_rng = np.random.default_rng(init_ss), np.random.default_rng(noise_ss)
     return init_rng, noise_rng

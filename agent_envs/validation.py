@@ -143,6 +143,22 @@ def check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -
     return int(value)
 
 
+def check_seed(seed: Any) -> int | None:
+    """`seed` as None or an int >= 0 (numpy ints accepted, bools rejected).
+
+    Gymnasium's own check raises `gymnasium.error.Error` and accepts ``True``; the envs call
+    this first so that a bad seed is a `TypeError`/`ValueError` naming ``seed``. Any size of int
+    is fine (numpy's `SeedSequence` takes arbitrary precision).
+    """
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed must be None or an integer >= 0, got {type(seed).__name__}")
+    if seed < 0:
+        raise ValueError(f"seed must be None or an integer >= 0, got {_shown(seed)}")
+    return int(seed)
+
+
 def real_array(name: str, value: Any) -> np.ndarray:
     """`value` as a finite float64 array; errors name `name`.
 

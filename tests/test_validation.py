@@ -248,6 +248,28 @@ def test_simulate_arguments_are_checked():
             simulate(params, n_steps=kwargs.pop("n_steps", 2), **kwargs)
 
 
+@pytest.mark.parametrize("make", [SwarmEnv, swarm_v0.parallel_env])
+@pytest.mark.parametrize(
+    ("seed", "error"),
+    [
+        (True, TypeError),
+        (1.5, TypeError),
+        ("1", TypeError),
+        (-1, ValueError),
+        (-(10**5000), ValueError),
+    ],
+    ids=["True", "1.5", "str", "-1", "-10**5000"],
+)
+def test_bad_seed_is_a_named_error_not_gymnasiums(make, seed, error):
+    """Gymnasium raises its own `gymnasium.error.Error` (and accepts True): checked first."""
+    env = make(n_agents=3)
+    with pytest.raises(error, match="seed must be None or an integer >= 0"):
+        env.reset(seed=seed)
+    with pytest.raises(error, match="seed"):
+        simulate(SwarmParams(n_agents=3), n_steps=1, seed=seed)
+    env.reset(seed=2**200)  # any size of non-negative int is a seed
+
+
 # ---------------------------------------------------------------------- actions
 @pytest.mark.parametrize(
     ("action", "error"),

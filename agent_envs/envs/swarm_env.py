@@ -25,6 +25,7 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
+from agent_envs.validation import check_seed
 
 ENV_ID = "agent_envs/Swarm-v0"
 
@@ -179,7 +180,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
+        super().reset(seed=check_seed(seed))
         self.episode.reset(self.np_random, **reset_options(options, strict=True))
         if self._renderer is not None:
             self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)

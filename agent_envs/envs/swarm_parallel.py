@@ -25,7 +25,7 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
-from agent_envs.validation import real_array
+from agent_envs.validation import check_seed, real_array
 
 
 class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarray]):
@@ -148,8 +148,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        if seed is not None:
-            self._np_random, self._np_random_seed = seeding.np_random(seed)
+        if check_seed(seed) is not None:
+            self._np_random, self._np_random_seed = seeding.np_random(int(seed))
         # unknown keys ignored: PettingZoo's API tests pass {"options": 1}
         self.episode.reset(self.np_random, **reset_options(options, strict=False))
         self.agents = self.possible_agents[:]
