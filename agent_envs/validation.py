@@ -112,7 +112,8 @@ def check_real(name: str, value: Any, accepted: Range | None = None) -> float:
     """
     where = f" in {accepted}" if accepted is not None else ""
     if not _is_real_scalar(value):
-        raise TypeError(f"{name} must be a real number{where}, got {type(value).__name__}")
+        kind = type(value).__name__
+        raise TypeError(f"{name} must be a real number (int or float){where}, got {kind}")
     try:
         result = float(value)
     except OverflowError:
@@ -126,7 +127,7 @@ def check_real(name: str, value: Any, accepted: Range | None = None) -> float:
 
 
 def check_positive(name: str, value: Any, accepted: Range | None = None) -> float:
-    """`value` as a finite float > 0 (and in `accepted` if given); errors as `check_real`."""
+    """`value` as a finite float in `accepted` (default (0, inf)); errors as `check_real`."""
     if accepted is None:
         accepted = Range(0.0, math.inf, low_open=True)
     return check_real(name, value, accepted)
