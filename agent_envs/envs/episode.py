@@ -151,6 +151,11 @@ class EpisodeConfig:
         return self.params.horizon / self.n_steps
 
 
+def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
+    """True when a and b differ at most in the cost parameters (target, gamma)."""
+    return dataclasses.replace(a, target=b.target, gamma=b.gamma) == b
+
+
 class _CachedLinearizationModel(SwarmModel):
     """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
 
@@ -295,8 +300,11 @@ class SwarmEpisode:
             params = dataclasses.replace(params, target=target)
             _check_target(params, self.config.divergence_threshold)
         if params != self.params:
+            # target and gamma are cost parameters: a new target keeps the dynamics model
+            # (and its kernel); only a change of the dynamics would rebuild it.
+            if not same_dynamics(params, self.params):
+                self.model = _CachedLinearizationModel(params)
             self.params = params
-            self.model = _CachedLinearizationModel(params)
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
         drift = self._mean_drift_at(x)
