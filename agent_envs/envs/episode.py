@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.observation import global_observation
@@ -323,12 +324,14 @@ class SwarmEpisode:
             )
         cost = float(np.mean(running_cost(x, control, self._target, self.params.gamma)))
         dw = brownian_increments(rng, x.shape, self.dt)
-        with np.errstate(over="ignore", invalid="ignore"):
-            x_next = self.integrator.step(self.model, x, control, self.time, self.dt, dw)
-        diverged = bool(np.any(diverged_paths(x_next, self.config.divergence_threshold)))
-        if not diverged:
-            drift = self._mean_drift_at(x_next)
-            diverged = not np.all(np.isfinite(drift))
+        # BLAS limited to one thread while stepping (see agent_envs.arrays.hot_path_threads).
+        with arrays.hot_path_threads():
+            with np.errstate(over="ignore", invalid="ignore"):
+                x_next = self.integrator.step(self.model, x, control, self.time, self.dt, dw)
+            diverged = bool(np.any(diverged_paths(x_next, self.config.divergence_threshold)))
+            if not diverged:
+                drift = self._mean_drift_at(x_next)
+                diverged = not np.all(np.isfinite(drift))
         if diverged:
             self.diverged = True
         else:
