@@ -222,14 +222,16 @@ def _lanczos_action(
 ) -> Any | None:
     """Lanczos for symmetric A: phi_p(A) v ~ |v| Q_m phi_p(T_m) e_1, T_m tridiagonal.
 
-    The three-term recurrence b_j q_{j+1} = A q_j - a_j q_j - b_{j-1} q_{j-1}, with the new
-    vector projected once more off q_{j-1} and q_j (local reorthogonalization) but not off the
-    older vectors: for functions of a matrix with a bounded spectrum the approximation converges
-    in spite of the loss of orthogonality (Druskin, Greenbaum & Knizhnerman, 1998).
-    Stopped when Saad's error estimate b_m |e_m^T phi_p(T_m) e_1| is below
-    rtol |phi_p(T_m) e_1|, checked every `check_every` steps from m = 2 sqrt(|A|_inf) (the
-    dimension below which the Krylov approximation of the exponential cannot have converged),
-    or at a happy breakdown. Differentiable on torch (list-built basis, no in-place writes).
+    The three-term recurrence b_j q_{j+1} = A q_j - a_j q_j - b_{j-1} q_{j-1}, with the
+    coefficients of q_{j-1} and q_j taken as projections and the new vector projected once more
+    off q_j (local reorthogonalization), but not off the older vectors: for functions of a
+    matrix with a bounded spectrum the approximation converges in spite of the loss of
+    orthogonality (Druskin, Greenbaum & Knizhnerman, 1998). Stopped when Saad's error estimate
+    b_m |e_m^T phi_p(T_m) e_1| is below rtol |phi_p(T_m) e_1|, checked every `check_every`
+    steps from m = 3 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
+    the exponential has not converged yet), or at a happy breakdown; None when not converged
+    by `max_dim` (also when m reaches n: the basis is then not exact). Differentiable on torch
+    (list-built basis, no in-place writes).
     """
     xp = arrays.namespace(a, v)
     n = a.shape[-1]
@@ -245,28 +247,30 @@ def _lanczos_action(
     alphas: list[Any] = []
     betas: list[Any] = []
     norm_inf = float(arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1))))
-    first_check = max(2, min(max_dim, math.ceil(2.0 * math.sqrt(norm_inf))))
+    first_check = max(2, min(max_dim, math.ceil(3.0 * math.sqrt(norm_inf))))
     tiny = 1e-12 * (norm_inf + 1e-300)
     coeffs = None
     converged = False
     w_prev = None
     for j in range(max_dim):
         w = q @ at
-        alpha = xp.sum(w * q, axis=-1)
+        alpha = xp.vecdot(w, q)
         w = w - alpha[..., None] * q
         if w_prev is not None:
-            w = w - betas[-1][..., None] * w_prev
-            # local reorthogonalization against q_{j-1} and q_j (rounding drift of the recurrence)
-            w = w - xp.sum(w * w_prev, axis=-1)[..., None] * w_prev
-        corr = xp.sum(w * q, axis=-1)
+            # the three-term recurrence's b_{j-1} q_{j-1} term, with the coefficient computed
+            # as the projection onto q_{j-1} (equal to b_{j-1} up to rounding)
+            w = w - xp.vecdot(w, w_prev)[..., None] * w_prev
+        corr = xp.vecdot(w, q)  # and against q_j (rounding drift of the recurrence)
         w = w - corr[..., None] * q
         alpha = alpha + corr
         b = xp.linalg.vector_norm(w, axis=-1)
         alphas.append(alpha)
         m = j + 1
         b_host = arrays.to_numpy(b)
-        breakdown = b_host <= tiny
-        converged = bool(np.all(breakdown)) or m == n
+        any_breakdown = float(b_host.min()) <= tiny
+        # m == n without convergence: the space is exhausted but, without full
+        # reorthogonalization, the basis is not exact; the caller then uses the dense method.
+        converged = any_breakdown and bool(np.all(b_host <= tiny))
         done = converged or m == max_dim
         if done or (m >= first_check and (m - first_check) % check_every == 0):
             t = arrays.tridiagonal(xp.stack(alphas, axis=-1), _stack_or_empty(xp, betas, alpha))
@@ -278,8 +282,8 @@ def _lanczos_action(
                     converged = done = True
         if done:
             break
-        if np.any(breakdown):
-            stop = arrays.asarray(breakdown, like=w) > 0.5
+        if any_breakdown:
+            stop = arrays.asarray(b_host <= tiny, like=w) > 0.5
             w = xp.where(stop[..., None], 0.0, w / xp.where(stop, 1.0, b)[..., None])
         else:
             w = w / b[..., None]
@@ -358,6 +362,9 @@ def phi_action(
         result = _lanczos_action(a, v, order, rtol, max_krylov_dim)
     else:
         result = _krylov_action(a, v, order, rtol, max_krylov_dim, symmetric)
+    if result is None and symmetric and max_krylov_dim >= a.shape[-1]:
+        # Lanczos ran through the whole space (n is small): the dense method is as cheap.
+        return _eigh_action(a, v, order)
     if result is None:
         fallback = "eigh" if symmetric else "expm"
         warnings.warn(
