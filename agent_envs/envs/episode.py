@@ -141,7 +141,11 @@ class EpisodeConfig:
         unknown = sorted(set(kwargs) - set(param_names) - set(ENV_OPTION_NAMES))
         if unknown:
             allowed = ", ".join((*param_names, *ENV_OPTION_NAMES, "render_mode"))
-            raise TypeError(f"unknown keyword argument(s) {unknown}; the swarm envs take {allowed}")
+            others = f" (and {unknown[1:]})" if len(unknown) > 1 else ""
+            raise TypeError(
+                f"swarm env got an unexpected keyword argument {unknown[0]!r}{others}; "
+                f"the swarm envs take {allowed}"
+            )
         params = SwarmParams(**{k: v for k, v in kwargs.items() if k in param_names})
         return cls(params=params, **{k: v for k, v in kwargs.items() if k not in param_names})
 
@@ -171,6 +175,89 @@ class _CachedLinearizationModel(SwarmModel):
             matrix.flags.writeable = False
             self._cached_state, self._cached_matrix = x, matrix
         return matrix
+
+
+def start_positions(
+    config: EpisodeConfig, rng: np.random.Generator, initial_positions: Any = None
+) -> np.ndarray:
+    """x^0 of one episode, (N, d): uniform on [-1, 1]^d from `rng`, or `initial_positions`.
+
+    The uniform draw is made either way, so the Brownian increments of a seeded episode do
+    not depend on whether a start was given.
+    """
+    n, d = config.params.n_agents, config.params.dim
+    x0 = uniform_positions(rng, n, d)
+    if initial_positions is not None:
+        x0 = as_positions(initial_positions, n, d, "initial_positions")
+        if np.any(diverged_paths(x0, config.divergence_threshold)):
+            raise ValueError(
+                "initial_positions must lie inside the divergence threshold "
+                f"(|x| <= {config.divergence_threshold})"
+            )
+    return x0
+
+
+def episode_params(config: EpisodeConfig, target: Any = None) -> SwarmParams:
+    """The `SwarmParams` of an episode: the config's, with xbar replaced by `target` if given."""
+    if target is None:
+        return config.params
+    params = dataclasses.replace(config.params, target=target)
+    _check_target(params, config.divergence_threshold)
+    return params
+
+
+def mean_interaction_drift(model: SwarmModel, x: np.ndarray) -> np.ndarray:
+    """E over the paths of the interaction drift L(x) x: x (..., P, N, d) -> (..., N, d).
+
+    Marks x read-only first, so that a `_CachedLinearizationModel` keeps L(x) for the next
+    integrator step from this state.
+    """
+    x.flags.writeable = False
+    with np.errstate(over="ignore", invalid="ignore"):
+        return model.interaction_drift(x).mean(axis=-3)
+
+
+def mean_running_cost(
+    x: np.ndarray, control: np.ndarray, target: np.ndarray, gamma: float
+) -> np.ndarray:
+    """c(x^n, u^n) of `eq:running_cost`, mean over the paths.
+
+    x (..., P, N, d), control (..., N, d) (the same for every path), target (..., d);
+    returns shape (...). Batched over leading (env) axes.
+    """
+    per_path = running_cost(x, control[..., None, :, :], target[..., None, None, :], gamma)
+    return np.mean(per_path, axis=-1)
+
+
+def advance_paths(
+    integrator: Integrator,
+    model: SwarmModel,
+    x: np.ndarray,
+    control: np.ndarray,
+    t: float | np.ndarray,
+    dt: float,
+    dw: np.ndarray,
+    divergence_threshold: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One integrator step of every path, with the divergence check of the envs.
+
+    Args:
+        x: x^n, (..., P, N, d); leading axes are envs.
+        control: u^n, (..., N, d), held over the step and the same for every path.
+        t: t_n, a float or an array broadcastable to x (one time per env).
+        dw: Brownian increments, the shape of x.
+
+    Returns:
+        x^{n+1} (..., P, N, d); E interaction drift at x^{n+1}, (..., N, d); and the (...)
+        flags "diverged": some path of the env left the divergence threshold, or it or the
+        interaction drift became non-finite. Entries of diverged envs are meaningless.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        x_next = integrator.step(model, x, control[..., None, :, :], t, dt, dw)
+    diverged = np.any(diverged_paths(x_next, divergence_threshold), axis=-1)
+    drift = mean_interaction_drift(model, x_next)
+    diverged |= ~np.all(np.isfinite(drift), axis=(-2, -1))
+    return x_next, drift, diverged
 
 
 @dataclass(frozen=True)
@@ -265,12 +352,6 @@ class SwarmEpisode:
             raise RuntimeError("the episode has not been reset; call reset() first")
         return self.positions
 
-    def _mean_drift_at(self, x: np.ndarray) -> np.ndarray:
-        """E interaction drift at a (read-only) state x; fills the L(x) cache for the next step."""
-        x.flags.writeable = False
-        with np.errstate(over="ignore", invalid="ignore"):
-            return self.model.interaction_drift(x).mean(axis=0)
-
     # ---------------------------------------------------------------- stepping
     def reset(
         self, rng: np.random.Generator, initial_positions: Any = None, target: Any = None
@@ -282,24 +363,14 @@ class SwarmEpisode:
         depend on whether a start was given. `target` overrides xbar for this episode.
         """
         n, d = self.config.params.n_agents, self.config.params.dim
-        x0 = uniform_positions(rng, n, d)
-        if initial_positions is not None:
-            x0 = as_positions(initial_positions, n, d, "initial_positions")
-            if np.any(diverged_paths(x0, self.config.divergence_threshold)):
-                raise ValueError(
-                    "initial_positions must lie inside the divergence threshold "
-                    f"(|x| <= {self.config.divergence_threshold})"
-                )
-        params = self.config.params
-        if target is not None:
-            params = dataclasses.replace(params, target=target)
-            _check_target(params, self.config.divergence_threshold)
+        x0 = start_positions(self.config, rng, initial_positions)
+        params = episode_params(self.config, target)
         if params != self.params:
             self.params = params
             self.model = _CachedLinearizationModel(params)
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
-        drift = self._mean_drift_at(x)
+        drift = mean_interaction_drift(self.model, x)
         if not np.all(np.isfinite(drift)):
             raise ValueError("the interaction drift is not finite at the initial positions")
         self.positions, self._mean_drift = x, drift
@@ -313,14 +384,19 @@ class SwarmEpisode:
             raise RuntimeError(
                 "the episode is over (horizon reached or diverged); call reset() first"
             )
-        cost = float(np.mean(running_cost(x, control, self._target, self.params.gamma)))
+        cost = float(mean_running_cost(x, control, self._target, self.params.gamma))
         dw = brownian_increments(rng, x.shape, self.dt)
-        with np.errstate(over="ignore", invalid="ignore"):
-            x_next = self.integrator.step(self.model, x, control, self.time, self.dt, dw)
-        diverged = bool(np.any(diverged_paths(x_next, self.config.divergence_threshold)))
-        if not diverged:
-            drift = self._mean_drift_at(x_next)
-            diverged = not np.all(np.isfinite(drift))
+        x_next, drift, diverged_flag = advance_paths(
+            self.integrator,
+            self.model,
+            x,
+            control,
+            self.time,
+            self.dt,
+            dw,
+            self.config.divergence_threshold,
+        )
+        diverged = bool(diverged_flag)
         if diverged:
             self.diverged = True
         else:

@@ -92,16 +92,21 @@ def global_observation(
     mean_positions: np.ndarray,
     mean_drift: np.ndarray,
     target: np.ndarray,
-    time_fraction: float,
+    time_fraction: float | np.ndarray,
     space: spaces.Box,
 ) -> np.ndarray:
-    """The Gymnasium observation from (N, d) path means, target (d,) and t/T; a new array."""
-    obs = np.empty(space.shape, dtype=np.float32)
-    nd = mean_positions.size
-    obs[:nd] = mean_positions.reshape(-1)
-    obs[nd : 2 * nd] = mean_drift.reshape(-1)
-    obs[2 * nd : -1] = target
-    obs[-1] = time_fraction
+    """The Gymnasium observation from path means, target and t/T; a new float32 array.
+
+    Batched over leading (env) axes: mean_positions and mean_drift (..., N, d), target
+    (..., d), time_fraction a float or (...); returns (..., 2 N d + d + 1).
+    """
+    lead = mean_positions.shape[:-2]
+    obs = np.empty((*lead, *space.shape), dtype=np.float32)
+    nd = mean_positions.shape[-2] * mean_positions.shape[-1]
+    obs[..., :nd] = mean_positions.reshape(*lead, nd)
+    obs[..., nd : 2 * nd] = mean_drift.reshape(*lead, nd)
+    obs[..., 2 * nd : -1] = target
+    obs[..., -1] = time_fraction
     return np.clip(obs, space.low, space.high, out=obs)
 
 

@@ -155,14 +155,23 @@ def _krylov_action(
     return out * beta[..., None, :]
 
 
-def _auto_method(a: np.ndarray, v: np.ndarray, symmetric: bool) -> str:
-    n = a.shape[-1]
-    n_matrices = int(np.prod(np.broadcast_shapes(a.shape[:-2], v.shape[:-2]), dtype=int))
-    if n <= _AUTO_EXPM_MAX:
+def auto_phi_method(size: int, n_matrices: int, symmetric: bool) -> str:
+    """The strategy ``method="auto"`` uses for `n_matrices` matrices of shape (size, size).
+
+    Public so that a caller that batches several independent problems together (the native
+    vector env stacks its envs on a leading axis) can fix the strategy each problem would get
+    on its own, and so compute each one exactly as an unbatched call would.
+    """
+    if size <= _AUTO_EXPM_MAX:
         return "expm"
-    if symmetric and n <= _AUTO_EIGH_MAX and n_matrices == 1:
+    if symmetric and size <= _AUTO_EIGH_MAX and n_matrices == 1:
         return "eigh"
     return "krylov"
+
+
+def _auto_method(a: np.ndarray, v: np.ndarray, symmetric: bool) -> str:
+    n_matrices = int(np.prod(np.broadcast_shapes(a.shape[:-2], v.shape[:-2]), dtype=int))
+    return auto_phi_method(a.shape[-1], n_matrices, symmetric)
 
 
 def phi_action(
