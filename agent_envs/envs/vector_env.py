@@ -315,7 +315,9 @@ class SwarmVectorEnv(VectorEnv):
         self._reset_envs(mask, seeds, options)
         self._has_reset = True
         info = self._state_info()
-        for key in ("positions", "time", "diverged"):
+        for key in ("positions", "time", "diverged"):  # as SyncVectorEnv: zeros where unset
+            rows = mask.reshape((-1,) + (1,) * (info[key].ndim - 1))
+            info[key] = np.where(rows, info[key], np.zeros_like(info[key]))
             info[f"_{key}"] = mask.copy()
         return self._observations(), info
 
@@ -388,15 +390,27 @@ class SwarmVectorEnv(VectorEnv):
         final_obs = np.full(self.num_envs, None, dtype=object)
         for i in np.flatnonzero(ended):
             final_obs[i] = observations[i]
-        final_info = {key: value.copy() for key, value in info.items()}
-        for key in [k for k in final_info if k.startswith("_")]:
-            final_info[key] = final_info[key] & ended
+        final_info = {}
+        for key in [k for k in info if not k.startswith("_")]:
+            rows = ended.reshape((-1,) + (1,) * (info[key].ndim - 1))
+            final_info[key] = np.where(rows, info[key], np.zeros_like(info[key]))
+            final_info[f"_{key}"] = info[f"_{key}"] & ended
         self._reset_envs(ended, [None] * self.num_envs, None)
         reset_info = self._state_info()
         for key in ("positions", "time", "diverged"):
             info[key] = np.where(
                 ended.reshape((-1,) + (1,) * (info[key].ndim - 1)), reset_info[key], info[key]
             )
+        for key in ("control", "running_cost"):  # step-only keys: not in a reset's info
+            if key not in info:
+                continue
+            kept = info[f"_{key}"] & ~ended
+            if np.any(kept):
+                rows = kept.reshape((-1,) + (1,) * (info[key].ndim - 1))
+                info[key] = np.where(rows, info[key], np.zeros_like(info[key]))
+                info[f"_{key}"] = kept
+            else:
+                del info[key], info[f"_{key}"]
         info["final_obs"], info["_final_obs"] = final_obs, ended.copy()
         info["final_info"], info["_final_info"] = final_info, ended.copy()
         return info
