@@ -43,6 +43,8 @@ BEST_MODEL = "best_model.zip"
 BEST_VECNORMALIZE = "best_model_vecnormalize.pkl"
 FINAL_MODEL = "final_model.zip"
 FINAL_VECNORMALIZE = "final_model_vecnormalize.pkl"
+#: `--vec-env` choices: SB3 VecEnvs of the training envs (native: NativeVecEnv, one batch).
+VEC_ENV_CHOICES = ("native", "dummy", "subproc")
 #: First validation seed (evaluation during training): episodes use seeds 1000, 1001, ...,
 #: absolute seeds, apart from the held-out test seeds 10000.. of `agent-envs evaluate`.
 DEFAULT_EVAL_SEED = 1_000
@@ -264,9 +266,11 @@ class TrainConfig:
     )
     turnpike_delta: float = option_field(2e-4, "delta of the turnpike reference controller")
     vec_env: str = option_field(
-        "dummy",
-        "vectorization of the training envs: dummy (in process) or subproc",
-        choices=("dummy", "subproc"),
+        "native",
+        "vectorization of the training envs: native (all envs stepped as one batch, "
+        "agent_envs.training.native_vec_env; the Gymnasium env only, the PettingZoo env "
+        "ignores it), dummy (one env after the other, in process) or subproc",
+        choices=VEC_ENV_CHOICES,
     )
     device: str = option_field("cpu", "torch device")
     torch_threads: int = option_field(
@@ -300,8 +304,8 @@ class TrainConfig:
         _check_int("eval_episodes", self.eval_episodes, 1)
         if self.n_envs is not None:
             _check_int("n_envs", self.n_envs, 1)
-        if self.vec_env not in ("dummy", "subproc"):
-            raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        if self.vec_env not in VEC_ENV_CHOICES:
+            raise ValueError(f"--vec-env must be one of {VEC_ENV_CHOICES}, got {self.vec_env!r}")
         for name in ("turnpike_beta", "turnpike_delta"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
