@@ -42,7 +42,7 @@ def _order(errors):
 def _ode_reference(model, x0, horizon, control=None):
     def rhs(t, y):
         u = None if control is None else control(t)
-        return model.drift(y.reshape(x0.shape), u).reshape(-1)
+        return model.drift(0.0, y.reshape(x0.shape), u).reshape(-1)
 
     sol = solve_ivp(rhs, (0, horizon), x0.reshape(-1), method="DOP853", rtol=1e-12, atol=1e-13)
     return sol.y[:, -1].reshape(x0.shape)
@@ -227,7 +227,7 @@ def test_exact_jacobian_of_a_symmetric_non_radial_kernel_is_not_treated_as_symme
 
     model = SwarmModel(SwarmParams(n_agents=100, kernel=Product(), sigma=0.0))
     x = np.random.default_rng(0).uniform(-1, 1, (1, 100, 1))
-    _, lin = model.drift_and_linearization(x, None, "exact")
+    _, lin = model.drift_and_linearization(0.0, x, None, "exact")
     assert not lin.symmetric
     dw = np.zeros_like(x)
     auto = make_integrator("erb", jacobian="exact").step(model, x, None, 0.0, 0.05, dw)
@@ -253,3 +253,29 @@ def test_registry_and_metadata():
         make_integrator("rk4")
     with pytest.raises(ValueError, match="jacobian"):
         make_integrator("serb", jacobian="approx")
+
+
+class _TimeDrift:
+    """x' = t (+ u): the drift depends on t only, linearization 0."""
+
+    sigma = 0.0
+
+    def drift(self, t, x, u=None):
+        return np.full_like(x, t) if u is None else np.full_like(x, t) + u
+
+    def drift_and_linearization(self, t, x, u, kind):
+        from agent_envs.dynamics.swarm import Linearization
+
+        zero = np.zeros((*x.shape[:-2], x.shape[-2], x.shape[-2]))
+        return self.drift(t, x, u), Linearization(zero, True, True)
+
+
+@pytest.mark.parametrize(
+    "name, expected",
+    [("em", 0.3 * 0.1), ("heun", 0.1 * (0.3 + 0.4) / 2), ("erb", 0.3 * 0.1), ("serb", 0.03)],
+)
+def test_integrators_pass_the_time_to_the_drift(name, expected):
+    # x' = t from t = 0.3 over dt = 0.1: EM/ERB/SERB use F(t_n); Heun averages F(t_n), F(t_n + dt).
+    x = np.zeros((1, 3, 1))
+    x1 = make_integrator(name).step(_TimeDrift(), x, None, 0.3, 0.1, np.zeros_like(x))
+    np.testing.assert_allclose(x1, expected, rtol=1e-14)

@@ -155,6 +155,11 @@ class EpisodeConfig:
         return self.params.horizon / self.n_steps
 
 
+def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
+    """True when a and b differ at most in the cost parameters (target, gamma)."""
+    return dataclasses.replace(a, target=b.target, gamma=b.gamma) == b
+
+
 class _CachedLinearizationModel(SwarmModel):
     """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
 
@@ -366,8 +371,11 @@ class SwarmEpisode:
         x0 = start_positions(self.config, rng, initial_positions)
         params = episode_params(self.config, target)
         if params != self.params:
+            # target and gamma are cost parameters: a new target keeps the dynamics model
+            # (and its kernel); only a change of the dynamics would rebuild it.
+            if not same_dynamics(params, self.params):
+                self.model = _CachedLinearizationModel(params)
             self.params = params
-            self.model = _CachedLinearizationModel(params)
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
         drift = mean_interaction_drift(self.model, x)
