@@ -236,6 +236,62 @@ def test_gymnasium_vector_wrappers_run_on_it():
     assert lengths == [4, 4, 4, 4, 4, 4]
 
 
+# ------------------------------------------------------------------ torch / device path
+def _torch_matches_numpy(device: str, **kwargs) -> None:
+    kwargs = {**DIVERGING, **kwargs}
+    on_numpy = SwarmVectorEnv(4, **kwargs)
+    on_torch = SwarmVectorEnv(4, device=device, backend="torch", **kwargs)
+    assert on_torch._positions.device.type == device.split(":")[0]  # the state stays there
+    obs_np, _ = on_numpy.reset(seed=2)
+    obs_t, _ = on_torch.reset(seed=2)
+    assert isinstance(obs_t, np.ndarray) and obs_t.dtype == np.float32
+    np.testing.assert_allclose(obs_t, obs_np, rtol=1e-6, atol=1e-9)
+    rng = np.random.default_rng(0)
+    n_terminated = 0
+    for _ in range(25):
+        a = actions(rng, 4, kwargs["n_agents"])
+        out_np, out_t = on_numpy.step(a), on_torch.step(a)
+        np.testing.assert_allclose(out_t[0], out_np[0], rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(out_t[1], out_np[1], rtol=1e-10, atol=1e-14)
+        np.testing.assert_array_equal(out_t[2], out_np[2])
+        np.testing.assert_array_equal(out_t[3], out_np[3])
+        np.testing.assert_allclose(
+            out_t[4]["positions"], out_np[4]["positions"], rtol=1e-10, atol=1e-12
+        )
+        n_terminated += int(out_np[2].sum())
+    assert n_terminated >= 2
+
+
+@pytest.mark.parametrize("kwargs", [{"n_agents": 12}, {"n_agents": 10, "integrator": "em"}])
+def test_torch_backend_on_cpu_matches_numpy(kwargs):
+    pytest.importorskip("torch")
+    _torch_matches_numpy("cpu", **{"epsilon": 0.5, **kwargs})
+
+
+def test_torch_tensor_output_and_tensor_actions():
+    torch = pytest.importorskip("torch")
+    venv = native(3, n_agents=5, backend="torch", tensor_output=True)
+    obs, _ = venv.reset(seed=0)
+    assert isinstance(obs, torch.Tensor) and obs.dtype == torch.float32
+    obs, rewards, terminated, truncated, info = venv.step(torch.zeros(3, 5))
+    assert rewards.dtype == torch.float64 and terminated.dtype == truncated.dtype == torch.bool
+    assert isinstance(info["positions"], np.ndarray)  # infos stay numpy
+    with pytest.raises(ValueError, match="tensor_output"):
+        SwarmVectorEnv(2, tensor_output=True)
+    with pytest.raises(ValueError, match="backend"):
+        SwarmVectorEnv(2, backend="jax")
+
+
+@pytest.mark.skipif(
+    not (
+        __import__("importlib").util.find_spec("torch") and __import__("torch").cuda.is_available()
+    ),
+    reason="needs a CUDA device",
+)
+def test_cuda_device_matches_numpy():
+    _torch_matches_numpy("cuda", n_agents=12, epsilon=0.5)
+
+
 # ------------------------------------------------------------------ SB3 adapter
 sb3 = pytest.importorskip("stable_baselines3")
 

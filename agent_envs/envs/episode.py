@@ -25,6 +25,7 @@ of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the iden
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from dataclasses import dataclass
 from typing import Any
@@ -32,6 +33,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.observation import global_observation
@@ -164,20 +166,26 @@ class _CachedLinearizationModel(SwarmModel):
     """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
 
     The episode only hands it read-only state arrays that it never mutates, and the cached
-    matrix is made read-only too, so a stale or corrupted hit is impossible.
+    matrix is made read-only too, so a stale or corrupted hit is impossible. torch tensors
+    cannot be made read-only: they are cached only with `cache_tensors=True`, which the owner
+    (the native vector env) sets because it builds a new state tensor every step and never
+    writes into one.
     """
 
-    def __init__(self, params: SwarmParams) -> None:
+    def __init__(self, params: SwarmParams, cache_tensors: bool = False) -> None:
         super().__init__(params)
-        self._cached_state: np.ndarray | None = None
-        self._cached_matrix: np.ndarray | None = None
+        self._cache_tensors = cache_tensors
+        self._cached_state: Any = None
+        self._cached_matrix: Any = None
 
-    def frozen_linearization(self, x: np.ndarray) -> np.ndarray:
+    def frozen_linearization(self, x: Any) -> Any:
         if x is self._cached_state and self._cached_matrix is not None:
             return self._cached_matrix
         matrix = super().frozen_linearization(x)
         if isinstance(x, np.ndarray) and not x.flags.writeable:
             matrix.flags.writeable = False
+            self._cached_state, self._cached_matrix = x, matrix
+        elif self._cache_tensors and arrays.is_torch(x):
             self._cached_state, self._cached_matrix = x, matrix
         return matrix
 
@@ -211,27 +219,36 @@ def episode_params(config: EpisodeConfig, target: Any = None) -> SwarmParams:
     return params
 
 
-def mean_interaction_drift(model: SwarmModel, x: np.ndarray) -> np.ndarray:
+def _quiet_overflow(x: Any) -> Any:
+    """numpy's errstate ignoring overflow/invalid (a diverging step is flagged, not warned);
+    a no-op context for torch, which does not warn."""
+    if isinstance(x, np.ndarray):
+        return np.errstate(over="ignore", invalid="ignore")
+    return contextlib.nullcontext()
+
+
+def mean_interaction_drift(model: SwarmModel, x: Any) -> Any:
     """E over the paths of the interaction drift L(x) x: x (..., P, N, d) -> (..., N, d).
 
-    Marks x read-only first, so that a `_CachedLinearizationModel` keeps L(x) for the next
-    integrator step from this state.
+    Marks a numpy x read-only first, so that a `_CachedLinearizationModel` keeps L(x) for the
+    next integrator step from this state. numpy arrays or torch tensors.
     """
-    x.flags.writeable = False
-    with np.errstate(over="ignore", invalid="ignore"):
-        return model.interaction_drift(x).mean(axis=-3)
+    if isinstance(x, np.ndarray):
+        x.flags.writeable = False
+    xp = arrays.namespace(x)
+    with _quiet_overflow(x):
+        return xp.mean(model.interaction_drift(x), axis=-3)
 
 
-def mean_running_cost(
-    x: np.ndarray, control: np.ndarray, target: np.ndarray, gamma: float
-) -> np.ndarray:
+def mean_running_cost(x: Any, control: Any, target: Any, gamma: float) -> Any:
     """c(x^n, u^n) of `eq:running_cost`, mean over the paths.
 
     x (..., P, N, d), control (..., N, d) (the same for every path), target (..., d);
-    returns shape (...). Batched over leading (env) axes.
+    returns shape (...). Batched over leading (env) axes; numpy arrays or torch tensors.
     """
+    xp = arrays.namespace(x)
     per_path = running_cost(x, control[..., None, :, :], target[..., None, None, :], gamma)
-    return np.mean(per_path, axis=-1)
+    return xp.mean(per_path, axis=-1)
 
 
 def advance_paths(
@@ -252,16 +269,19 @@ def advance_paths(
         t: t_n, a float or an array broadcastable to x (one time per env).
         dw: Brownian increments, the shape of x.
 
+    numpy arrays or torch tensors (all in one library).
+
     Returns:
         x^{n+1} (..., P, N, d); E interaction drift at x^{n+1}, (..., N, d); and the (...)
         flags "diverged": some path of the env left the divergence threshold, or it or the
         interaction drift became non-finite. Entries of diverged envs are meaningless.
     """
-    with np.errstate(over="ignore", invalid="ignore"):
+    xp = arrays.namespace(x)
+    with _quiet_overflow(x):
         x_next = integrator.step(model, x, control[..., None, :, :], t, dt, dw)
-    diverged = np.any(diverged_paths(x_next, divergence_threshold), axis=-1)
+    diverged = xp.any(diverged_paths(x_next, divergence_threshold), axis=-1)
     drift = mean_interaction_drift(model, x_next)
-    diverged |= ~np.all(np.isfinite(drift), axis=(-2, -1))
+    diverged = diverged | ~xp.all(xp.isfinite(drift), axis=(-2, -1))
     return x_next, drift, diverged
 
 

@@ -33,6 +33,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from agent_envs import arrays
 from agent_envs.envs.episode import (
     EpisodeConfig,
     _CachedLinearizationModel,
@@ -144,7 +145,9 @@ class SwarmVectorEnv(VectorEnv):
         num_envs: int = 1,
         *,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        device: str = "cpu",
+        device: Any = "cpu",
+        backend: str | None = None,
+        tensor_output: bool = False,
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
@@ -157,11 +160,15 @@ class SwarmVectorEnv(VectorEnv):
                 f"render_mode={render_mode!r}: the native vector env does not render; use "
                 "gym.make_vec(..., vectorization_mode='sync', render_mode=...)"
             )
-        if device != "cpu":
-            raise ValueError(
-                f"device must be 'cpu' (numpy arrays), got {device!r}: the torch/CUDA path "
-                "needs the array-API core"
-            )
+        if backend is None:
+            backend = "numpy" if device in (None, "cpu") else "torch"
+        self._xp, self._device, _ = arrays.resolve(backend, device)
+        self.backend = backend
+        if not isinstance(tensor_output, bool):
+            raise TypeError(f"tensor_output must be a bool, got {tensor_output!r}")
+        if tensor_output and backend != "torch":
+            raise ValueError("tensor_output=True needs backend='torch' (or a torch device)")
+        self.tensor_output = tensor_output
         try:
             mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -171,14 +178,14 @@ class SwarmVectorEnv(VectorEnv):
             raise ValueError(f"autoreset_mode must be one of {allowed}, got {autoreset_mode!r}")
         self.config = EpisodeConfig.from_kwargs(**kwargs)
         self.num_envs = int(num_envs)
-        self.device = device
+        self.device = "cpu" if self._device is None else str(self._device)
         self.render_mode = None
         self.metadata = {**type(self).metadata, "autoreset_mode": mode}
         self.autoreset_mode = mode
 
         params = self.config.params
         n, d = params.n_agents, params.dim
-        self.model = _CachedLinearizationModel(params)
+        self.model = _CachedLinearizationModel(params, cache_tensors=True)
         self.phi_method = single_env_phi_method(self.config)
         self.integrator: Integrator = make_integrator(
             self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
@@ -193,9 +200,9 @@ class SwarmVectorEnv(VectorEnv):
 
         b, p = self.num_envs, self.config.n_paths
         self.np_randoms: list[np.random.Generator | None] = [None] * b
-        self.positions = np.zeros((b, p, n, d))
-        self._mean_drift = np.zeros((b, n, d))
-        self.targets = np.broadcast_to(params.target_vector, (b, d)).copy()
+        self._positions = self._on_device(np.zeros((b, p, n, d)))
+        self._mean_drift = self._on_device(np.zeros((b, n, d)))
+        self._targets = self._on_device(np.broadcast_to(params.target_vector, (b, d)).copy())
         self.step_index = np.zeros(b, dtype=np.int64)
         self._autoreset = np.zeros(b, dtype=bool)
         self._has_reset = False
@@ -210,6 +217,16 @@ class SwarmVectorEnv(VectorEnv):
     def n_paths(self) -> int:
         """Brownian paths per env."""
         return self.config.n_paths
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(B, P, N, d) current states, as a numpy array (read-only on the numpy backend)."""
+        return arrays.to_numpy(self._positions)
+
+    @property
+    def targets(self) -> np.ndarray:
+        """(B, d) targets xbar of the current episodes, as a numpy array."""
+        return arrays.to_numpy(self._targets)
 
     @property
     def times(self) -> np.ndarray:
@@ -237,11 +254,25 @@ class SwarmVectorEnv(VectorEnv):
             self.np_randoms[i] = rng
         return rng
 
-    def _observations(self) -> np.ndarray:
+    def _on_device(self, a: np.ndarray) -> Any:
+        """A host numpy array in the env's array library, on its device (numpy: itself)."""
+        if self._device is None:
+            return a
+        import torch
+
+        return torch.as_tensor(a, device=self._device)
+
+    def _output(self, a: Any) -> Any:
+        """What step/reset return: a numpy array, or a tensor on the device (tensor_output)."""
+        if self.tensor_output:
+            return a if arrays.is_torch(a) else self._on_device(np.asarray(a))
+        return arrays.to_numpy(a)
+
+    def _observations(self) -> Any:
         return global_observation(
-            self.positions.mean(axis=-3),
+            self._xp.mean(self._positions, axis=-3),
             self._mean_drift,
-            self.targets,
+            self._targets,
             self.step_index / self.config.n_steps,
             self.single_observation_space,
         )
@@ -250,25 +281,29 @@ class SwarmVectorEnv(VectorEnv):
         """Start new episodes in the envs of `mask` (same draws as `SwarmEpisode.reset`)."""
         opts = reset_options(options, strict=True)
         params = episode_params(self.config, opts["target"])
-        positions = self.positions.copy()
-        for i in np.flatnonzero(mask):
+        rows = np.flatnonzero(mask)
+        starts = np.empty((len(rows), 1, *self._positions.shape[-2:]))
+        for k, i in enumerate(rows):
             if seeds[i] is not None:
                 self.np_randoms[i], _ = seeding.np_random(seeds[i])
-            x0 = start_positions(self.config, self._rng(i), opts["initial_positions"])
-            positions[i] = x0
+            starts[k, 0] = start_positions(self.config, self._rng(i), opts["initial_positions"])
+        xp = self._xp
+        rows_on_device = self._on_device(rows)
+        positions = xp.asarray(self._positions, copy=True)
+        positions[rows_on_device] = self._on_device(starts)  # the same start for every path
         drift = mean_interaction_drift(self.model, positions)
-        fresh_drift = drift[mask]
-        if not np.all(np.isfinite(fresh_drift)):
+        if not bool(xp.all(xp.isfinite(drift[rows_on_device]))):
             raise ValueError("the interaction drift is not finite at the initial positions")
-        self.positions, self._mean_drift = positions, drift
-        self.targets[mask] = params.target_vector
+        targets = xp.asarray(self._targets, copy=True)
+        targets[rows_on_device] = self._on_device(params.target_vector)
+        self._positions, self._mean_drift, self._targets = positions, drift, targets
         self.step_index[mask] = 0
         self._autoreset[mask] = False
 
     def _state_info(self) -> dict[str, Any]:
         every = np.ones(self.num_envs, dtype=bool)
         return {
-            "positions": self.positions.copy(),
+            "positions": np.array(self.positions),
             "_positions": every,
             "time": self.times,
             "_time": every.copy(),
@@ -276,23 +311,31 @@ class SwarmVectorEnv(VectorEnv):
             "_diverged": every.copy(),
         }
 
-    def _controls(self, actions: Any, stepping: np.ndarray) -> np.ndarray:
-        """u = max_control * clip(a, -1, 1) per env: (B, N, d) (rows not stepping ignored)."""
-        b = self.num_envs
+    def _controls(self, actions: Any, stepping: Any) -> Any:
+        """u = max_control * clip(a, -1, 1) per env: (B, N, d) (rows not stepping ignored).
+
+        `actions` may be a numpy array (or nested sequence) or a torch tensor; `stepping` is
+        the (B,) mask on the env's device.
+        """
+        b, xp = self.num_envs, self._xp
         n, d = self.config.params.n_agents, self.config.params.dim
-        try:
-            arr = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            msg = f"actions must be an array of {b} x {n * d} real numbers: {exc}"
-            raise TypeError(msg) from None
-        if arr.shape not in ((b, n * d), (b, n, d)):
+        if arrays.is_torch(actions) and self._device is not None:
+            arr = actions.to(device=self._device, dtype=self._positions.dtype)
+        else:
+            try:
+                arr = np.asarray(arrays.to_numpy(actions), dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                msg = f"actions must be an array of {b} x {n * d} real numbers: {exc}"
+                raise TypeError(msg) from None
+            arr = self._on_device(arr)
+        if tuple(arr.shape) not in ((b, n * d), (b, n, d)):
             raise ValueError(
-                f"actions must have shape ({b}, {n * d}) or ({b}, {n}, {d}), got {arr.shape}"
+                f"actions must have shape ({b}, {n * d}) or ({b}, {n}, {d}), got {tuple(arr.shape)}"
             )
-        arr = arr.reshape(b, n, d)
-        if not np.all(np.isfinite(arr[stepping])):
+        arr = xp.reshape(arr, (b, n, d))
+        if not bool(xp.all(xp.isfinite(arr[stepping]))):
             raise ValueError("actions must be finite, got NaN or inf entries")
-        return self.config.max_control * np.clip(arr, -1.0, 1.0)
+        return self.config.max_control * xp.clip(arr, -1.0, 1.0)
 
     # ------------------------------------------------------------------ API
     def reset(
@@ -319,7 +362,7 @@ class SwarmVectorEnv(VectorEnv):
             rows = mask.reshape((-1,) + (1,) * (info[key].ndim - 1))
             info[key] = np.where(rows, info[key], np.zeros_like(info[key]))
             info[f"_{key}"] = mask.copy()
-        return self._observations(), info
+        return self._output(self._observations()), info
 
     def step(
         self, actions: Any
@@ -327,64 +370,75 @@ class SwarmVectorEnv(VectorEnv):
         """Step every env once (NEXT_STEP: the envs that ended last step are reset instead)."""
         if not self._has_reset:
             raise RuntimeError("call reset() before step()")
-        b, p = self.num_envs, self.config.n_paths
+        b, p, xp = self.num_envs, self.config.n_paths, self._xp
         n, d = self.config.params.n_agents, self.config.params.dim
         resetting = self._autoreset.copy()
         stepping = ~resetting
-        controls = self._controls(actions, stepping)
-        x, times = self.positions, self.times
+        stepping_on_device = self._on_device(stepping)
+        controls = self._controls(actions, stepping_on_device)
+        x = self._positions
 
-        costs = mean_running_cost(x, controls, self.targets, self.config.params.gamma)
+        costs = mean_running_cost(x, controls, self._targets, self.config.params.gamma)
+        # Each env draws from its own generator, as its single twin does; the batch then
+        # moves to the device in one transfer.
         dw = np.zeros((b, p, n, d))
         for i in np.flatnonzero(stepping):
             dw[i] = brownian_increments(self._rng(i), (p, n, d), self.dt)
-        x_next, drift_next, diverged = advance_paths(
+        x_next, drift_next, diverged_on_device = advance_paths(
             self.integrator,
             self.model,
             x,
             controls,
-            times[:, None, None, None],
+            self._on_device(self.times[:, None, None, None]),
             self.dt,
-            dw,
+            self._on_device(dw),
             self.config.divergence_threshold,
         )
-        diverged &= stepping
+        diverged = arrays.to_numpy(diverged_on_device) & stepping
         moved = stepping & ~diverged
         if np.all(moved):
-            self.positions, self._mean_drift = x_next, drift_next
+            self._positions, self._mean_drift = x_next, drift_next
             self.step_index += 1
         else:
             # Diverged envs keep x^n (as the single env); the others take x^{n+1}. The drift
             # of the assembled state is recomputed, which also caches L for the next step.
-            self.positions = np.where(moved[:, None, None, None], x_next, x)
+            moved_on_device = self._on_device(moved)
+            self._positions = xp.where(moved_on_device[:, None, None, None], x_next, x)
             self.step_index[moved] += 1
             if np.any(resetting):
                 self._reset_envs(resetting, [None] * b, None)
             else:
-                self._mean_drift = mean_interaction_drift(self.model, self.positions)
+                self._mean_drift = mean_interaction_drift(self.model, self._positions)
 
         truncated = moved & (self.step_index >= self.config.n_steps)
         terminated = diverged.copy()
-        rewards = np.where(stepping, -self.dt * costs, 0.0)
+        rewards = arrays.to_numpy(xp.where(stepping_on_device, -self.dt * costs, 0.0))
         observations = self._observations()
         info = self._state_info()
         info["diverged"] = diverged.copy()
         if np.any(stepping):  # as SyncVectorEnv: a key only when some env filled it
-            info["control"] = np.where(stepping[:, None, None], controls, 0.0)
+            control_rows = stepping_on_device[:, None, None]
+            info["control"] = arrays.to_numpy(xp.where(control_rows, controls, 0.0))
             info["_control"] = stepping.copy()
-            info["running_cost"] = np.where(stepping, costs, 0.0)
+            info["running_cost"] = arrays.to_numpy(xp.where(stepping_on_device, costs, 0.0))
             info["_running_cost"] = stepping.copy()
 
         ended = terminated | truncated
         if self.autoreset_mode == AutoresetMode.SAME_STEP and np.any(ended):
-            info = self._same_step_reset(ended, observations, info)
+            info = self._same_step_reset(ended, self._output(observations), info)
             observations = self._observations()
         else:
             self._autoreset = ended
-        return observations, rewards, terminated, truncated, info
+        return (
+            self._output(observations),
+            self._output(rewards),
+            self._output(terminated),
+            self._output(truncated),
+            info,
+        )
 
     def _same_step_reset(
-        self, ended: np.ndarray, observations: np.ndarray, info: dict[str, Any]
+        self, ended: np.ndarray, observations: Any, info: dict[str, Any]
     ) -> dict[str, Any]:
         """Reset the ended envs now; their last observation and info go to final_obs/info."""
         final_obs = np.full(self.num_envs, None, dtype=object)
