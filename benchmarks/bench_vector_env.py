@@ -149,22 +149,26 @@ def bench_ppo(timesteps: int) -> None:
 
 
 def bench_device(device: str, num_envs: int, seconds: float) -> None:
+    """B = num_envs native envs on a torch device against numpy on the CPU, same B."""
     import torch
 
     if device.startswith("cuda") and not torch.cuda.is_available():
         print(f"## {device}: no CUDA device here; skipped\n")
         return
-    try:
-        on_device = vector_stepper("vector_entry_point", num_envs, {"device": device})
-    except ValueError as exc:
-        print(f"## {device}: not available: {exc}\n")
-        return
-    on_cpu = vector_stepper("vector_entry_point", num_envs, {})
-    dev, _ = steps_per_second(on_device, num_envs, seconds)
-    cpu, _ = steps_per_second(on_cpu, num_envs, seconds)
     name = torch.cuda.get_device_name(device) if device.startswith("cuda") else device
-    print(f"## native env on {name}, B = {num_envs}, N = {N_AGENTS}\n")
-    print(f"{dev:,.0f} env-steps/s; numpy on the CPU: {cpu:,.0f}; ratio {dev / cpu:.1f}\n")
+    print(f"## native env on {name} (torch) vs numpy on the CPU, B = {num_envs}, N = {N_AGENTS}\n")
+    print("| integrator | device env-steps/s | CPU env-steps/s | device / CPU |")
+    print("|---|---|---|---|")
+    for label, kwargs in ENV_CONFIGS.items():
+        on_device = vector_stepper("vector_entry_point", num_envs, {**kwargs, "device": device})
+        on_cpu = vector_stepper("vector_entry_point", num_envs, kwargs)
+        on_device()  # warm-up: CUDA context, kernels
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        dev, _ = steps_per_second(on_device, num_envs, seconds)
+        cpu, _ = steps_per_second(on_cpu, num_envs, seconds)
+        print(f"| {label} | {dev:,.0f} | {cpu:,.0f} | {dev / cpu:.1f} |")
+    print()
 
 
 def main() -> None:

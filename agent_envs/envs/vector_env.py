@@ -20,6 +20,14 @@ by "auto" for N > 128, for n_paths > 1 at N > 64, and for a non-symmetric kernel
 stops when every problem of the call has converged, so a batch of envs may take more Krylov
 steps than one env alone: those envs agree with their single twins to the Krylov tolerance
 (rtol 1e-10 per step), not bit for bit.
+
+Arrays: numpy by default. With ``device="cuda"`` (or any torch device, or ``backend="torch"``
+for torch on the CPU) the state, the kernel matrices, the integrator steps, costs and
+observations are torch tensors on that device (the core is written once against the Array
+API, `agent_envs.arrays`). The Brownian increments are still drawn by each env's numpy
+generator and moved to the device in one transfer per step, so the torch env follows the
+numpy env to round-off (1e-10, tested on the CPU). Observations, rewards and flags come out as
+numpy arrays unless ``tensor_output=True`` (then torch tensors on the device); infos are numpy.
 """
 
 from __future__ import annotations
@@ -123,10 +131,12 @@ class SwarmVectorEnv(VectorEnv):
 
     ## Arguments
 
-    `num_envs` (B >= 1), `autoreset_mode`, `device` ("cpu": numpy arrays), and every keyword
-    argument of the single env except `render_mode` (the native env does not render; use
-    `vectorization_mode="sync"` for rendering). Bad values raise `ValueError`/`TypeError`
-    naming the argument.
+    `num_envs` (B >= 1); `autoreset_mode`; `device` ("cpu": numpy; "cuda", "cuda:1", ...:
+    torch on that device); `backend` (None: numpy on "cpu", torch otherwise; "torch" with
+    device "cpu" runs torch on the CPU); `tensor_output` (return torch tensors instead of
+    numpy arrays; torch only); and every keyword argument of the single env except
+    `render_mode` (the native env does not render; use `vectorization_mode="sync"` for
+    rendering). Bad values raise `ValueError`/`TypeError` naming the argument.
 
     ## Attributes
 
@@ -163,6 +173,11 @@ class SwarmVectorEnv(VectorEnv):
         if backend is None:
             backend = "numpy" if device in (None, "cpu") else "torch"
         self._xp, self._device, _ = arrays.resolve(backend, device)
+        if self._device is not None and self._device.type == "cuda":
+            import torch
+
+            if not torch.cuda.is_available():
+                raise ValueError(f"device={device!r}: torch sees no CUDA device here")
         self.backend = backend
         if not isinstance(tensor_output, bool):
             raise TypeError(f"tensor_output must be a bool, got {tensor_output!r}")
