@@ -235,13 +235,16 @@ class SwarmVectorEnv(VectorEnv):
 
     @property
     def positions(self) -> np.ndarray:
-        """(B, P, N, d) current states, as a numpy array (read-only on the numpy backend)."""
-        return arrays.to_numpy(self._positions)
+        """(B, P, N, d) current states as a numpy array: the (read-only) state itself on the
+        numpy backend, a copy on torch (a CPU tensor's numpy view would be writable)."""
+        if isinstance(self._positions, np.ndarray):
+            return self._positions
+        return np.array(arrays.to_numpy(self._positions))
 
     @property
     def targets(self) -> np.ndarray:
-        """(B, d) targets xbar of the current episodes, as a numpy array."""
-        return arrays.to_numpy(self._targets)
+        """(B, d) targets xbar of the current episodes (a numpy copy)."""
+        return np.array(arrays.to_numpy(self._targets))
 
     @property
     def times(self) -> np.ndarray:
