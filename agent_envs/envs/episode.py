@@ -414,16 +414,18 @@ class SwarmEpisode:
             )
         cost = float(mean_running_cost(x, control, self._target, self.params.gamma))
         dw = brownian_increments(rng, x.shape, self.dt)
-        x_next, drift, diverged_flag = advance_paths(
-            self.integrator,
-            self.model,
-            x,
-            control,
-            self.time,
-            self.dt,
-            dw,
-            self.config.divergence_threshold,
-        )
+        # BLAS limited to one thread while stepping (see agent_envs.arrays.hot_path_threads).
+        with arrays.hot_path_threads():
+            x_next, drift, diverged_flag = advance_paths(
+                self.integrator,
+                self.model,
+                x,
+                control,
+                self.time,
+                self.dt,
+                dw,
+                self.config.divergence_threshold,
+            )
         diverged = bool(diverged_flag)
         if diverged:
             self.diverged = True
