@@ -231,7 +231,14 @@ def _lanczos_action(
     steps from m = 3 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
     the exponential has not converged yet), or at a happy breakdown; None when not converged
     by `max_dim` (also when m reaches n: the basis is then not exact). Differentiable on torch
-    (list-built basis, no in-place writes).
+    (list-built basis, no in-place writes to the basis).
+
+    Batch members (the leading axes; the k columns of one member stop together) are decided
+    one by one: each has its own |A|_inf, first check, breakdown tolerance and stopping
+    dimension m_i, and its result is Q_{m_i} phi_p(T_{m_i}) e_1 computed on its own. So a
+    member's result does not depend on what else is in the batch (the native vector env relies
+    on this to reproduce the single env exactly); the recurrence runs until the last member
+    stops.
     """
     xp = arrays.namespace(a, v)
     n = a.shape[-1]
@@ -243,14 +250,23 @@ def _lanczos_action(
         q = q / xp.where(beta0 > 0, beta0, 1.0)[..., None]
     else:
         q = q / beta0[..., None]
+    batch = tuple(np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2])))
     basis = [q]
     alphas: list[Any] = []
     betas: list[Any] = []
-    norm_inf = float(arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1))))
-    first_check = max(2, min(max_dim, math.ceil(3.0 * math.sqrt(norm_inf))))
+    # per member: |A|_inf, the first check and the breakdown tolerance
+    norm_inf = np.broadcast_to(
+        arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1), axis=-1)), batch
+    ).astype(np.float64)
+    first_check = np.array(
+        [max(2, min(max_dim, math.ceil(3.0 * math.sqrt(x)))) for x in norm_inf.reshape(-1)],
+        dtype=np.int64,
+    ).reshape(batch)
     tiny = 1e-12 * (norm_inf + 1e-300)
-    coeffs = None
-    converged = False
+    done = np.zeros(batch, dtype=bool)
+    converged = np.zeros(batch, dtype=bool)
+    # stopping dimension -> (members that stopped there, their phi_p(T_m) e_1 (count, k, m))
+    stopped: dict[int, tuple[np.ndarray, Any]] = {}
     w_prev = None
     for j in range(max_dim):
         w = q @ at
@@ -266,37 +282,65 @@ def _lanczos_action(
         b = xp.linalg.vector_norm(w, axis=-1)
         alphas.append(alpha)
         m = j + 1
-        b_host = arrays.to_numpy(b)
-        any_breakdown = float(b_host.min()) <= tiny
+        b_host = np.broadcast_to(arrays.to_numpy(b), (*batch, b.shape[-1]))
+        small = b_host <= tiny[..., None]
         # m == n without convergence: the space is exhausted but, without full
         # reorthogonalization, the basis is not exact; the caller then uses the dense method.
-        converged = any_breakdown and bool(np.all(b_host <= tiny))
-        done = converged or m == max_dim
-        if done or (m >= first_check and (m - first_check) % check_every == 0):
+        breakdown = ~done & np.all(small, axis=-1)
+        stops = breakdown | (~done & (m == max_dim))
+        check = ~done & ~stops & (m >= first_check) & ((m - first_check) % check_every == 0)
+        needed = stops | check
+        if np.any(needed):
             t = arrays.tridiagonal(xp.stack(alphas, axis=-1), _stack_or_empty(xp, betas, alpha))
-            coeffs = _small_phi_e1(t, order, True)  # (..., k, m)
-            if not done:
+            t = xp.broadcast_to(t, (*batch, *t.shape[-3:]))
+            coeffs = _small_phi_e1(t[_rows(needed, t)], order, True)  # (count, k, m)
+            passed = np.zeros(batch, dtype=bool)
+            if np.any(check):
                 c = arrays.to_numpy(coeffs)
-                est = b_host * np.abs(c[..., -1])
-                if np.all(est <= rtol * np.linalg.norm(c, axis=-1) + 1e-300):
-                    converged = done = True
-        if done:
+                est = b_host[needed] * np.abs(c[..., -1])
+                ok = np.all(est <= rtol * np.linalg.norm(c, axis=-1) + 1e-300, axis=-1)
+                passed[needed] = ok & check[needed]
+            now = stops | passed
+            if np.any(now):
+                stopped[m] = (now, coeffs[_rows(now[needed], coeffs)])
+            converged |= breakdown | passed
+            done |= now
+        if np.all(done):
             break
-        if any_breakdown:
-            stop = arrays.asarray(b_host <= tiny, like=w) > 0.5
+        if np.any(small):
+            stop = arrays.asarray(small, like=w) > 0.5
             w = xp.where(stop[..., None], 0.0, w / xp.where(stop, 1.0, b)[..., None])
         else:
             w = w / b[..., None]
         betas.append(b)
         w_prev, q = q, w
         basis.append(q)
-    assert coeffs is not None
-    if not converged:
+    if not np.all(converged):
         return None
-    m = coeffs.shape[-1]
-    stacked = xp.stack(basis[:m], axis=-2)  # (..., k, m, n)
-    out = (coeffs[..., None, :] @ stacked)[..., 0, :]
+    if len(stopped) == 1:  # every member stopped at the same m: no gathering needed
+        ((m, (_, coeffs)),) = stopped.items()
+        stacked = xp.stack(basis[:m], axis=-2)  # (..., k, m, n)
+        coeffs = xp.reshape(coeffs, (*batch, *coeffs.shape[-2:]))
+        out = (coeffs[..., None, :] @ stacked)[..., 0, :]
+        return xp.matrix_transpose(out * beta0[..., None])
+    k = q.shape[-2]
+    out = xp.zeros((*batch, k, n), dtype=q.dtype)
+    if arrays.is_torch(out):
+        out = out.to(q.device)
+    for m, (members, coeffs) in stopped.items():
+        stacked = xp.broadcast_to(xp.stack(basis[:m], axis=-2), (*batch, k, m, n))
+        part = (coeffs[..., None, :] @ stacked[_rows(members, stacked)])[..., 0, :]
+        out[_rows(members, out)] = part
     return xp.matrix_transpose(out * beta0[..., None])
+
+
+def _rows(mask: np.ndarray, like: Any) -> Any:
+    """A boolean mask over the leading (batch) axes, usable as an index of `like`."""
+    if arrays.is_torch(like):
+        import torch
+
+        return torch.as_tensor(mask, device=like.device)
+    return mask
 
 
 def _stack_or_empty(xp: Any, items: list[Any], like: Any) -> Any:
