@@ -5,9 +5,9 @@ path per env:
 
 1. env-steps/s of `gym.make_vec(..., vectorization_mode="vector_entry_point")` (one batch)
    over `vectorization_mode="sync"` (one Python env per copy) for B = 16, 64, 256, for SERB
-   with the default phi strategy (what the single env picks: eigh at N = 100, one path; the
-   native env then matches SyncVectorEnv bit for bit), SERB with phi_method="krylov" on both
-   sides (members agree to the Krylov tolerance), and Euler-Maruyama. Actions are fixed
+   with the default phi strategy (what the single env picks for its one path: Lanczos at
+   N = 100; the native env then matches SyncVectorEnv bit for bit), SERB with
+   phi_method="eigh" on both sides, and Euler-Maruyama. Actions are fixed
    uniform draws in [-0.5, 0.5]; autoresets happen inside the timing (m = 50). Each figure
    is the best of `--repeats` interleaved blocks of at least `--seconds` seconds, per CPU
    second of this process (robust when other processes share the cores) and per wall second.
@@ -45,8 +45,8 @@ from agent_envs.envs import ENV_ID  # noqa: E402
 
 N_AGENTS = 100
 ENV_CONFIGS: dict[str, dict[str, Any]] = {
-    "serb (auto: eigh)": {},
-    "serb (krylov)": {"phi_method": "krylov"},
+    "serb (auto)": {},
+    "serb (eigh)": {"phi_method": "eigh"},
     "em": {"integrator": "em"},
 }
 
