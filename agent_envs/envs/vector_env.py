@@ -403,16 +403,17 @@ class SwarmVectorEnv(VectorEnv):
         dw = np.zeros((b, p, n, d))
         for i in np.flatnonzero(stepping):
             dw[i] = brownian_increments(self._rng(i), (p, n, d), self.dt)
-        x_next, drift_next, diverged_on_device = advance_paths(
-            self.integrator,
-            self.model,
-            x,
-            controls,
-            self._on_device(self.times[:, None, None, None]),
-            self.dt,
-            self._on_device(dw),
-            self.config.divergence_threshold,
-        )
+        with arrays.hot_path_threads():  # BLAS on one thread, as the single env's step
+            x_next, drift_next, diverged_on_device = advance_paths(
+                self.integrator,
+                self.model,
+                x,
+                controls,
+                self._on_device(self.times[:, None, None, None]),
+                self.dt,
+                self._on_device(dw),
+                self.config.divergence_threshold,
+            )
         diverged = arrays.to_numpy(diverged_on_device) & stepping
         moved = stepping & ~diverged
         if np.all(moved):
