@@ -283,6 +283,13 @@ def test_torch_backend_on_cpu_matches_numpy(kwargs):
     _torch_matches_numpy("cpu", **{"epsilon": 0.5, **kwargs})
 
 
+@pytest.mark.slow
+def test_torch_backend_on_cpu_matches_numpy_at_the_default_size():
+    # N = 100, symmetric kernel: the Lanczos phi-action with per-member stopping, on torch
+    pytest.importorskip("torch")
+    _torch_matches_numpy("cpu", n_agents=100)
+
+
 def test_torch_tensor_output_and_tensor_actions():
     torch = pytest.importorskip("torch")
     venv = native(3, n_agents=5, backend="torch", tensor_output=True)
