@@ -215,6 +215,27 @@ def tridiagonal(diag: Any, off: Any) -> Any:
     return t
 
 
+def divide_fresh(p: Any, c: float) -> Any:
+    """p / c, in place for a fresh numpy array (saves a large temporary), functional on torch."""
+    if is_torch(p):
+        return p / c
+    return np.divide(p, c, out=p)
+
+
+def add_diagonal_blocks(blocks: Any, diag: Any) -> Any:
+    """blocks[..., k, k, :, :] += diag[..., k, :, :] for blocks (..., N, N, d, d): in place on a
+    fresh numpy array, functional on torch."""
+    n = blocks.shape[-3]
+    if is_torch(blocks):
+        import torch
+
+        eye = torch.eye(n, dtype=blocks.dtype, device=blocks.device)
+        return blocks + eye[..., None, None] * diag[..., :, None, :, :]
+    idx = np.arange(n)
+    blocks[..., idx, idx, :, :] += diag
+    return blocks
+
+
 def subtract_diagonal(p: Any, s: Any) -> Any:
     """P - diag(s) for P (..., n, n) and s (..., n). Modifies a numpy P in place (callers pass a
     fresh array); functional on torch so autograd sees it."""

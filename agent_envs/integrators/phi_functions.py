@@ -166,7 +166,8 @@ def _krylov_action(
     n = a.shape[-1]
     max_dim = min(max_dim, n)
     at = xp.matrix_transpose(a)
-    rows = xp.matrix_transpose(v)  # (..., k, n)
+    batch = tuple(np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2])))
+    rows = xp.matrix_transpose(xp.broadcast_to(v, (*batch, *v.shape[-2:])))  # (..., k, n)
     beta = xp.linalg.vector_norm(rows, axis=-1)  # (..., k)
     safe_beta = xp.where(beta > 0, beta, 1.0)
     basis = [rows / safe_beta[..., None]]
@@ -228,7 +229,7 @@ def _lanczos_action(
     matrix with a bounded spectrum the approximation converges in spite of the loss of
     orthogonality (Druskin, Greenbaum & Knizhnerman, 1998). Stopped when Saad's error estimate
     b_m |e_m^T phi_p(T_m) e_1| is below rtol |phi_p(T_m) e_1|, checked every `check_every`
-    steps from m = 3 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
+    steps from m = 3.5 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
     the exponential has not converged yet), or at a happy breakdown; None when not converged
     by `max_dim` (also when m reaches n: the basis is then not exact). Differentiable on torch
     (list-built basis, no in-place writes to the basis).
@@ -243,14 +244,14 @@ def _lanczos_action(
     xp = arrays.namespace(a, v)
     n = a.shape[-1]
     max_dim = min(max_dim, n)
+    batch = tuple(np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2])))
     at = xp.matrix_transpose(a)
-    q = xp.matrix_transpose(v)  # (..., k, n)
+    q = xp.matrix_transpose(xp.broadcast_to(v, (*batch, *v.shape[-2:])))  # (..., k, n)
     beta0 = xp.linalg.vector_norm(q, axis=-1)  # (..., k)
     if bool(xp.any(beta0 == 0)):
         q = q / xp.where(beta0 > 0, beta0, 1.0)[..., None]
     else:
         q = q / beta0[..., None]
-    batch = tuple(np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2])))
     basis = [q]
     alphas: list[Any] = []
     betas: list[Any] = []
@@ -259,7 +260,7 @@ def _lanczos_action(
         arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1), axis=-1)), batch
     ).astype(np.float64)
     first_check = np.array(
-        [max(2, min(max_dim, math.ceil(3.0 * math.sqrt(x)))) for x in norm_inf.reshape(-1)],
+        [max(2, min(max_dim, math.ceil(3.5 * math.sqrt(x)))) for x in norm_inf.reshape(-1)],
         dtype=np.int64,
     ).reshape(batch)
     tiny = 1e-12 * (norm_inf + 1e-300)
