@@ -94,7 +94,8 @@ def run_side_by_side(
     "kwargs",
     [
         {"n_agents": 12},  # SERB, frozen L, phi by expm
-        {"n_agents": 100, "n_steps": 6},  # the default setting: phi by eigh
+        {"n_agents": 100, "n_steps": 6},  # the default setting: phi by Lanczos
+        {"n_agents": 60, "n_steps": 6, "phi_method": "eigh"},
         {"n_agents": 8, "dim": 2, "n_paths": 2, "phi_method": "expm"},
         {"n_agents": 8, "dim": 2, "jacobian": "exact", "epsilon": 0.5},
         {"n_agents": 10, "integrator": "em", "epsilon": 0.5},  # eps = 0.05: every EM run diverges
