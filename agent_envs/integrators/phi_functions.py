@@ -160,7 +160,9 @@ def _krylov_action(
 
     The columns are handled as rows internally: W (..., k, n). The basis vectors are kept in a
     list and stacked, never written in place, so autograd differentiates through the final
-    basis and Hessenberg matrix; the convergence test reads detached values.
+    basis and Hessenberg matrix; the convergence test reads detached values. As in
+    `_lanczos_action`, each batch member stops at its own dimension (its k columns together),
+    so its result does not depend on the rest of the batch.
     """
     xp = arrays.namespace(a, v)
     n = a.shape[-1]
@@ -176,8 +178,10 @@ def _krylov_action(
     columns: list[Any] = []
     subdiag: list[Any] = []
     prev = None
-    coeffs = None
-    converged = False
+    done = np.zeros(batch, dtype=bool)
+    converged = np.zeros(batch, dtype=bool)
+    # stopping dimension -> (members that stopped there, their phi_p(H_m) e_1 (count, k, m))
+    stopped: dict[int, tuple[np.ndarray, Any]] = {}
     for j in range(max_dim):
         w = basis[j] @ at  # (..., k, n): A q_j for each column
         h_total = None
@@ -195,27 +199,34 @@ def _krylov_action(
         basis.append(q_next)
         stacked = xp.concat([stacked, q_next[..., None, :]], axis=-2)
         m = j + 1
-        converged = bool(xp.all(breakdown)) or m == n
-        done = converged or m == max_dim
-        if m % check_every and not done:
+        # per member (the k columns of a member stop together): a happy breakdown or the
+        # whole space spanned ends it exactly
+        broke = np.broadcast_to(arrays.to_numpy(breakdown), (*batch, breakdown.shape[-1]))
+        exhausted = ~done & (np.all(broke, axis=-1) | (m == n))
+        stops = exhausted | (~done & (m == max_dim))
+        if m % check_every and not np.any(stops):
             continue
         coeffs = _small_phi_e1(_hessenberg(columns, subdiag, m), order, symmetric)  # (..., k, m)
-        if prev is not None and not done:
+        coeffs = xp.broadcast_to(coeffs, (*batch, *coeffs.shape[-2:]))
+        passed = np.zeros(batch, dtype=bool)
+        if prev is not None and not m % check_every:
             c, p = arrays.to_numpy(coeffs), arrays.to_numpy(prev)
             diff = np.linalg.norm(c[..., : p.shape[-1]] - p, axis=-1)
             diff = np.sqrt(diff**2 + np.sum(c[..., p.shape[-1] :] ** 2, axis=-1))
             size = np.linalg.norm(c, axis=-1)
-            if np.all(diff <= rtol * size + 1e-300):
-                done = converged = True
-        if done:
+            passed = ~done & ~stops & np.all(diff <= rtol * size + 1e-300, axis=-1)
+        now = stops | passed
+        if np.any(now):
+            stopped[m] = (now, coeffs[_rows(now, coeffs)])
+        converged |= exhausted | passed
+        done |= now
+        if np.all(done):
             break
-        prev = coeffs
-    assert coeffs is not None
-    if not converged:
+        if not m % check_every:  # the regular checks compare with the previous regular one
+            prev = coeffs
+    if not np.all(converged):
         return None
-    m = coeffs.shape[-1]
-    out = (coeffs[..., None, :] @ stacked[..., :m, :])[..., 0, :]  # (..., k, n)
-    return xp.matrix_transpose(out * beta[..., None])
+    return _gather_members(xp, stopped, stacked, beta, batch)
 
 
 def _lanczos_action(
@@ -316,21 +327,31 @@ def _lanczos_action(
         basis.append(q)
     if not np.all(converged):
         return None
+    return _gather_members(xp, stopped, xp.stack(basis[: max(stopped)], axis=-2), beta0, batch)
+
+
+def _gather_members(
+    xp: Any, stopped: dict[int, tuple[np.ndarray, Any]], stacked: Any, beta: Any, batch: tuple
+) -> Any:
+    """|v| Q_{m_i} c_i for every batch member i, each computed with its own stopping dimension.
+
+    `stopped` maps a Krylov dimension m to (the members that stopped there, their coefficients
+    (count, k, m)); `stacked` (..., k, >= max m, n) is the basis, `beta` (..., k) the norms of
+    the starting vectors. Returns (..., n, k).
+    """
     if len(stopped) == 1:  # every member stopped at the same m: no gathering needed
         ((m, (_, coeffs)),) = stopped.items()
-        stacked = xp.stack(basis[:m], axis=-2)  # (..., k, m, n)
         coeffs = xp.reshape(coeffs, (*batch, *coeffs.shape[-2:]))
-        out = (coeffs[..., None, :] @ stacked)[..., 0, :]
-        return xp.matrix_transpose(out * beta0[..., None])
-    k = q.shape[-2]
-    out = xp.zeros((*batch, k, n), dtype=q.dtype)
+        out = (coeffs[..., None, :] @ stacked[..., :m, :])[..., 0, :]
+        return xp.matrix_transpose(out * beta[..., None])
+    k, n = stacked.shape[-3], stacked.shape[-1]
+    out = xp.zeros((*batch, k, n), dtype=stacked.dtype)
     if arrays.is_torch(out):
-        out = out.to(q.device)
+        out = out.to(stacked.device)
     for m, (members, coeffs) in stopped.items():
-        stacked = xp.broadcast_to(xp.stack(basis[:m], axis=-2), (*batch, k, m, n))
-        part = (coeffs[..., None, :] @ stacked[_rows(members, stacked)])[..., 0, :]
-        out[_rows(members, out)] = part
-    return xp.matrix_transpose(out * beta0[..., None])
+        basis = xp.broadcast_to(stacked[..., :m, :], (*batch, k, m, n))
+        out[_rows(members, out)] = (coeffs[..., None, :] @ basis[_rows(members, basis)])[..., 0, :]
+    return xp.matrix_transpose(out * beta[..., None])
 
 
 def _rows(mask: np.ndarray, like: Any) -> Any:
