@@ -15,12 +15,9 @@ sees the numbers its single twin would draw.
 Exactness: each env's linear algebra is the single env's. The phi-function strategy "auto"
 depends on how many matrices a call holds (`agent_envs.integrators.phi_functions.
 auto_phi_method`), so the vector env fixes the strategy the single env picks for its own P
-paths. "expm" and "eigh" are per-matrix LAPACK calls, and the Lanczos iteration ("krylov" for
-a symmetric matrix) stops member by member, so these match bit for bit. The Arnoldi iteration
-("krylov" for a non-symmetric matrix: "auto" picks it for a non-symmetric kernel at N > 128)
-stops when every problem of the call has converged, so a batch of envs may take more Krylov
-steps than one env alone: those envs agree with their single twins to the Krylov tolerance
-(rtol 1e-10 per step), not bit for bit.
+paths. "expm" and "eigh" are per-matrix LAPACK calls, and the Krylov iterations (Lanczos for a
+symmetric matrix, Arnoldi otherwise) stop member by member, so every env matches its single
+twin bit for bit.
 
 Arrays: numpy by default. With ``device="cuda"`` (or any torch device, or ``backend="torch"``
 for torch on the CPU) the state, the kernel matrices, the integrator steps, costs and
