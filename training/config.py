@@ -41,6 +41,8 @@ HORIZON_WRAPPER = "agent_envs.training.wrappers.HorizonAsTermination"
 ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "env_wrapper")
 #: rl-zoo3 keys turned into an SB3 action-noise object (TD3).
 NOISE_KEYS = ("noise_type", "noise_std")
+#: `--vec-env` choices: SB3 VecEnvs of the training envs (native: NativeVecEnv, one batch).
+VEC_ENV_CHOICES = ("native", "dummy", "subproc")
 
 # Measured on N = 10, m = 20 (README.md, "Training agents"): the good controls are small next
 # to max_control (the proportional control 12 (xbar - x) is ~10% of it), so the policies start
@@ -210,9 +212,11 @@ class TrainConfig:
         DEFAULT_DELTA, "delta of the turnpike reference controller"
     )
     vec_env: str = option_field(
-        "dummy",
-        "vectorization of the training envs: dummy (in process) or subproc",
-        choices=("dummy", "subproc"),
+        "native",
+        "vectorization of the training envs: native (all envs stepped as one batch, "
+        "agent_envs.training.native_vec_env; the Gymnasium env only, the PettingZoo env "
+        "ignores it), dummy (one env after the other, in process) or subproc",
+        choices=VEC_ENV_CHOICES,
     )
     device: str = option_field("cpu", "torch device")
     torch_threads: int = option_field(
@@ -246,8 +250,8 @@ class TrainConfig:
         _check_int("eval_episodes", self.eval_episodes, 1)
         if self.n_envs is not None:
             _check_int("n_envs", self.n_envs, 1)
-        if self.vec_env not in ("dummy", "subproc"):
-            raise ValueError(f"--vec-env must be dummy or subproc, got {self.vec_env!r}")
+        if self.vec_env not in VEC_ENV_CHOICES:
+            raise ValueError(f"--vec-env must be one of {VEC_ENV_CHOICES}, got {self.vec_env!r}")
         for name in ("turnpike_beta", "turnpike_delta"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):

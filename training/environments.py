@@ -66,6 +66,15 @@ def make_training_env(config: TrainConfig, n_envs: int):
     import agent_envs  # noqa: F401
     from agent_envs.training.wrappers import HorizonAsTermination
 
+    if config.vec_env == "native":
+        from agent_envs.training.native_vec_env import NativeVecEnv
+
+        try:
+            venv = NativeVecEnv(n_envs, config.env_kwargs, horizon_as_termination=True)
+        except TypeError as exc:  # unknown keyword: a user error, as in make_gym_env
+            raise ValueError(f"--env-kwargs {config.env_kwargs}: {exc}") from None
+        venv.seed(config.seed)  # as make_vec_env: env i resets with seed + i
+        return venv
     return make_vec_env(
         config.env_id,
         n_envs=n_envs,

@@ -2,6 +2,8 @@
 
 - `SwarmEnv` (`gymnasium.make("agent_envs/Swarm-v0", **kwargs)`): one controller, action
   (N d,), reward -tau c(x^n, u^n).
+- `SwarmVectorEnv` (`gymnasium.make_vec("agent_envs/Swarm-v0", num_envs=B,
+  vectorization_mode="vector_entry_point", **kwargs)`): B Gymnasium envs stepped as one batch.
 - `SwarmParallelEnv` (`agent_envs.swarm_v0.parallel_env(**kwargs)`): one agent per swarm
   member, per-agent rewards adding up to the Gymnasium reward.
 
@@ -17,6 +19,7 @@ from agent_envs.envs.episode import DEFAULT_MAX_CONTROL, EpisodeConfig, SwarmEpi
 from agent_envs.envs.observation import split_agent_observation, split_observation
 from agent_envs.envs.swarm_env import ENV_ID, SwarmEnv, make_swarm_env
 from agent_envs.envs.swarm_parallel import SwarmParallelEnv
+from agent_envs.envs.vector_env import SwarmVectorEnv, make_swarm_vector_env
 
 
 def register_envs() -> None:
@@ -27,7 +30,11 @@ def register_envs() -> None:
     """
     if ENV_ID in gym.registry:
         return
-    gym.register(id=ENV_ID, entry_point="agent_envs.envs.swarm_env:make_swarm_env")
+    gym.register(
+        id=ENV_ID,
+        entry_point="agent_envs.envs.swarm_env:make_swarm_env",
+        vector_entry_point="agent_envs.envs.vector_env:make_swarm_vector_env",
+    )
 
 
 __all__ = [
@@ -37,7 +44,9 @@ __all__ = [
     "SwarmEnv",
     "SwarmEpisode",
     "SwarmParallelEnv",
+    "SwarmVectorEnv",
     "make_swarm_env",
+    "make_swarm_vector_env",
     "register_envs",
     "split_agent_observation",
     "split_observation",

@@ -25,6 +25,7 @@ of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the iden
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from dataclasses import dataclass
 from typing import Any
@@ -200,22 +201,123 @@ class _CachedLinearizationModel(SwarmModel):
     """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
 
     The episode only hands it read-only state arrays that it never mutates, and the cached
-    matrix is made read-only too, so a stale or corrupted hit is impossible.
+    matrix is made read-only too, so a stale or corrupted hit is impossible. torch tensors
+    cannot be made read-only: they are cached only with `cache_tensors=True`, which the owner
+    (the native vector env) sets because it builds a new state tensor every step and never
+    writes into one.
     """
 
-    def __init__(self, params: SwarmParams) -> None:
+    def __init__(self, params: SwarmParams, cache_tensors: bool = False) -> None:
         super().__init__(params)
-        self._cached_state: np.ndarray | None = None
-        self._cached_matrix: np.ndarray | None = None
+        self._cache_tensors = cache_tensors
+        self._cached_state: Any = None
+        self._cached_matrix: Any = None
 
-    def frozen_linearization(self, x: np.ndarray) -> np.ndarray:
+    def frozen_linearization(self, x: Any) -> Any:
         if x is self._cached_state and self._cached_matrix is not None:
             return self._cached_matrix
         matrix = super().frozen_linearization(x)
         if isinstance(x, np.ndarray) and not x.flags.writeable:
             matrix.flags.writeable = False
             self._cached_state, self._cached_matrix = x, matrix
+        elif self._cache_tensors and arrays.is_torch(x):
+            self._cached_state, self._cached_matrix = x, matrix
         return matrix
+
+
+def start_positions(
+    config: EpisodeConfig, rng: np.random.Generator, initial_positions: Any = None
+) -> np.ndarray:
+    """x^0 of one episode, (N, d): uniform on [-1, 1]^d from `rng`, or `initial_positions`.
+
+    The uniform draw is made either way, so the Brownian increments of a seeded episode do
+    not depend on whether a start was given.
+    """
+    n, d = config.params.n_agents, config.params.dim
+    x0 = uniform_positions(rng, n, d)
+    if initial_positions is not None:
+        x0 = as_positions(initial_positions, n, d, "initial_positions")
+        if np.any(diverged_paths(x0, config.divergence_threshold)):
+            raise ValueError(
+                "initial_positions must lie inside the divergence threshold "
+                f"(|x| <= {config.divergence_threshold})"
+            )
+    return x0
+
+
+def episode_params(config: EpisodeConfig, target: Any = None) -> SwarmParams:
+    """The `SwarmParams` of an episode: the config's, with xbar replaced by `target` if given."""
+    if target is None:
+        return config.params
+    params = dataclasses.replace(config.params, target=target)  # checks and names `target`
+    _check_target(params, config.divergence_threshold)
+    return params
+
+
+def _quiet_overflow(x: Any) -> Any:
+    """numpy's errstate ignoring overflow/invalid (a diverging step is flagged, not warned);
+    a no-op context for torch, which does not warn."""
+    if isinstance(x, np.ndarray):
+        return np.errstate(over="ignore", invalid="ignore")
+    return contextlib.nullcontext()
+
+
+def mean_interaction_drift(model: SwarmModel, x: Any) -> Any:
+    """E over the paths of the interaction drift L(x) x: x (..., P, N, d) -> (..., N, d).
+
+    Marks a numpy x read-only first, so that a `_CachedLinearizationModel` keeps L(x) for the
+    next integrator step from this state. numpy arrays or torch tensors.
+    """
+    if isinstance(x, np.ndarray):
+        x.flags.writeable = False
+    xp = arrays.namespace(x)
+    with _quiet_overflow(x):
+        return xp.mean(model.interaction_drift(x), axis=-3)
+
+
+def mean_running_cost(x: Any, control: Any, target: Any, gamma: float) -> Any:
+    """c(x^n, u^n) of `eq:running_cost`, mean over the paths.
+
+    x (..., P, N, d), control (..., N, d) (the same for every path), target (..., d);
+    returns shape (...). Batched over leading (env) axes; numpy arrays or torch tensors.
+    """
+    xp = arrays.namespace(x)
+    per_path = running_cost(x, control[..., None, :, :], target[..., None, None, :], gamma)
+    return xp.mean(per_path, axis=-1)
+
+
+def advance_paths(
+    integrator: Integrator,
+    model: SwarmModel,
+    x: np.ndarray,
+    control: np.ndarray,
+    t: float | np.ndarray,
+    dt: float,
+    dw: np.ndarray,
+    divergence_threshold: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One integrator step of every path, with the divergence check of the envs.
+
+    Args:
+        x: x^n, (..., P, N, d); leading axes are envs.
+        control: u^n, (..., N, d), held over the step and the same for every path.
+        t: t_n, a float or an array broadcastable to x (one time per env).
+        dw: Brownian increments, the shape of x.
+
+    numpy arrays or torch tensors (all in one library).
+
+    Returns:
+        x^{n+1} (..., P, N, d); E interaction drift at x^{n+1}, (..., N, d); and the (...)
+        flags "diverged": some path of the env left the divergence threshold, or it or the
+        interaction drift became non-finite. Entries of diverged envs are meaningless.
+    """
+    xp = arrays.namespace(x)
+    with _quiet_overflow(x):
+        x_next = integrator.step(model, x, control[..., None, :, :], t, dt, dw)
+    diverged = xp.any(diverged_paths(x_next, divergence_threshold), axis=-1)
+    drift = mean_interaction_drift(model, x_next)
+    diverged = diverged | ~xp.all(xp.isfinite(drift), axis=(-2, -1))
+    return x_next, drift, diverged
 
 
 @dataclass(frozen=True)
@@ -310,12 +412,6 @@ class SwarmEpisode:
             raise RuntimeError("the episode has not been reset; call reset() first")
         return self.positions
 
-    def _mean_drift_at(self, x: np.ndarray) -> np.ndarray:
-        """E interaction drift at a (read-only) state x; fills the L(x) cache for the next step."""
-        x.flags.writeable = False
-        with np.errstate(over="ignore", invalid="ignore"):
-            return self.model.interaction_drift(x).mean(axis=0)
-
     # ---------------------------------------------------------------- stepping
     def reset(
         self, rng: np.random.Generator, initial_positions: Any = None, target: Any = None
@@ -327,18 +423,8 @@ class SwarmEpisode:
         depend on whether a start was given. `target` overrides xbar for this episode.
         """
         n, d = self.config.params.n_agents, self.config.params.dim
-        x0 = uniform_positions(rng, n, d)
-        if initial_positions is not None:
-            x0 = as_positions(initial_positions, n, d, "initial_positions")
-            if np.any(diverged_paths(x0, self.config.divergence_threshold)):
-                raise ValueError(
-                    "initial_positions must lie inside the divergence threshold "
-                    f"(|x| <= {self.config.divergence_threshold})"
-                )
-        params = self.config.params
-        if target is not None:
-            params = dataclasses.replace(params, target=target)  # checks and names `target`
-            _check_target(params, self.config.divergence_threshold)
+        x0 = start_positions(self.config, rng, initial_positions)
+        params = episode_params(self.config, target)
         if params != self.params:
             # target and gamma are cost parameters: a new target keeps the dynamics model
             # (and its kernel); only a change of the dynamics would rebuild it.
@@ -347,7 +433,7 @@ class SwarmEpisode:
             self.params = params
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
-        drift = self._mean_drift_at(x)
+        drift = mean_interaction_drift(self.model, x)
         if not np.all(np.isfinite(drift)):
             raise ValueError(
                 "kernel: the interaction drift is not finite at the initial positions (a user "
@@ -364,16 +450,21 @@ class SwarmEpisode:
             raise RuntimeError(
                 "the episode is over (horizon reached or diverged); call reset() first"
             )
-        cost = float(np.mean(running_cost(x, control, self._target, self.params.gamma)))
+        cost = float(mean_running_cost(x, control, self._target, self.params.gamma))
         dw = brownian_increments(rng, x.shape, self.dt)
         # BLAS limited to one thread while stepping (see agent_envs.arrays.hot_path_threads).
         with arrays.hot_path_threads():
-            with np.errstate(over="ignore", invalid="ignore"):
-                x_next = self.integrator.step(self.model, x, control, self.time, self.dt, dw)
-            diverged = bool(np.any(diverged_paths(x_next, self.config.divergence_threshold)))
-            if not diverged:
-                drift = self._mean_drift_at(x_next)
-                diverged = not np.all(np.isfinite(drift))
+            x_next, drift, diverged_flag = advance_paths(
+                self.integrator,
+                self.model,
+                x,
+                control,
+                self.time,
+                self.dt,
+                dw,
+                self.config.divergence_threshold,
+            )
+        diverged = bool(diverged_flag)
         if diverged:
             self.diverged = True
         else:

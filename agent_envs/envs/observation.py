@@ -92,17 +92,47 @@ def global_observation(
     mean_positions: np.ndarray,
     mean_drift: np.ndarray,
     target: np.ndarray,
-    time_fraction: float,
+    time_fraction: float | np.ndarray,
     space: spaces.Box,
 ) -> np.ndarray:
-    """The Gymnasium observation from (N, d) path means, target (d,) and t/T; a new array."""
-    obs = np.empty(space.shape, dtype=np.float32)
-    nd = mean_positions.size
-    obs[:nd] = mean_positions.reshape(-1)
-    obs[nd : 2 * nd] = mean_drift.reshape(-1)
-    obs[2 * nd : -1] = target
-    obs[-1] = time_fraction
+    """The Gymnasium observation from path means, target and t/T; a new float32 array.
+
+    Batched over leading (env) axes: mean_positions and mean_drift (..., N, d), target
+    (..., d), time_fraction a float or (...); returns (..., 2 N d + d + 1). torch tensors
+    give a float32 tensor on their device.
+    """
+    lead = mean_positions.shape[:-2]
+    if not isinstance(mean_positions, np.ndarray):
+        return _global_observation_tensor(mean_positions, mean_drift, target, time_fraction, space)
+    obs = np.empty((*lead, *space.shape), dtype=np.float32)
+    nd = mean_positions.shape[-2] * mean_positions.shape[-1]
+    obs[..., :nd] = mean_positions.reshape(*lead, nd)
+    obs[..., nd : 2 * nd] = mean_drift.reshape(*lead, nd)
+    obs[..., 2 * nd : -1] = target
+    obs[..., -1] = time_fraction
     return np.clip(obs, space.low, space.high, out=obs)
+
+
+def _global_observation_tensor(
+    mean_positions: Any, mean_drift: Any, target: Any, time_fraction: Any, space: spaces.Box
+) -> Any:
+    """`global_observation` for torch tensors (same layout, float32 on their device)."""
+    import torch
+
+    lead = tuple(mean_positions.shape[:-2])
+    nd = mean_positions.shape[-2] * mean_positions.shape[-1]
+    device = mean_positions.device
+    time_fraction = torch.as_tensor(time_fraction, dtype=torch.float64, device=device)
+    parts = [
+        mean_positions.reshape(*lead, nd),
+        mean_drift.reshape(*lead, nd),
+        torch.broadcast_to(torch.as_tensor(target, device=device), (*lead, target.shape[-1])),
+        torch.broadcast_to(time_fraction, lead)[..., None],
+    ]
+    obs = torch.cat([part.to(torch.float32) for part in parts], dim=-1)
+    low = torch.as_tensor(space.low, device=device)
+    high = torch.as_tensor(space.high, device=device)
+    return torch.minimum(torch.maximum(obs, low), high)
 
 
 def agent_observations(

@@ -160,7 +160,9 @@ def _krylov_action(
 
     The columns are handled as rows internally: W (..., k, n). The basis vectors are kept in a
     list and stacked, never written in place, so autograd differentiates through the final
-    basis and Hessenberg matrix; the convergence test reads detached values.
+    basis and Hessenberg matrix; the convergence test reads detached values. As in
+    `_lanczos_action`, each batch member stops at its own dimension (its k columns together),
+    so its result does not depend on the rest of the batch.
     """
     xp = arrays.namespace(a, v)
     n = a.shape[-1]
@@ -176,8 +178,10 @@ def _krylov_action(
     columns: list[Any] = []
     subdiag: list[Any] = []
     prev = None
-    coeffs = None
-    converged = False
+    done = np.zeros(batch, dtype=bool)
+    converged = np.zeros(batch, dtype=bool)
+    # stopping dimension -> (members that stopped there, their phi_p(H_m) e_1 (count, k, m))
+    stopped: dict[int, tuple[np.ndarray, Any]] = {}
     for j in range(max_dim):
         w = basis[j] @ at  # (..., k, n): A q_j for each column
         h_total = None
@@ -195,27 +199,34 @@ def _krylov_action(
         basis.append(q_next)
         stacked = xp.concat([stacked, q_next[..., None, :]], axis=-2)
         m = j + 1
-        converged = bool(xp.all(breakdown)) or m == n
-        done = converged or m == max_dim
-        if m % check_every and not done:
+        # per member (the k columns of a member stop together): a happy breakdown or the
+        # whole space spanned ends it exactly
+        broke = np.broadcast_to(arrays.to_numpy(breakdown), (*batch, breakdown.shape[-1]))
+        exhausted = ~done & (np.all(broke, axis=-1) | (m == n))
+        stops = exhausted | (~done & (m == max_dim))
+        if m % check_every and not np.any(stops):
             continue
         coeffs = _small_phi_e1(_hessenberg(columns, subdiag, m), order, symmetric)  # (..., k, m)
-        if prev is not None and not done:
+        coeffs = xp.broadcast_to(coeffs, (*batch, *coeffs.shape[-2:]))
+        passed = np.zeros(batch, dtype=bool)
+        if prev is not None and not m % check_every:
             c, p = arrays.to_numpy(coeffs), arrays.to_numpy(prev)
             diff = np.linalg.norm(c[..., : p.shape[-1]] - p, axis=-1)
             diff = np.sqrt(diff**2 + np.sum(c[..., p.shape[-1] :] ** 2, axis=-1))
             size = np.linalg.norm(c, axis=-1)
-            if np.all(diff <= rtol * size + 1e-300):
-                done = converged = True
-        if done:
+            passed = ~done & ~stops & np.all(diff <= rtol * size + 1e-300, axis=-1)
+        now = stops | passed
+        if np.any(now):
+            stopped[m] = (now, coeffs[_rows(now, coeffs)])
+        converged |= exhausted | passed
+        done |= now
+        if np.all(done):
             break
-        prev = coeffs
-    assert coeffs is not None
-    if not converged:
+        if not m % check_every:  # the regular checks compare with the previous regular one
+            prev = coeffs
+    if not np.all(converged):
         return None
-    m = coeffs.shape[-1]
-    out = (coeffs[..., None, :] @ stacked[..., :m, :])[..., 0, :]  # (..., k, n)
-    return xp.matrix_transpose(out * beta[..., None])
+    return _gather_members(xp, stopped, stacked, beta, batch)
 
 
 def _lanczos_action(
@@ -233,7 +244,14 @@ def _lanczos_action(
     steps from m = 3.5 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
     the exponential has not converged yet), or at a happy breakdown; None when not converged
     by `max_dim` (also when m reaches n: the basis is then not exact). Differentiable on torch
-    (list-built basis, no in-place writes).
+    (list-built basis, no in-place writes to the basis).
+
+    Batch members (the leading axes; the k columns of one member stop together) are decided
+    one by one: each has its own |A|_inf, first check, breakdown tolerance and stopping
+    dimension m_i, and its result is Q_{m_i} phi_p(T_{m_i}) e_1 computed on its own. So a
+    member's result does not depend on what else is in the batch (the native vector env relies
+    on this to reproduce the single env exactly); the recurrence runs until the last member
+    stops.
     """
     xp = arrays.namespace(a, v)
     n = a.shape[-1]
@@ -249,11 +267,19 @@ def _lanczos_action(
     basis = [q]
     alphas: list[Any] = []
     betas: list[Any] = []
-    norm_inf = float(arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1))))
-    first_check = max(2, min(max_dim, math.ceil(3.5 * math.sqrt(norm_inf))))
+    # per member: |A|_inf, the first check and the breakdown tolerance
+    norm_inf = np.broadcast_to(
+        arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1), axis=-1)), batch
+    ).astype(np.float64)
+    first_check = np.array(
+        [max(2, min(max_dim, math.ceil(3.5 * math.sqrt(x)))) for x in norm_inf.reshape(-1)],
+        dtype=np.int64,
+    ).reshape(batch)
     tiny = 1e-12 * (norm_inf + 1e-300)
-    coeffs = None
-    converged = False
+    done = np.zeros(batch, dtype=bool)
+    converged = np.zeros(batch, dtype=bool)
+    # stopping dimension -> (members that stopped there, their phi_p(T_m) e_1 (count, k, m))
+    stopped: dict[int, tuple[np.ndarray, Any]] = {}
     w_prev = None
     for j in range(max_dim):
         w = q @ at
@@ -266,37 +292,75 @@ def _lanczos_action(
         b = xp.sqrt(xp.vecdot(w, w))
         alphas.append(alpha)
         m = j + 1
-        b_host = arrays.to_numpy(b)
-        any_breakdown = float(b_host.min()) <= tiny
+        b_host = np.broadcast_to(arrays.to_numpy(b), (*batch, b.shape[-1]))
+        small = b_host <= tiny[..., None]
         # m == n without convergence: the space is exhausted but, without full
         # reorthogonalization, the basis is not exact; the caller then uses the dense method.
-        converged = any_breakdown and bool(np.all(b_host <= tiny))
-        done = converged or m == max_dim
-        if done or (m >= first_check and (m - first_check) % check_every == 0):
+        breakdown = ~done & np.all(small, axis=-1)
+        stops = breakdown | (~done & (m == max_dim))
+        check = ~done & ~stops & (m >= first_check) & ((m - first_check) % check_every == 0)
+        needed = stops | check
+        if np.any(needed):
             t = arrays.tridiagonal(xp.stack(alphas, axis=-1), _stack_or_empty(xp, betas, alpha))
-            coeffs = _small_phi_e1(t, order, True)  # (..., k, m)
-            if not done:
+            t = xp.broadcast_to(t, (*batch, *t.shape[-3:]))
+            coeffs = _small_phi_e1(t[_rows(needed, t)], order, True)  # (count, k, m)
+            passed = np.zeros(batch, dtype=bool)
+            if np.any(check):
                 c = arrays.to_numpy(coeffs)
-                est = b_host * np.abs(c[..., -1])
-                if np.all(est <= rtol * np.linalg.norm(c, axis=-1) + 1e-300):
-                    converged = done = True
-        if done:
+                est = b_host[needed] * np.abs(c[..., -1])
+                ok = np.all(est <= rtol * np.linalg.norm(c, axis=-1) + 1e-300, axis=-1)
+                passed[needed] = ok & check[needed]
+            now = stops | passed
+            if np.any(now):
+                stopped[m] = (now, coeffs[_rows(now[needed], coeffs)])
+            converged |= breakdown | passed
+            done |= now
+        if np.all(done):
             break
-        if any_breakdown:
-            stop = arrays.asarray(b_host <= tiny, like=w) > 0.5
+        if np.any(small):
+            stop = arrays.asarray(small, like=w) > 0.5
             w = xp.where(stop[..., None], 0.0, w / xp.where(stop, 1.0, b)[..., None])
         else:
             w = w / b[..., None]
         betas.append(b)
         w_prev, q = q, w
         basis.append(q)
-    assert coeffs is not None
-    if not converged:
+    if not np.all(converged):
         return None
-    m = coeffs.shape[-1]
-    stacked = xp.stack(basis[:m], axis=-2)  # (..., k, m, n)
-    out = (coeffs[..., None, :] @ stacked)[..., 0, :]
-    return xp.matrix_transpose(out * beta0[..., None])
+    return _gather_members(xp, stopped, xp.stack(basis[: max(stopped)], axis=-2), beta0, batch)
+
+
+def _gather_members(
+    xp: Any, stopped: dict[int, tuple[np.ndarray, Any]], stacked: Any, beta: Any, batch: tuple
+) -> Any:
+    """|v| Q_{m_i} c_i for every batch member i, each computed with its own stopping dimension.
+
+    `stopped` maps a Krylov dimension m to (the members that stopped there, their coefficients
+    (count, k, m)); `stacked` (..., k, >= max m, n) is the basis, `beta` (..., k) the norms of
+    the starting vectors. Returns (..., n, k).
+    """
+    if len(stopped) == 1:  # every member stopped at the same m: no gathering needed
+        ((m, (_, coeffs)),) = stopped.items()
+        coeffs = xp.reshape(coeffs, (*batch, *coeffs.shape[-2:]))
+        out = (coeffs[..., None, :] @ stacked[..., :m, :])[..., 0, :]
+        return xp.matrix_transpose(out * beta[..., None])
+    k, n = stacked.shape[-3], stacked.shape[-1]
+    out = xp.zeros((*batch, k, n), dtype=stacked.dtype)
+    if arrays.is_torch(out):
+        out = out.to(stacked.device)
+    for m, (members, coeffs) in stopped.items():
+        basis = xp.broadcast_to(stacked[..., :m, :], (*batch, k, m, n))
+        out[_rows(members, out)] = (coeffs[..., None, :] @ basis[_rows(members, basis)])[..., 0, :]
+    return xp.matrix_transpose(out * beta[..., None])
+
+
+def _rows(mask: np.ndarray, like: Any) -> Any:
+    """A boolean mask over the leading (batch) axes, usable as an index of `like`."""
+    if arrays.is_torch(like):
+        import torch
+
+        return torch.as_tensor(mask, device=like.device)
+    return mask
 
 
 def _stack_or_empty(xp: Any, items: list[Any], like: Any) -> Any:
@@ -305,17 +369,27 @@ def _stack_or_empty(xp: Any, items: list[Any], like: Any) -> Any:
     return xp.zeros((*like.shape, 0), dtype=like.dtype)
 
 
-def _auto_method(a: Any, v: Any, symmetric: bool) -> str:
-    n = a.shape[-1]
-    batch = np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2]))
-    single = int(np.prod(batch, dtype=int)) == 1
-    if n <= _AUTO_EXPM_MAX:
+def auto_phi_method(size: int, n_matrices: int, symmetric: bool) -> str:
+    """The strategy ``method="auto"`` uses for `n_matrices` matrices of shape (size, size).
+
+    Public so that a caller that batches several independent problems together (the native
+    vector env stacks its envs on a leading axis) can fix the strategy each problem would get
+    on its own, and so compute each one exactly as an unbatched call would.
+    """
+    single = n_matrices == 1
+    if size <= _AUTO_EXPM_MAX:
         return "expm"
     if symmetric:
-        return "expm" if single and n <= _AUTO_EXPM_SINGLE_MAX else "krylov"
-    if n <= _AUTO_EXPM_SINGLE_MAX or (single and n <= _AUTO_EXPM_SINGLE_NONSYMMETRIC_MAX):
+        return "expm" if single and size <= _AUTO_EXPM_SINGLE_MAX else "krylov"
+    if size <= _AUTO_EXPM_SINGLE_MAX or (single and size <= _AUTO_EXPM_SINGLE_NONSYMMETRIC_MAX):
         return "expm"
     return "krylov"
+
+
+def _auto_method(a: Any, v: Any, symmetric: bool) -> str:
+    batch = np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2]))
+    n_matrices = int(np.prod(batch, dtype=int))
+    return auto_phi_method(a.shape[-1], n_matrices, symmetric)
 
 
 def phi_action(

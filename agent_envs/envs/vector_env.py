@@ -1,0 +1,491 @@
+"""Native vectorized `agent_envs/Swarm-v0`: B envs x P paths stepped as one batch.
+
+    envs = gym.make_vec("agent_envs/Swarm-v0", num_envs=64,
+                        vectorization_mode="vector_entry_point", n_agents=100)
+
+returns a `SwarmVectorEnv`. Env i of the batch is the single env `gym.make("agent_envs/Swarm-v0",
+**kwargs)` reset with seed s + i: same observations, rewards, terminations, truncations and
+infos as `gymnasium.vector.SyncVectorEnv` over those envs, episode after episode (tested in
+tests/test_vector_env.py). The state of all envs is one (B, P, N, d) array and one step is one
+call of the core's batched functions (`agent_envs.envs.episode.advance_paths`,
+`mean_running_cost`, `agent_envs.envs.observation.global_observation`); the only per-env
+Python work is the random draws, which come from each env's own generator so that every env
+sees the numbers its single twin would draw.
+
+Exactness: each env's linear algebra is the single env's. The phi-function strategy "auto"
+depends on how many matrices a call holds (`agent_envs.integrators.phi_functions.
+auto_phi_method`), so the vector env fixes the strategy the single env picks for its own P
+paths. "expm" and "eigh" are per-matrix LAPACK calls, and the Krylov iterations (Lanczos for a
+symmetric matrix, Arnoldi otherwise) stop member by member, so every env matches its single
+twin bit for bit.
+
+Arrays: numpy by default. With ``device="cuda"`` (or any torch device, or ``backend="torch"``
+for torch on the CPU) the state, the kernel matrices, the integrator steps, costs and
+observations are torch tensors on that device (the core is written once against the Array
+API, `agent_envs.arrays`). The Brownian increments are still drawn by each env's numpy
+generator and moved to the device in one transfer per step, so the torch env follows the
+numpy env to round-off (1e-10, tested on the CPU). Observations, rewards and flags come out as
+numpy arrays unless ``tensor_output=True`` (then torch tensors on the device); infos are numpy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from agent_envs import arrays
+from agent_envs.envs.episode import (
+    EpisodeConfig,
+    _CachedLinearizationModel,
+    advance_paths,
+    episode_params,
+    mean_interaction_drift,
+    mean_running_cost,
+    reset_options,
+    start_positions,
+)
+from agent_envs.envs.observation import (
+    global_observation,
+    interaction_drift_bound,
+    observation_space,
+)
+from agent_envs.integrators import Integrator, make_integrator
+from agent_envs.integrators.phi_functions import auto_phi_method
+from agent_envs.simulator import brownian_increments
+
+#: Autoreset modes the native env implements (Gymnasium's names).
+AUTORESET_MODES = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
+
+SeedArg = int | Sequence[int | None] | None
+
+
+def single_env_phi_method(config: EpisodeConfig) -> str:
+    """The phi strategy a single env with this config uses ("auto" resolved for its P paths).
+
+    The integrators apply phi to dt L(x) (frozen: N x N, acting on the d columns) or to the
+    exact Jacobian (Nd x Nd); "auto" picks by matrix size, symmetry and the number of matrices
+    in the call, which for a single env is its number of paths.
+    """
+    if config.phi_method != "auto" or not make_integrator(config.integrator).needs_jacobian:
+        return config.phi_method
+    model = _CachedLinearizationModel(config.params)
+    symmetric = bool(model.kernel.symmetric)
+    size = config.params.n_agents
+    if config.jacobian == "exact":
+        symmetric = symmetric and bool(getattr(model.kernel, "radial", False))
+        size *= config.params.dim
+    return auto_phi_method(size, config.n_paths, symmetric)
+
+
+class SwarmVectorEnv(VectorEnv):
+    r"""B copies of `agent_envs/Swarm-v0` stepped together as one batch of arrays.
+
+    ## Description
+
+    The swarm control problem of `agent_envs.envs.swarm_env.SwarmEnv` (same dynamics,
+    integrators, rewards and episode end), for `num_envs` independent envs. All envs share
+    the keyword arguments; each has its own random generator, step counter, target and
+    divergence flag.
+
+    ## Spaces
+
+    `single_observation_space` and `single_action_space` are the single env's
+    (`Box((2 N d + d + 1,), float32)` and `Box(-1, 1, (N d,), float32)`);
+    `observation_space` and `action_space` are their batches (leading axis B). Actions may
+    also be given as (B, N, d).
+
+    ## Rewards, episode end
+
+    As the single env, per env: reward -tau c(x^n, u^n) (`eq:running_cost`), `truncated`
+    after m = `n_steps` steps, `terminated` (and `info["diverged"]`) when a step diverges;
+    the other envs go on.
+
+    ## Autoreset
+
+    `autoreset_mode` is Gymnasium's `AutoresetMode.NEXT_STEP` (default, as `SyncVectorEnv`):
+    the step after an env's episode ended resets it (its action is ignored, reward 0,
+    terminated and truncated False, info the reset info). With `AutoresetMode.SAME_STEP` an
+    ended env is reset within the step; `info["final_obs"]` (object array) and
+    `info["final_info"]` then hold its last observation and step info.
+
+    ## Seeding
+
+    `reset(seed=s)` seeds env i with s + i (a list gives one seed per env, None leaves an env's
+    generator running; a first reset without seed draws fresh entropy). The generators are
+    `gymnasium.utils.seeding.np_random(seed)`, the single env's.
+
+    ## Info
+
+    Gymnasium's vector convention: one array per key with a leading axis B and a boolean mask
+    `"_key"` telling which envs filled it. Keys: `positions` (B, P, N, d), `time` (B,),
+    `diverged` (B,) from every env; `control` (B, N, d) and `running_cost` (B,) from the envs
+    that stepped (not from those being reset).
+
+    ## Arguments
+
+    `num_envs` (B >= 1); `autoreset_mode`; `device` ("cpu": numpy; "cuda", "cuda:1", ...:
+    torch on that device); `backend` (None: numpy on "cpu", torch otherwise; "torch" with
+    device "cpu" runs torch on the CPU); `tensor_output` (return torch tensors instead of
+    numpy arrays; torch only); and every keyword argument of the single env except
+    `render_mode` (the native env does not render; use `vectorization_mode="sync"` for
+    rendering). Bad values raise `ValueError`/`TypeError` naming the argument.
+
+    ## Attributes
+
+    config (`EpisodeConfig`), model, integrator, phi_method (the resolved strategy), dt,
+    n_steps, n_paths, positions (B, P, N, d), step_index (B,), targets (B, d), np_randoms (one
+    generator per env).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "render_modes": [],
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
+    }
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        *,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        device: Any = "cpu",
+        backend: str | None = None,
+        tensor_output: bool = False,
+        render_mode: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+            raise TypeError(f"num_envs must be an int >= 1, got {num_envs!r}")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be an int >= 1, got {num_envs}")
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode={render_mode!r}: the native vector env does not render; use "
+                "gym.make_vec(..., vectorization_mode='sync', render_mode=...)"
+            )
+        if backend is None:
+            backend = "numpy" if device in (None, "cpu") else "torch"
+        self._xp, self._device, _ = arrays.resolve(backend, device)
+        if self._device is not None and self._device.type == "cuda":
+            import torch
+
+            if not torch.cuda.is_available():
+                raise ValueError(f"device={device!r}: torch sees no CUDA device here")
+        self.backend = backend
+        if not isinstance(tensor_output, bool):
+            raise TypeError(f"tensor_output must be a bool, got {tensor_output!r}")
+        if tensor_output and backend != "torch":
+            raise ValueError("tensor_output=True needs backend='torch' (or a torch device)")
+        self.tensor_output = tensor_output
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            mode = None
+        if mode not in AUTORESET_MODES:
+            allowed = [m.value for m in AUTORESET_MODES]
+            raise ValueError(f"autoreset_mode must be one of {allowed}, got {autoreset_mode!r}")
+        self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
+        self.num_envs = int(num_envs)
+        self.device = "cpu" if self._device is None else str(self._device)
+        self.render_mode = None
+        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
+        self.autoreset_mode = mode
+
+        params = self.config.params
+        n, d = params.n_agents, params.dim
+        self.model = _CachedLinearizationModel(params, cache_tensors=True)
+        self.phi_method = single_env_phi_method(self.config)
+        self.integrator: Integrator = make_integrator(
+            self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
+        )
+        self.dt = self.config.dt
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(n * d,), dtype=np.float32)
+        self.single_observation_space = observation_space(
+            n, d, self.config.divergence_threshold, interaction_drift_bound(self.model.kernel)
+        )
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+
+        b, p = self.num_envs, self.config.n_paths
+        self.np_randoms: list[np.random.Generator | None] = [None] * b
+        self._positions = self._on_device(np.zeros((b, p, n, d)))
+        self._mean_drift = self._on_device(np.zeros((b, n, d)))
+        self._targets = self._on_device(np.broadcast_to(params.target_vector, (b, d)).copy())
+        self.step_index = np.zeros(b, dtype=np.int64)
+        self._autoreset = np.zeros(b, dtype=bool)
+        self._has_reset = False
+
+    # ----------------------------------------------------------------- attributes
+    @property
+    def n_steps(self) -> int:
+        """m, the number of steps of an episode."""
+        return self.config.n_steps
+
+    @property
+    def n_paths(self) -> int:
+        """Brownian paths per env."""
+        return self.config.n_paths
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(B, P, N, d) current states as a numpy array: the (read-only) state itself on the
+        numpy backend, a copy on torch (a CPU tensor's numpy view would be writable)."""
+        if isinstance(self._positions, np.ndarray):
+            return self._positions
+        return np.array(arrays.to_numpy(self._positions))
+
+    @property
+    def targets(self) -> np.ndarray:
+        """(B, d) targets xbar of the current episodes (a numpy copy)."""
+        return np.array(arrays.to_numpy(self._targets))
+
+    @property
+    def times(self) -> np.ndarray:
+        """t_n = n T / m per env: (B,)."""
+        return self.config.params.horizon * self.step_index / self.config.n_steps
+
+    # ----------------------------------------------------------------- helpers
+    def _env_seeds(self, seed: SeedArg) -> list[int | None]:
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            return [int(seed) + i for i in range(self.num_envs)]
+        seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(
+                f"seed as a list must have one entry per env (num_envs={self.num_envs}), "
+                f"got {len(seeds)}"
+            )
+        return seeds
+
+    def _rng(self, i: int) -> np.random.Generator:
+        rng = self.np_randoms[i]
+        if rng is None:
+            rng, _ = seeding.np_random()
+            self.np_randoms[i] = rng
+        return rng
+
+    def _on_device(self, a: np.ndarray) -> Any:
+        """A host numpy array in the env's array library, on its device (numpy: itself)."""
+        if self._device is None:
+            return a
+        import torch
+
+        return torch.as_tensor(a, device=self._device)
+
+    def _output(self, a: Any) -> Any:
+        """What step/reset return: a numpy array, or a tensor on the device (tensor_output)."""
+        if self.tensor_output:
+            return a if arrays.is_torch(a) else self._on_device(np.asarray(a))
+        return arrays.to_numpy(a)
+
+    def _observations(self) -> Any:
+        return global_observation(
+            self._xp.mean(self._positions, axis=-3),
+            self._mean_drift,
+            self._targets,
+            self.step_index / self.config.n_steps,
+            self.single_observation_space,
+        )
+
+    def _reset_envs(self, mask: np.ndarray, seeds: list[int | None], options: Any) -> None:
+        """Start new episodes in the envs of `mask` (same draws as `SwarmEpisode.reset`)."""
+        opts = reset_options(options, strict=True)
+        params = episode_params(self.config, opts["target"])
+        rows = np.flatnonzero(mask)
+        starts = np.empty((len(rows), 1, *self._positions.shape[-2:]))
+        for k, i in enumerate(rows):
+            if seeds[i] is not None:
+                self.np_randoms[i], _ = seeding.np_random(seeds[i])
+            starts[k, 0] = start_positions(self.config, self._rng(i), opts["initial_positions"])
+        xp = self._xp
+        rows_on_device = self._on_device(rows)
+        positions = xp.asarray(self._positions, copy=True)
+        positions[rows_on_device] = self._on_device(starts)  # the same start for every path
+        drift = mean_interaction_drift(self.model, positions)
+        if not bool(xp.all(xp.isfinite(drift[rows_on_device]))):
+            raise ValueError("the interaction drift is not finite at the initial positions")
+        targets = xp.asarray(self._targets, copy=True)
+        targets[rows_on_device] = self._on_device(params.target_vector)
+        self._positions, self._mean_drift, self._targets = positions, drift, targets
+        self.step_index[mask] = 0
+        self._autoreset[mask] = False
+
+    def _state_info(self) -> dict[str, Any]:
+        every = np.ones(self.num_envs, dtype=bool)
+        n, d = self.config.params.n_agents, self.config.params.dim
+        return {
+            "positions": np.array(self.positions),
+            "_positions": every,
+            "time": self.times,
+            "_time": every.copy(),
+            "diverged": np.zeros(self.num_envs, dtype=bool),
+            "_diverged": every.copy(),
+            # a reset's info has the step keys too (zero control, zero running cost), as the
+            # single env's does
+            "control": np.zeros((self.num_envs, n, d)),
+            "_control": every.copy(),
+            "running_cost": np.zeros(self.num_envs),
+            "_running_cost": every.copy(),
+        }
+
+    def _controls(self, actions: Any, stepping: Any) -> Any:
+        """u = max_control * clip(a, -1, 1) per env: (B, N, d) (rows not stepping ignored).
+
+        `actions` may be a numpy array (or nested sequence) or a torch tensor; `stepping` is
+        the (B,) mask on the env's device.
+        """
+        b, xp = self.num_envs, self._xp
+        n, d = self.config.params.n_agents, self.config.params.dim
+        if arrays.is_torch(actions) and self._device is not None:
+            arr = actions.to(device=self._device, dtype=self._positions.dtype)
+        else:
+            try:
+                arr = np.asarray(arrays.to_numpy(actions), dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                msg = f"actions must be an array of {b} x {n * d} real numbers: {exc}"
+                raise TypeError(msg) from None
+            arr = self._on_device(arr)
+        if tuple(arr.shape) not in ((b, n * d), (b, n, d)):
+            raise ValueError(
+                f"actions must have shape ({b}, {n * d}) or ({b}, {n}, {d}), got {tuple(arr.shape)}"
+            )
+        arr = xp.reshape(arr, (b, n, d))
+        if not bool(xp.all(xp.isfinite(arr[stepping]))):
+            raise ValueError("actions must be finite, got NaN or inf entries")
+        return self.config.max_control * xp.clip(arr, -1.0, 1.0)
+
+    # ------------------------------------------------------------------ API
+    def reset(
+        self, *, seed: SeedArg = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every env (or those of ``options["reset_mask"]``); see the class docstring."""
+        seeds = self._env_seeds(seed)
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        if mask is None:
+            mask = np.ones(self.num_envs, dtype=bool)
+        else:
+            mask = np.asarray(mask)
+            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
+                raise ValueError(
+                    f"options['reset_mask'] must be a bool array of shape ({self.num_envs},)"
+                )
+            if not self._has_reset and not np.all(mask):
+                raise ValueError("the first reset must reset every env (no reset_mask)")
+        self._reset_envs(mask, seeds, options)
+        self._has_reset = True
+        info = self._state_info()
+        # as SyncVectorEnv: zeros (and a False mask) where an env was not reset
+        for key in ("positions", "time", "diverged", "control", "running_cost"):
+            rows = mask.reshape((-1,) + (1,) * (info[key].ndim - 1))
+            info[key] = np.where(rows, info[key], np.zeros_like(info[key]))
+            info[f"_{key}"] = mask.copy()
+        return self._output(self._observations()), info
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Step every env once (NEXT_STEP: the envs that ended last step are reset instead)."""
+        if not self._has_reset:
+            raise RuntimeError("call reset() before step()")
+        b, p, xp = self.num_envs, self.config.n_paths, self._xp
+        n, d = self.config.params.n_agents, self.config.params.dim
+        resetting = self._autoreset.copy()
+        stepping = ~resetting
+        stepping_on_device = self._on_device(stepping)
+        controls = self._controls(actions, stepping_on_device)
+        x = self._positions
+
+        costs = mean_running_cost(x, controls, self._targets, self.config.params.gamma)
+        # Each env draws from its own generator, as its single twin does; the batch then
+        # moves to the device in one transfer.
+        dw = np.zeros((b, p, n, d))
+        for i in np.flatnonzero(stepping):
+            dw[i] = brownian_increments(self._rng(i), (p, n, d), self.dt)
+        with arrays.hot_path_threads():  # BLAS on one thread, as the single env's step
+            x_next, drift_next, diverged_on_device = advance_paths(
+                self.integrator,
+                self.model,
+                x,
+                controls,
+                self._on_device(self.times[:, None, None, None]),
+                self.dt,
+                self._on_device(dw),
+                self.config.divergence_threshold,
+            )
+        diverged = arrays.to_numpy(diverged_on_device) & stepping
+        moved = stepping & ~diverged
+        if np.all(moved):
+            self._positions, self._mean_drift = x_next, drift_next
+            self.step_index += 1
+        else:
+            # Diverged envs keep x^n (as the single env); the others take x^{n+1}. The drift
+            # of the assembled state is recomputed, which also caches L for the next step.
+            moved_on_device = self._on_device(moved)
+            self._positions = xp.where(moved_on_device[:, None, None, None], x_next, x)
+            self.step_index[moved] += 1
+            if np.any(resetting):
+                self._reset_envs(resetting, [None] * b, None)
+            else:
+                self._mean_drift = mean_interaction_drift(self.model, self._positions)
+
+        truncated = moved & (self.step_index >= self.config.n_steps)
+        terminated = diverged.copy()
+        rewards = arrays.to_numpy(xp.where(stepping_on_device, -self.dt * costs, 0.0))
+        observations = self._observations()
+        info = self._state_info()
+        info["diverged"] = diverged.copy()
+        # envs that autoreset in this call report their reset info: zero control and cost
+        control_rows = stepping_on_device[:, None, None]
+        info["control"] = arrays.to_numpy(xp.where(control_rows, controls, 0.0))
+        info["running_cost"] = arrays.to_numpy(xp.where(stepping_on_device, costs, 0.0))
+
+        ended = terminated | truncated
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and np.any(ended):
+            info = self._same_step_reset(ended, self._output(observations), info)
+            observations = self._observations()
+        else:
+            self._autoreset = ended
+        return (
+            self._output(observations),
+            self._output(rewards),
+            self._output(terminated),
+            self._output(truncated),
+            info,
+        )
+
+    def _same_step_reset(
+        self, ended: np.ndarray, observations: Any, info: dict[str, Any]
+    ) -> dict[str, Any]:
+        """Reset the ended envs now; their last observation and info go to final_obs/info."""
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        for i in np.flatnonzero(ended):
+            final_obs[i] = observations[i]
+        final_info = {}
+        for key in [k for k in info if not k.startswith("_")]:
+            rows = ended.reshape((-1,) + (1,) * (info[key].ndim - 1))
+            final_info[key] = np.where(rows, info[key], np.zeros_like(info[key]))
+            final_info[f"_{key}"] = info[f"_{key}"] & ended
+        self._reset_envs(ended, [None] * self.num_envs, None)
+        reset_info = self._state_info()
+        for key in ("positions", "time", "diverged", "control", "running_cost"):
+            info[key] = np.where(
+                ended.reshape((-1,) + (1,) * (info[key].ndim - 1)), reset_info[key], info[key]
+            )
+        info["final_obs"], info["_final_obs"] = final_obs, ended.copy()
+        info["final_info"], info["_final_info"] = final_info, ended.copy()
+        return info
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Nothing to release (no subprocesses, no renderer)."""
+
+
+def make_swarm_vector_env(num_envs: int = 1, **kwargs: Any) -> SwarmVectorEnv:
+    """`vector_entry_point` of `agent_envs/Swarm-v0`: `SwarmVectorEnv(num_envs, **kwargs)`."""
+    return SwarmVectorEnv(num_envs, **kwargs)
