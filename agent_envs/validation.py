@@ -160,8 +160,11 @@ def check_seed(seed: Any) -> int | None:
     return int(seed)
 
 
-def real_array(name: str, value: Any) -> np.ndarray:
+def real_array(name: str, value: Any, *, finite: bool = True) -> np.ndarray:
     """`value` as a finite float64 array; errors name `name`.
+
+    With ``finite=False`` only the dtype is checked (the caller checks finiteness where it
+    matters, e.g. on the rows of a vector env that step).
 
     Accepted: anything numpy turns into an array of a real numeric dtype (signed or unsigned
     integers, floats of any width), e.g. lists of Python numbers, numpy arrays, torch CPU
@@ -195,7 +198,7 @@ def real_array(name: str, value: Any) -> np.ndarray:
             result = arr.astype(np.float64)
     else:
         raise TypeError(f"{name} must hold real numbers (int or float dtype), got {arr.dtype}")
-    if not np.all(np.isfinite(result)):
+    if finite and not np.all(np.isfinite(result)):
         raise ValueError(f"{name} must be finite, got NaN or inf entries")
     return result
 

@@ -255,3 +255,27 @@ def test_cuda_gradient_is_finite():
     traj = simulate(SwarmParams(n_agents=30), n_steps=4, n_paths=3, seed=0, control=u)
     traj.positions.pow(2).sum().backward()
     assert torch.all(torch.isfinite(u.grad))
+
+
+def test_krylov_gradient_is_finite_when_some_columns_break_down():
+    """Agents on a line in d = 2: the second coordinate's Krylov column is zero and breaks
+    down at once while the first goes on; the gradient must stay finite (the Lanczos norm's
+    gradient at 0)."""
+    torch = pytest.importorskip("torch")
+    n = 60
+    x0 = np.zeros((n, 2))
+    x0[:, 0] = np.linspace(-1.0, 1.0, n)
+    u = torch.zeros((3, n, 2), dtype=torch.float64, requires_grad=True)
+    traj = simulate(
+        SwarmParams(n_agents=n, dim=2, sigma=0.0),
+        integrator="serb",
+        n_steps=3,
+        n_paths=1,
+        seed=0,
+        initial_positions=torch.as_tensor(x0),
+        control=u,
+        phi_method="krylov",
+    )
+    traj.positions.pow(2).sum().backward()
+    assert u.grad is not None
+    assert bool(torch.all(torch.isfinite(u.grad)))

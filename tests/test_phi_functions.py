@@ -119,3 +119,29 @@ def test_krylov_broadcasts_vectors_over_a_batch_of_matrices():
         got = phi_action(a, v, 1, method="krylov", symmetric=symmetric)
         ref = phi_action(a, np.broadcast_to(v, (3, 90, 1)), 1, method="expm")
         np.testing.assert_allclose(got, ref, rtol=1e-8, atol=1e-10)
+
+
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_a_member_that_does_not_converge_leaves_the_others_unchanged(symmetric):
+    """Only the failing batch member falls back to the dense method: the others keep exactly
+    the value they have when computed alone (one stiff path or env must not change the rest
+    of the batch)."""
+    rng = np.random.default_rng(3)
+    n = 100
+    q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    mild = (q * -np.linspace(0.0, 2.0, n)) @ q.T
+    stiff = (q * -np.logspace(0, 8, n)) @ q.T  # needs far more than 30 Krylov vectors
+    a = np.stack([mild, stiff])
+    a = 0.5 * (a + np.swapaxes(a, -1, -2))
+    if not symmetric:
+        a = a + 1e-3 * rng.normal(size=(n, n))
+    v = rng.normal(size=(n, 1))
+    kw = {"method": "krylov", "symmetric": symmetric, "max_krylov_dim": 30}
+    alone = phi_action(a[0], v, 1, **kw)
+    with pytest.warns(RuntimeWarning, match="1 of 2 matrices"):
+        batch = phi_action(a, v, 1, **kw)
+    np.testing.assert_array_equal(batch[0], alone)
+    dense = "eigh" if symmetric else "expm"
+    np.testing.assert_allclose(
+        batch[1], phi_action(a[1], v, 1, method=dense, symmetric=symmetric), rtol=1e-9
+    )

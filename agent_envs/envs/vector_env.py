@@ -58,6 +58,7 @@ from agent_envs.envs.observation import (
 from agent_envs.integrators import Integrator, make_integrator
 from agent_envs.integrators.phi_functions import auto_phi_method
 from agent_envs.simulator import brownian_increments
+from agent_envs.validation import check_seed, real_array
 
 #: Autoreset modes the native env implements (Gymnasium's names).
 AUTORESET_MODES = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
@@ -81,6 +82,15 @@ def single_env_phi_method(config: EpisodeConfig) -> str:
         symmetric = symmetric and bool(getattr(model.kernel, "radial", False))
         size *= config.params.dim
     return auto_phi_method(size, config.n_paths, symmetric)
+
+
+def _is_int(tensor: Any) -> bool:
+    """True for a torch tensor of a (non-bool) integer dtype."""
+    return (
+        not tensor.is_floating_point()
+        and not tensor.is_complex()
+        and str(tensor.dtype) != "torch.bool"
+    )
 
 
 class SwarmVectorEnv(VectorEnv):
@@ -253,9 +263,15 @@ class SwarmVectorEnv(VectorEnv):
     def _env_seeds(self, seed: SeedArg) -> list[int | None]:
         if seed is None:
             return [None] * self.num_envs
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            return [int(seed) + i for i in range(self.num_envs)]
-        seeds = list(seed)
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+            first = check_seed(seed)
+            return [first + i for i in range(self.num_envs)]
+        if not isinstance(seed, (list, tuple, np.ndarray)):
+            raise TypeError(
+                f"seed must be None, an integer >= 0 or a list of {self.num_envs} of them (one "
+                f"per env), got {type(seed).__name__}"
+            )
+        seeds = [check_seed(s) for s in seed]
         if len(seeds) != self.num_envs:
             raise ValueError(
                 f"seed as a list must have one entry per env (num_envs={self.num_envs}), "
@@ -342,15 +358,17 @@ class SwarmVectorEnv(VectorEnv):
         """
         b, xp = self.num_envs, self._xp
         n, d = self.config.params.n_agents, self.config.params.dim
-        if arrays.is_torch(actions) and self._device is not None:
-            arr = actions.to(device=self._device, dtype=self._positions.dtype)
+        if arrays.is_torch(actions):
+            if actions.is_complex() or not (actions.is_floating_point() or _is_int(actions)):
+                raise TypeError(f"actions must hold real numbers, got a tensor of {actions.dtype}")
+            if self._device is not None:
+                arr = actions.to(device=self._device, dtype=self._positions.dtype)
+            else:
+                arr = real_array("actions", arrays.to_numpy(actions.detach()), finite=False)
         else:
-            try:
-                arr = np.asarray(arrays.to_numpy(actions), dtype=np.float64)
-            except (TypeError, ValueError) as exc:
-                msg = f"actions must be an array of {b} x {n * d} real numbers: {exc}"
-                raise TypeError(msg) from None
-            arr = self._on_device(arr)
+            # the dtype is checked for every row; finiteness below only for the rows that step
+            # (an autoresetting env ignores its action, as SyncVectorEnv does)
+            arr = self._on_device(real_array("actions", actions, finite=False))
         if tuple(arr.shape) not in ((b, n * d), (b, n, d)):
             raise ValueError(
                 f"actions must have shape ({b}, {n * d}) or ({b}, {n}, {d}), got {tuple(arr.shape)}"
@@ -358,6 +376,8 @@ class SwarmVectorEnv(VectorEnv):
         arr = xp.reshape(arr, (b, n, d))
         if not bool(xp.all(xp.isfinite(arr[stepping]))):
             raise ValueError("actions must be finite, got NaN or inf entries")
+        # rows that do not step get no control at all, so a NaN there never reaches the batch
+        arr = xp.where(stepping[:, None, None], arr, 0.0)
         return self.config.max_control * xp.clip(arr, -1.0, 1.0)
 
     # ------------------------------------------------------------------ API

@@ -224,9 +224,7 @@ def _krylov_action(
             break
         if not m % check_every:  # the regular checks compare with the previous regular one
             prev = coeffs
-    if not np.all(converged):
-        return None
-    return _gather_members(xp, stopped, stacked, beta, batch)
+    return _gather_members(xp, stopped, stacked, beta, batch), converged
 
 
 def _lanczos_action(
@@ -271,10 +269,7 @@ def _lanczos_action(
     norm_inf = np.broadcast_to(
         arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1), axis=-1)), batch
     ).astype(np.float64)
-    first_check = np.array(
-        [max(2, min(max_dim, math.ceil(3.5 * math.sqrt(x)))) for x in norm_inf.reshape(-1)],
-        dtype=np.int64,
-    ).reshape(batch)
+    first_check = np.clip(np.ceil(3.5 * np.sqrt(norm_inf)), 2, max_dim).astype(np.int64)
     tiny = 1e-12 * (norm_inf + 1e-300)
     done = np.zeros(batch, dtype=bool)
     converged = np.zeros(batch, dtype=bool)
@@ -289,7 +284,7 @@ def _lanczos_action(
             # the three-term recurrence's b_{j-1} q_{j-1} term, with the coefficient computed
             # as the projection onto q_{j-1} (equal to b_{j-1} up to rounding)
             w = w - xp.vecdot(w, w_prev)[..., None] * w_prev
-        b = xp.sqrt(xp.vecdot(w, w))
+        b = xp.linalg.vector_norm(w, axis=-1)  # its gradient is 0 at 0 (sqrt is not)
         alphas.append(alpha)
         m = j + 1
         b_host = np.broadcast_to(arrays.to_numpy(b), (*batch, b.shape[-1]))
@@ -325,9 +320,8 @@ def _lanczos_action(
         betas.append(b)
         w_prev, q = q, w
         basis.append(q)
-    if not np.all(converged):
-        return None
-    return _gather_members(xp, stopped, xp.stack(basis[: max(stopped)], axis=-2), beta0, batch)
+    stacked = xp.stack(basis[: max(stopped)], axis=-2)
+    return _gather_members(xp, stopped, stacked, beta0, batch), converged
 
 
 def _gather_members(
@@ -433,19 +427,26 @@ def phi_action(
     if method == "expm":
         return _augmented_expm(a, v, order)
     if symmetric:
-        result = _lanczos_action(a, v, order, rtol, max_krylov_dim)
+        result, converged = _lanczos_action(a, v, order, rtol, max_krylov_dim)
     else:
-        result = _krylov_action(a, v, order, rtol, max_krylov_dim, symmetric)
-    if result is None and symmetric and max_krylov_dim >= a.shape[-1]:
-        # Lanczos ran through the whole space (n is small): the dense method is as cheap.
-        return _eigh_action(a, v, order)
-    if result is None:
-        fallback = "eigh" if symmetric else "expm"
+        result, converged = _krylov_action(a, v, order, rtol, max_krylov_dim, symmetric)
+    if np.all(converged):
+        return result
+    # Only the members that did not converge get the dense method: the others keep their
+    # Krylov values, so a batch member's result never depends on the other members.
+    if not (symmetric and max_krylov_dim >= a.shape[-1]):
+        # (when Lanczos ran through the whole space, n is small and the dense method as cheap)
         warnings.warn(
             f"Krylov phi-action did not reach rtol={rtol} within max_krylov_dim="
-            f"{max_krylov_dim} (matrix size {a.shape[-1]}); falling back to dense '{fallback}'",
+            f"{max_krylov_dim} (matrix size {a.shape[-1]}) for {int(np.sum(~converged))} of "
+            f"{converged.size} matrices; falling back to dense "
+            f"'{'eigh' if symmetric else 'expm'}' for those",
             RuntimeWarning,
             stacklevel=2,
         )
-        return _eigh_action(a, v, order) if symmetric else _augmented_expm(a, v, order)
-    return result
+    dense = _eigh_action(a, v, order) if symmetric else _augmented_expm(a, v, order)
+    if converged.ndim == 0 or not np.any(converged):
+        return dense
+    xp = arrays.namespace(result)
+    keep = arrays.asarray(converged, like=result) > 0.5
+    return xp.where(keep[..., None, None], result, dense)
