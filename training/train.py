@@ -26,10 +26,14 @@ A run directory ``{out}/{env}__{algo}__{seed}__{unix time}`` holds:
     final_model.zip + final_model_vecnormalize.pkl  at the end of training
     summary.json           timesteps, wall time, last validation result
     tb/                    TensorBoard logs
+    manifest.json          SHA-256 and size of every .zip and .pkl above
+    .lock                  empty; flock-ed while a process trains in the run
 
-Interrupting a run (Ctrl-C) saves a checkpoint first; ``--resume RUN_DIR`` continues from the
-last complete checkpoint (model, VecNormalize statistics, replay buffer, timesteps done, the
-learning curve up to that point).
+The folder is created with an exclusive ``os.mkdir`` (a second process gets a ValueError), and
+every file is written atomically (`agent_envs.training.storage`). Interrupting a run (Ctrl-C)
+saves a checkpoint first; ``--resume RUN_DIR`` continues from the newest checkpoint whose files
+are whole and match the manifest (model, VecNormalize statistics, replay buffer, timesteps done,
+the learning curve up to that point), skipping damaged newer ones with a message.
 """
 
 from __future__ import annotations
