@@ -470,6 +470,7 @@ def compare(config: CompareConfig) -> dict[str, Any]:
     """Run the whole comparison; returns paths and the summary table (see module docstring)."""
     from agent_envs.training.report import ReportSection, build_report, display_table
     from agent_envs.training.results import summarize
+    from agent_envs.training.storage import write_json_atomic
     from agent_envs.training.train import torch_threads
 
     started = time.perf_counter()
@@ -605,7 +606,7 @@ def compare(config: CompareConfig) -> dict[str, Any]:
         "training_wall_time_s": round(train_done - started, 1),
         "summary": json.loads(summary.to_json(orient="records")),
     }
-    (out / "comparison.json").write_text(json.dumps(record, indent=2) + "\n")
+    write_json_atomic(out / "comparison.json", record)
     print(table.to_string(index=False))
     print(f"report: {paths['markdown']} and {paths['html']} ({total:.0f} s in all)")
     return {"paths": paths, "summary": summary, "table": table, "record": record, "runs": run_dirs}

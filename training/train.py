@@ -108,12 +108,7 @@ def train(config: TrainConfig, callbacks: Sequence[Any] | None = None) -> Path:
         check_output_dir(config.out, "--out")
         description = env_description(eval_env_id(config), config.env_kwargs)
         run_dir = Path(config.out) / (config.run_name or default_run_name(config))
-        if (run_dir / "config.json").exists():
-            raise ValueError(
-                f"run directory {run_dir} exists; pass --resume {run_dir} to continue it or "
-                "choose another --run-name"
-            )
-        create_run_directory(run_dir)
+        create_run_directory(run_dir)  # exclusive: a second process stops here
         lock = RunLock(run_dir).acquire()
     try:
         with torch_threads(config.torch_threads):
