@@ -498,8 +498,7 @@ def _run_compare(args: argparse.Namespace) -> int:
     from agent_envs.training.compare import CompareConfig, compare
 
     config = config_from_namespace(CompareConfig, args)
-    config.validate()  # every option, the learners' configs and both envs, before training
-    try:
+    try:  # compare() validates every option, the learners' configs and both envs first
         compare(config)
     except KeyboardInterrupt:
         print("\ninterrupted; run the same command again to resume", file=sys.stderr)
