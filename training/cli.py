@@ -555,7 +555,8 @@ def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, command in SUBCOMMANDS.items():
-        sp = sub.add_parser(name, help=command.help, description=command.help)
+        shown = "agent-envs " + name.replace("reproduce-", "reproduce ")  # the alias users type
+        sp = sub.add_parser(name, help=command.help, description=command.help, prog=shown)
         if name == selected:
             command.add_arguments(sp)
     return parser
