@@ -12,6 +12,8 @@ import argparse
 import json
 import pathlib
 import pickle
+import subprocess
+import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -263,7 +265,7 @@ def test_battery_is_large_and_covers_every_option():
                 assert used & set(action.option_strings), (name, action.option_strings)
 
 
-@pytest.mark.filterwarnings("ignore")
+@pytest.mark.filterwarnings("error")  # a warning would be a second stderr line in a terminal
 @pytest.mark.parametrize(("argv", "mentions"), BATTERY, ids=[" ".join(a)[:60] for a, _ in BATTERY])
 def test_bad_invocation_is_one_line_and_exit_2(argv, mentions, files, tmp_path, capsys):
     out = tmp_path / "out"
@@ -286,6 +288,19 @@ def test_untrusted_statistics_are_never_unpickled(files, tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and not files["marker"].exists()
     assert f"{files['planted']}:{files['planted'].parent / 'final_model_vecnormalize.pkl'}" in err
+
+
+def test_the_script_prints_one_line_too(tmp_path):
+    """Out of process (imports of torch and SB3 included, no pytest capture): still one line."""
+    argv = ["train", "--device", "foo", "--out", str(tmp_path / "o")]
+    done = subprocess.run(
+        [sys.executable, "-m", "agent_envs.training.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and done.stderr.startswith("agent-envs train: error:")
 
 
 def test_help_still_exits_zero(capsys):
