@@ -24,7 +24,9 @@ def make_gym_env(
     try:
         return gym.make(env_id, **(env_kwargs or {}))
     except TypeError as exc:  # unknown or mistyped keyword: a user error, not a crash
-        raise ValueError(f"{option} {env_kwargs}: {exc}") from None
+        # gym.make re-raises the env's TypeError with the kwargs appended; show the env's own
+        original = exc.__context__ if isinstance(exc.__context__, TypeError) else exc
+        raise ValueError(f"{option} {env_kwargs}: {original}") from None
 
 
 def eval_env_id(config: TrainConfig) -> str:

@@ -130,7 +130,9 @@ def make_swarm_env(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> 
     try:
         env = gym.make(env_id, **dict(env_kwargs or {}))
     except TypeError as exc:
-        raise ValueError(f"--env-kwargs {dict(env_kwargs or {})}: {exc}") from None
+        # gym.make re-raises the env's TypeError with the kwargs appended; show the env's own
+        original = exc.__context__ if isinstance(exc.__context__, TypeError) else exc
+        raise ValueError(f"--env-kwargs {dict(env_kwargs or {})}: {original}") from None
     if not hasattr(env.unwrapped, "params"):
         env.close()
         raise ValueError(
