@@ -229,7 +229,8 @@ class TrainConfig:
     verbose: int = option_field(0, "SB3 verbosity (0, 1, 2)")
     resume: str | None = option_field(
         None,
-        "resume the run in this directory from its last checkpoint (its config.json is used; "
+        "resume the run in this directory from its newest checkpoint whose files match the run's "
+        "manifest.json (damaged newer ones are skipped, with a message; its config.json is used; "
         "--timesteps may raise the total)",
     )
 
