@@ -374,12 +374,10 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     )
     for name, desc in results.meta["policies"].items():
         if desc.get("kind") == "sb3":
+            from agent_envs.training.policies import STATISTICS_SOURCES
+
             used = desc.get("vecnormalize")
-            source = {
-                "named": "named on the command line",
-                "manifest": "SHA-256 verified against the run's manifest.json",
-                "rl-zoo3": "the rl-zoo3 run's statistics",
-            }.get(desc.get("vecnormalize_source"), "")
+            source = STATISTICS_SOURCES.get(desc.get("vecnormalize_source"), "")
             print(
                 f"{name}: VecNormalize statistics {used} ({source})"
                 if used

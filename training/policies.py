@@ -97,22 +97,22 @@ class ModelSpec:
         return cls(path, algo, statistics)
 
 
+#: Why a statistics file may be unpickled (`Statistics.source` -> the words `evaluate` prints).
+STATISTICS_SOURCES = {
+    "named": "named on the command line",
+    "manifest": "SHA-256 verified against the run's manifest.json",
+    "rl-zoo3": "the rl-zoo3 run's statistics",
+}
+
+
 @dataclass(frozen=True)
 class Statistics:
     """The VecNormalize statistics chosen for a model and why they may be unpickled."""
 
     path: Path
-    #: "named" (by the user), "manifest" (hash recorded by the run that wrote them) or
-    #: "rl-zoo3" (the statistics of the rl-zoo3 run the user named a model of)
+    #: a key of `STATISTICS_SOURCES`: "named" (by the user), "manifest" (hash recorded by the
+    #: run that wrote them) or "rl-zoo3" (the statistics of the rl-zoo3 run of the named model)
     source: str
-
-    def describe(self) -> str:
-        why = {
-            "named": "named on the command line",
-            "manifest": "SHA-256 verified against the run's manifest.json",
-            "rl-zoo3": "the rl-zoo3 run's statistics",
-        }[self.source]
-        return f"{self.path} ({why})"
 
 
 def own_run_candidates(model_path: str | os.PathLike) -> list[Path]:
