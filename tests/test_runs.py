@@ -29,6 +29,7 @@ from agent_envs.training.storage import (
     atomic_path,
     check_output_dir,
     create_run_directory,
+    remove_stale_temporaries,
     save_recorded,
     write_text_atomic,
 )
@@ -50,6 +51,24 @@ def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]  # no temp left
     write_text_atomic(path, "new")
     assert path.read_text() == "new"
+
+
+def test_temporaries_of_a_killed_writer_are_removed(tmp_path):
+    code = (
+        "import os, sys\n"
+        "from agent_envs.training.storage import atomic_path\n"
+        "with atomic_path(sys.argv[1]) as tmp:\n"
+        "    tmp.write_bytes(b'x' * 1000)\n"
+        "    os.kill(os.getpid(), 9)\n"
+    )
+    target = tmp_path / "rl_model_replay_buffer_100_steps.pkl"
+    done = subprocess.run([sys.executable, "-c", code, str(target)], timeout=120)
+    assert done.returncode == -9 and not target.exists()
+    (left,) = tmp_path.iterdir()  # the killed process could not clean up
+    assert left.name.startswith(".rl_model_replay_buffer_100_steps.pkl.tmp-")
+    (tmp_path / "keep.pkl").write_bytes(b"")
+    assert remove_stale_temporaries(tmp_path) == [left]
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.pkl"]
 
 
 def test_run_directory_is_created_exclusively_and_locked(tmp_path):

@@ -32,6 +32,8 @@ from typing import Any
 MANIFEST = "manifest.json"
 #: The lock file of a run directory (held while a process trains in it).
 LOCK = ".lock"
+#: Part of the name of every temporary file of `atomic_path` (``.NAME.tmp-RANDOM.SUFFIX``).
+TEMPORARY_MARK = ".tmp-"
 _MANIFEST_FORMAT = "agent-envs run manifest"
 _MANIFEST_VERSION = 1
 
@@ -147,7 +149,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     exception the temporary file is removed and `path` is left as it was.
     """
     final = Path(path)
-    fd, name = tempfile.mkstemp(dir=final.parent, prefix=f".{final.name}.", suffix=final.suffix)
+    fd, name = tempfile.mkstemp(
+        dir=final.parent, prefix=f".{final.name}{TEMPORARY_MARK}", suffix=final.suffix
+    )
     os.close(fd)
     tmp = Path(name)
     try:
@@ -158,6 +162,19 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Delete the temporary files `atomic_path` left in `folder` when its process was killed.
+
+    Call it only while holding the folder's run lock (no other process is writing there).
+    Returns the deleted paths.
+    """
+    stale = sorted(Path(folder).glob(f".*{TEMPORARY_MARK}*"))
+    for path in stale:
+        if path.is_file():
+            path.unlink()
+    return stale
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:

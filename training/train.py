@@ -61,6 +61,7 @@ from agent_envs.training.storage import (
     RunLock,
     check_output_dir,
     create_run_directory,
+    remove_stale_temporaries,
     write_json_atomic,
 )
 
@@ -192,6 +193,8 @@ def _train_in(
             f"{config.timesteps}); nothing to train"
         )
         return run_dir
+    for folder in (run_dir, run_dir / "checkpoints"):  # left by a killed run; we hold the lock
+        remove_stale_temporaries(folder)
     stored = {**config.to_dict(), "resume": None}
     write_json_atomic(run_dir / "config.json", stored)
     write_json_atomic(run_dir / "env.json", description)
