@@ -3,7 +3,9 @@
 Run from outside the repository so that the installed wheel, not the source tree, is imported.
 """
 
+import subprocess
 import sys
+import tempfile
 
 import gymnasium as gym
 
@@ -34,4 +36,19 @@ traj = simulate(SwarmParams(n_agents=8), n_steps=4, n_paths=2, seed=0)
 assert not traj.diverged
 bad = sorted(m for m in ("torch", "stable_baselines3", "pandas") if m in sys.modules)
 assert not bad, bad
+
+# The command line: the core-only subcommand works, the others say which extra to install.
+cli = [sys.executable, "-m", "agent_envs.training.cli"]
+with tempfile.TemporaryDirectory() as tmp:
+    done = subprocess.run(
+        [*cli, "reproduce", "uncontrolled", "--n-agents", "3", "--n-paths", "1", "--out", "u"],
+        cwd=tmp,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    done = subprocess.run([*cli, "evaluate", "--out", "e"], cwd=tmp, capture_output=True, text=True)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 1 and len(lines) == 1, done.stderr
+    assert 'pip install "agent-envs[train]"' in lines[0], lines
 print(f"minimal install OK: agent_envs {agent_envs.__version__}, episode cost {-total:.4f}")

@@ -95,7 +95,7 @@ def _torch_xp() -> Any:
 
 def is_torch(x: Any) -> bool:
     """True for a torch tensor (never imports torch)."""
-    return "torch" in sys.modules and is_torch_array(x)
+    return sys.modules.get("torch") is not None and is_torch_array(x)
 
 
 def namespace(*arrays: Any) -> Any:

@@ -15,7 +15,13 @@ from agent_envs.training.cli import main as cli_main
 from agent_envs.training.cli import parse_policy_specs, parse_seeds
 from agent_envs.training.defaults import parse_env_kwargs
 from agent_envs.training.evaluate import evaluate_policies, rollout
-from agent_envs.training.policies import PerAgentPolicy, detect_algo, find_vecnormalize
+from agent_envs.training.policies import (
+    ModelSpec,
+    PerAgentPolicy,
+    detect_algo,
+    find_statistics,
+    own_run_candidates,
+)
 from agent_envs.training.report import ReportSection, build_report
 from agent_envs.training.results import EvaluationResults, mean_confidence_interval, summarize
 
@@ -126,17 +132,18 @@ def test_saved_sb3_model_with_vecnormalize_evaluates(tmp_path):
     model.learn(12)
     model.save(tmp_path / "best_model")
     venv.save(str(tmp_path / "vecnormalize.pkl"))
-    assert find_vecnormalize(tmp_path / "best_model.zip") == tmp_path / "vecnormalize.pkl"
+    stats = tmp_path / "vecnormalize.pkl"
+    # statistics next to a model that no run manifest vouches for are refused, not unpickled
+    with pytest.raises(ValueError, match="refusing to load the statistics"):
+        find_statistics(ModelSpec.parse(tmp_path / "best_model.zip"))
+    named = find_statistics(ModelSpec.parse(f"{tmp_path / 'best_model.zip'}:{stats}"))
+    assert (named.path, named.source) == (stats, "named")
     assert detect_algo(tmp_path / "best_model.zip") == "ppo"
-    # training's names: best_model.zip + best_vecnormalize.pkl; checkpoints as CheckpointCallback
-    (tmp_path / "best_vecnormalize.pkl").write_bytes(b"")
-    assert find_vecnormalize(tmp_path / "best_model.zip") == tmp_path / "best_vecnormalize.pkl"
-    (tmp_path / "best_vecnormalize.pkl").unlink()
-    ck = tmp_path / "checkpoints"
-    ck.mkdir()
-    (ck / "rl_model_vecnormalize_64_steps.pkl").write_bytes(b"")
-    assert (
-        find_vecnormalize(ck / "rl_model_64_steps.zip") == ck / "rl_model_vecnormalize_64_steps.pkl"
+    # training's names: best_model.zip + best_model_vecnormalize.pkl; checkpoints as
+    # CheckpointCallback names them
+    assert own_run_candidates(tmp_path / "best_model.zip")[0].name == "best_model_vecnormalize.pkl"
+    assert own_run_candidates(tmp_path / "checkpoints" / "rl_model_64_steps.zip")[1].name == (
+        "rl_model_vecnormalize_64_steps.pkl"
     )
     SAC("MlpPolicy", gym.make(ENV_ID, **SMALL), device="cpu").save(tmp_path / "sac")
     A2C("MlpPolicy", gym.make(ENV_ID, **SMALL), device="cpu").save(tmp_path / "a2c")
@@ -148,8 +155,8 @@ def test_saved_sb3_model_with_vecnormalize_evaluates(tmp_path):
     )
     res = evaluate_policies(
         {
-            "ppo": str(tmp_path / "best_model.zip"),
-            "ppo2": f"ppo:{tmp_path / 'best_model'}",
+            "ppo": f"{tmp_path / 'best_model.zip'}:{stats}",
+            "ppo2": f"ppo:{tmp_path / 'best_model'}:{stats}",
             "ma": str(tmp_path / "shared" / "ma_ppo.zip"),
             "turnpike": "turnpike",
         },
@@ -158,11 +165,13 @@ def test_saved_sb3_model_with_vecnormalize_evaluates(tmp_path):
         seeds=[0, 1],
         progress=False,
     )
-    assert res.meta["policies"]["ppo"]["vecnormalize"].endswith("vecnormalize.pkl")
+    assert res.meta["policies"]["ppo"]["vecnormalize"] == str(stats)
+    assert res.meta["policies"]["ppo"]["vecnormalize_source"] == "named"
     assert res.meta["policies"]["ma"].get("per_agent") is True
     assert np.all(np.isfinite(res.episodes["total_cost"]))
     ppo = res.episodes[res.episodes.policy == "ppo"]["total_cost"].to_numpy()
     np.testing.assert_array_equal(ppo, res.episodes[res.episodes.policy == "ppo2"]["total_cost"])
+    stats.unlink()
     with pytest.raises(ValueError, match="expects observations"):
         evaluate_policies(
             {"bad": str(tmp_path / "sac.zip")},

@@ -33,8 +33,9 @@ import numpy as np
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from agent_envs.training.checkpoints import BEST_MODEL, BEST_VECNORMALIZE
+from agent_envs.training.checkpoints import BEST_MODEL, save_model_with_statistics
 from agent_envs.training.results import mean_confidence_interval
+from agent_envs.training.storage import atomic_path
 
 
 def mean_ci95(values: np.ndarray) -> tuple[float, float]:
@@ -177,12 +178,13 @@ class SwarmEvalCallback(EvalCallback):
         # resumed curve keeps only means. ep_lengths holds the nominal episode length m.
         means = np.array([[np.mean(r)] for r in self.evaluations_results])
         n_steps = int(self.eval_env.get_attr("n_steps")[0])
-        np.savez(
-            self.log_path,
-            timesteps=np.array(self.evaluations_timesteps),
-            results=means,
-            ep_lengths=np.full(means.shape, n_steps),
-        )
+        with atomic_path(f"{self.log_path}.npz") as tmp:
+            np.savez(
+                tmp,
+                timesteps=np.array(self.evaluations_timesteps),
+                results=means,
+                ep_lengths=np.full(means.shape, n_steps),
+            )
         self.last_mean_reward = -mean
         self.logger.record("eval/mean_reward", -mean)
         self.logger.record("eval/cost", mean)
@@ -202,10 +204,7 @@ class SwarmEvalCallback(EvalCallback):
             )
         if -mean > self.best_mean_reward:
             self.best_mean_reward = -mean
-            self.model.save(self.run_dir / BEST_MODEL)
-            stats = self.model.get_vec_normalize_env()
-            if stats is not None:
-                stats.save(str(self.run_dir / BEST_VECNORMALIZE))
+            save_model_with_statistics(self.model, self.run_dir, BEST_MODEL)
         return row
 
     def _write_curve(self) -> None:
@@ -217,7 +216,7 @@ def write_learning_curve(path: str | os.PathLike, rows: list[dict[str, Any]]) ->
     keys: list[str] = []
     for row in rows:
         keys.extend(k for k in row if k not in keys)
-    with open(path, "w", newline="") as handle:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=keys)
         writer.writeheader()
         writer.writerows(rows)

@@ -10,8 +10,11 @@ Conventions shared by every subcommand:
 - ``--env-kwargs`` (and every other JSON-object option) is one JSON object, e.g.
   ``--env-kwargs '{"n_agents": 20, "integrator": "em"}'``
   (`agent_envs.training.defaults.parse_env_kwargs`);
-- a bad input (ValueError, TypeError, a missing file) prints one line
-  ``agent-envs COMMAND: error: ...`` on stderr and exits with 2; Ctrl-C exits with 130.
+- every subcommand checks all its inputs before it does any work (trains, simulates, writes);
+- a bad input (an argparse error, a ValueError / TypeError / OSError, a gymnasium error) prints
+  one line ``agent-envs COMMAND: error: ...`` on stderr and exits with 2, never a traceback;
+- a subcommand that needs the ``train`` extra (torch, SB3, pandas, ...) on an install without
+  it prints one line naming the extra and exits with 1; Ctrl-C exits with 130.
 """
 
 from __future__ import annotations
@@ -25,6 +28,29 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+#: Modules of the ``train`` extra: a missing one is reported as the missing extra.
+TRAIN_EXTRA_MODULES = frozenset(
+    {"torch", "stable_baselines3", "pandas", "tqdm", "supersuit", "tensorboard", "rich"}
+)
+#: The most seeds one command line may list (a typo like 0:10**12 is an error, not an OOM).
+MAX_SEEDS = 100_000
+
+
+class UsageError(Exception):
+    """A command-line error: printed as one line, exit code 2."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with the project's one error path: an error is a `UsageError` (one line).
+
+    argparse's own `error` prints the usage block and exits; here the message is raised so
+    that `main` prints it as the one line ``agent-envs COMMAND: error: ...``. Subparsers are
+    of this class too (argparse creates them with the parent's class).
+    """
+
+    def error(self, message: str):  # type: ignore[override]
+        raise UsageError(f"{self.prog}: error: {message} (see {self.prog} --help)")
 
 
 @dataclass(frozen=True)
@@ -102,7 +128,28 @@ def _uncontrolled_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the start and noise (0)")
 
 
+def _check_sizes(args: argparse.Namespace) -> None:
+    """--n-agents, --n-paths (and --n-steps) within the core's accepted sizes."""
+    from agent_envs.validation import MAX_AGENTS, MAX_BATCH_SIZE, MAX_PATHS, MAX_STEPS, check_int
+
+    check_int("--n-agents", args.n_agents, 1, MAX_AGENTS)
+    check_int("--n-paths", args.n_paths, 1, MAX_PATHS)
+    if getattr(args, "n_steps", None) is not None:
+        check_int("--n-steps", args.n_steps, 1, MAX_STEPS)
+    if args.n_agents * args.n_paths > MAX_BATCH_SIZE:
+        raise ValueError(
+            f"--n-agents times --n-paths must be <= {MAX_BATCH_SIZE}, got "
+            f"{args.n_agents} x {args.n_paths}"
+        )
+
+
 def _run_uncontrolled(args: argparse.Namespace) -> int:
+    from agent_envs.training.storage import check_output_dir
+
+    _check_sizes(args)
+    if args.seed < 0:
+        raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
+    check_output_dir(args.out)
     from agent_envs.training.experiments.uncontrolled import markdown_table, reproduce
 
     rows = reproduce(args.out, args.n_agents, args.n_paths, args.seed)
@@ -146,6 +193,15 @@ def _turnpike_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_turnpike(args: argparse.Namespace) -> int:
+    from agent_envs.training.storage import check_output_dir
+
+    _check_sizes(args)
+    for seed in args.seeds:
+        if seed < 0:
+            raise ValueError(f"--seeds must be integers >= 0, got {seed}")
+    if len(set(args.seeds)) != len(args.seeds):
+        raise ValueError(f"--seeds lists a seed twice: {args.seeds}")
+    check_output_dir(args.out)
     import pandas as pd
 
     from agent_envs.training.experiments.turnpike_controlled import TABLE_COLUMNS, reproduce
@@ -174,11 +230,12 @@ def _run_turnpike(args: argparse.Namespace) -> int:
 def parse_seeds(items: Sequence[str] | None) -> list[int]:
     """Seeds from items like ``0 1 2``, ``0-19`` (inclusive) or ``0:20`` (half-open).
 
-    None or no items: the held-out test seeds `defaults.DEFAULT_TEST_SEEDS`.
+    None or no items: the held-out test seeds `defaults.DEFAULT_TEST_SEEDS`. Raises ValueError
+    naming --seeds for anything else, a negative seed, an empty range or more than `MAX_SEEDS`.
     """
     from agent_envs.training.defaults import DEFAULT_TEST_SEEDS
 
-    if not items:
+    if items is None:
         return list(DEFAULT_TEST_SEEDS)
     seeds: list[int] = []
     for item in items:
@@ -186,23 +243,38 @@ def parse_seeds(items: Sequence[str] | None) -> list[int]:
             part = part.strip()
             if not part:
                 continue
-            if ":" in part:
-                a, b = part.split(":", 1)
-                seeds.extend(range(int(a), int(b)))
-            elif re.fullmatch(r"\d+-\d+", part):
-                a, b = part.split("-", 1)
-                seeds.extend(range(int(a), int(b) + 1))
+            match = re.fullmatch(r"(\d+)(?:([-:])(\d+))?", part)
+            if match is None:
+                raise ValueError(
+                    f"--seeds: {part!r} is not a seed (an integer >= 0), a range A-B (inclusive) "
+                    "or A:B (half-open)"
+                )
+            low = int(match.group(1))
+            if match.group(2) is None:
+                span = range(low, low + 1)
             else:
-                seeds.append(int(part))
+                high = int(match.group(3)) + (1 if match.group(2) == "-" else 0)
+                span = range(low, high)
+                if not span:
+                    raise ValueError(f"--seeds: the range {part!r} is empty")
+            if len(seeds) + len(span) > MAX_SEEDS:
+                raise ValueError(f"--seeds: more than {MAX_SEEDS} seeds")
+            seeds.extend(span)
+    if not seeds:
+        raise ValueError("--seeds: no seed given (leave the option out for 10000-10019)")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError("--seeds lists a seed twice")
     return seeds
 
 
 def parse_policy_specs(items: Sequence[str] | None) -> dict[str, str]:
     """``NAME=SPEC`` or ``SPEC`` items -> {name: spec} (a bare path is named by its file stem).
 
-    None or no items: the three reference controllers.
+    A SPEC is a baseline name or ``[ALGO:]MODEL.zip[:STATS.pkl]``. None or no items: the three
+    reference controllers.
     """
     from agent_envs.training.defaults import BASELINE_POLICIES
+    from agent_envs.training.policies import ModelSpec
 
     if not items:
         return {name: name for name in BASELINE_POLICIES}
@@ -212,9 +284,11 @@ def parse_policy_specs(items: Sequence[str] | None) -> dict[str, str]:
             name, spec = item.split("=", 1)
         else:
             spec = item
-            name = Path(item.split(":", 1)[-1]).stem if item not in BASELINE_POLICIES else item
+            name = item if item in BASELINE_POLICIES else ModelSpec.parse(item).path.stem
+        if not name or not spec:
+            raise ValueError(f"--policy {item!r}: write NAME=SPEC or SPEC")
         if name in out:
-            raise ValueError(f"policy name {name!r} given twice; use NAME=SPEC to rename")
+            raise ValueError(f"--policy name {name!r} given twice; use NAME=SPEC to rename")
         out[name] = spec
     return out
 
@@ -229,8 +303,10 @@ def _evaluate_arguments(parser: argparse.ArgumentParser) -> None:
         dest="policies",
         metavar="[NAME=]SPEC",
         help="a baseline (turnpike | proportional | zero) or a saved SB3 model PATH.zip "
-        "(ALGO:PATH to name the algorithm); repeat for several. Default: turnpike, proportional, "
-        "zero.",
+        "(ALGO:PATH to name the algorithm, PATH.zip:STATS.pkl to name its VecNormalize "
+        "statistics; statistics are found by themselves only in a run folder of agent-envs "
+        "train, checked against its manifest.json, or of rl-zoo3); repeat for several. Default: "
+        "turnpike, proportional, zero.",
     )
     parser.add_argument("--env-id", default=GYM_ENV_ID, help="Gymnasium env id")
     parser.add_argument(
@@ -259,17 +335,33 @@ def _evaluate_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
-    import pandas as pd
-
-    from agent_envs.training.defaults import parse_env_kwargs
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.report import build_report, display_table
-    from agent_envs.training.results import summarize
+    from agent_envs.training.defaults import BASELINE_POLICIES, check_env_id, parse_env_kwargs
+    from agent_envs.training.storage import check_output_dir
+    from agent_envs.validation import check_positive, check_real
 
     policies = parse_policy_specs(args.policies)
     env_kwargs = parse_env_kwargs(args.env_kwargs)
     seeds = parse_seeds(args.seeds)
+    check_env_id(args.env_id)
+    if args.target is not None:
+        check_real("--target", args.target)
+    check_positive("--beta", args.beta)
+    check_positive("--delta", args.delta)
+    check_output_dir(args.out)
+    if any(spec not in BASELINE_POLICIES for spec in policies.values()):
+        from agent_envs.training.policies import check_model
+
+        for spec in policies.values():
+            if spec not in BASELINE_POLICIES:
+                check_model(spec)  # the file, its algorithm, its statistics (nothing unpickled)
+    import pandas as pd
+
+    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.report import build_report, display_table
+    from agent_envs.training.results import summarize
+
     options = {"target": args.target} if args.target is not None else None
+    # evaluate_policies resolves every policy and makes every env before the first episode
     results = evaluate_policies(
         policies,
         args.env_id,
@@ -280,6 +372,17 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         out_dir=args.out,
     )
+    for name, desc in results.meta["policies"].items():
+        if desc.get("kind") == "sb3":
+            from agent_envs.training.policies import STATISTICS_SOURCES
+
+            used = desc.get("vecnormalize")
+            source = STATISTICS_SOURCES.get(desc.get("vecnormalize_source"), "")
+            print(
+                f"{name}: VecNormalize statistics {used} ({source})"
+                if used
+                else f"{name}: no VecNormalize statistics (observations used as they are)"
+            )
     reference = "turnpike" if "turnpike" in policies else None
     table = display_table(summarize(results.episodes, reference), reference)
     with pd.option_context("display.width", 200, "display.max_columns", 20):
@@ -302,26 +405,44 @@ def _report_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--title", default="Swarm control: policy evaluation")
     parser.add_argument(
         "--reference",
-        default=DEFAULT_REFERENCE,
-        help=f"policy the cost ratios refer to (default: {DEFAULT_REFERENCE})",
+        default=None,
+        help=f"policy the cost ratios refer to (default: {DEFAULT_REFERENCE} when evaluated)",
     )
-    parser.add_argument("--seed-index", type=int, default=0, help="seed shown in trajectories")
+    parser.add_argument(
+        "--seed-index",
+        type=int,
+        default=0,
+        help="which of the evaluated seeds (0 = the first) the trajectory plot shows",
+    )
 
 
 def _run_report(args: argparse.Namespace) -> int:
+    from agent_envs.training.storage import check_output_dir
+
+    check_output_dir(args.out)
     import pandas as pd
 
     from agent_envs.training.report import build_report, display_table
+    from agent_envs.training.results import DEFAULT_REFERENCE, EvaluationResults, merge_results
 
+    loaded = [EvaluationResults.load(path) for path in args.results]
+    merged = merge_results(loaded)
+    if args.reference is not None and args.reference not in merged.policies:
+        raise ValueError(
+            f"--reference {args.reference!r} is not an evaluated policy; the results hold "
+            f"{', '.join(merged.policies)}"
+        )
+    reference = args.reference or DEFAULT_REFERENCE
     paths = build_report(
-        list(args.results),
+        loaded,
         args.out,
         title=args.title,
-        reference=args.reference,
+        reference=reference,
         seed_index=args.seed_index,
     )
     summary = pd.read_csv(paths["summary"])
-    print(display_table(summary, args.reference).to_string(index=False))
+    shown = reference if reference in merged.policies else None
+    print(display_table(summary, shown).to_string(index=False))
     print(f"report: {paths['markdown']} and {paths['html']}")
     return 0
 
@@ -375,8 +496,7 @@ def _run_compare(args: argparse.Namespace) -> int:
     from agent_envs.training.compare import CompareConfig, compare
 
     config = config_from_namespace(CompareConfig, args)
-    config.selected_learners()
-    try:
+    try:  # compare() validates every option, the learners' configs and both envs first
         compare(config)
     except KeyboardInterrupt:
         print("\ninterrupted; run the same command again to resume", file=sys.stderr)
@@ -427,16 +547,41 @@ def _normalise(argv: list[str]) -> list[str]:
 
 def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
     """The parser; only `selected`'s options are filled in (they may import its modules)."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="agent-envs",
         description="Stochastic, stiff swarm environments, the turnpike controller and learners.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, command in SUBCOMMANDS.items():
-        sp = sub.add_parser(name, help=command.help, description=command.help)
+        shown = "agent-envs " + name.replace("reproduce-", "reproduce ")  # the alias users type
+        sp = sub.add_parser(name, help=command.help, description=command.help, prog=shown)
         if name == selected:
             command.add_arguments(sp)
     return parser
+
+
+def user_error_types() -> tuple[type[BaseException], ...]:
+    """The exceptions that mean "bad input": reported as one line with exit code 2."""
+    import gymnasium
+
+    return (ValueError, TypeError, OSError, gymnasium.error.Error)
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception's message on one line (its type when it has none)."""
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
+def missing_extra(exc: ModuleNotFoundError) -> str | None:
+    """The one-line message for a module of the ``train`` extra that is not installed."""
+    top = (exc.name or "").split(".")[0]
+    if top not in TRAIN_EXTRA_MODULES:
+        return None
+    return (
+        f"this command needs the 'train' extra (module {top!r} is not installed): "
+        'pip install "agent-envs[train]"'
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -444,23 +589,37 @@ def main(argv: Sequence[str] | None = None) -> int:
     args_list = _normalise(list(sys.argv[1:] if argv is None else argv))
     if args_list and args_list[0] == "reproduce":
         print(
-            f"usage: agent-envs reproduce {{{','.join(REPRODUCTIONS)}}} [--out DIR] ...",
+            f"agent-envs reproduce: error: name an experiment: agent-envs reproduce "
+            f"{{{','.join(REPRODUCTIONS)}}} [--out DIR] ...",
             file=sys.stderr,
         )
         return 2
     selected = next((a for a in args_list if a in SUBCOMMANDS), None)
-    parser = build_parser(selected)
-    args = parser.parse_args(args_list)
-    if args.command is None:
-        parser.print_help()
-        return 2
+    command = selected or "agent-envs"
     try:
+        parser = build_parser(selected)
+        args = parser.parse_args(args_list)
+        if args.command is None:
+            parser.print_help()
+            return 2
+        command = args.command.replace("reproduce-", "reproduce ")
         return int(SUBCOMMANDS[args.command].run(args) or 0)
-    except (ValueError, TypeError, FileNotFoundError) as exc:
-        print(f"agent-envs {args.command}: error: {exc}", file=sys.stderr)
+    except UsageError as exc:
+        print(one_line(exc), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+    except ModuleNotFoundError as exc:
+        message = missing_extra(exc)
+        if message is None:
+            raise
+        print(f"agent-envs {command}: error: {message}", file=sys.stderr)
+        return 1
+    except Exception as exc:
+        if not isinstance(exc, user_error_types()):
+            raise
+        print(f"agent-envs {command}: error: {one_line(exc)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ every policy also on that modified env, e.g. policies trained with Euler-Maruyam
 from __future__ import annotations
 
 import json
+import math
 import shlex
 import time
 from dataclasses import dataclass, field, fields, replace
@@ -127,6 +128,10 @@ PRESETS: dict[str, Preset] = {
 }
 
 
+#: Largest --timesteps-scale (the paper preset's budgets times this stay far below 10**12).
+MAX_TIMESTEPS_SCALE = 1000.0
+
+
 @dataclass
 class CompareConfig:
     """Options of `agent-envs compare` (one field = one option)."""
@@ -172,10 +177,41 @@ class CompareConfig:
         self.eval_env_kwargs = parse_env_kwargs(self.eval_env_kwargs, "--eval-env-kwargs")
         if self.preset not in PRESETS:
             raise ValueError(f"--preset must be one of {', '.join(PRESETS)}; got {self.preset!r}")
-        if not (isinstance(self.timesteps_scale, (int, float)) and self.timesteps_scale > 0):
-            raise ValueError(f"--timesteps-scale must be > 0, got {self.timesteps_scale!r}")
-        if self.test_episodes is not None and self.test_episodes < 2:
-            raise ValueError(f"--test-episodes must be >= 2, got {self.test_episodes}")
+        if not (
+            isinstance(self.timesteps_scale, (int, float))
+            and not isinstance(self.timesteps_scale, bool)
+            and math.isfinite(self.timesteps_scale)
+            and 0 < self.timesteps_scale <= MAX_TIMESTEPS_SCALE
+        ):
+            raise ValueError(
+                f"--timesteps-scale must be a number in (0, {MAX_TIMESTEPS_SCALE}], "
+                f"got {self.timesteps_scale!r}"
+            )
+        if self.test_episodes is not None and not 2 <= self.test_episodes <= 100_000:
+            raise ValueError(
+                f"--test-episodes must be an integer in [2, 100000], got {self.test_episodes}"
+            )
+
+    def validate(self) -> CompareConfig:
+        """Check everything before the first learner trains; returns self.
+
+        The output folder, every selected learner's training configuration (hyperparameters,
+        seed, torch threads, ...), and the env with ``--env-kwargs`` and with
+        ``--eval-env-kwargs`` (both are built once).
+        """
+        from agent_envs.training.environments import env_description
+        from agent_envs.training.storage import check_output_dir
+
+        check_output_dir(self.out_dir, "--out")
+        learners = self.selected_learners()
+        runs_dir = self.out_dir / "runs"
+        for learner in learners:
+            learner_config(self, learner, runs_dir)  # validates the TrainConfig
+        env_kwargs = {**PRESETS[self.preset].env_kwargs, **self.env_kwargs}
+        env_description(GYM_ENV_ID, env_kwargs)
+        if self.eval_env_kwargs:
+            env_description(GYM_ENV_ID, {**env_kwargs, **self.eval_env_kwargs}, "--eval-env-kwargs")
+        return self
 
     @property
     def out_dir(self) -> Path:
@@ -183,14 +219,15 @@ class CompareConfig:
 
     def selected_learners(self) -> list[Learner]:
         preset = PRESETS[self.preset]
-        if not self.learners:
+        if self.learners is None:
             return list(preset.learners)
         by_name = {learner.name: learner for learner in preset.learners}
         names = [n.strip() for n in self.learners.split(",") if n.strip()]
         unknown = [n for n in names if n not in by_name]
-        if unknown:
+        if unknown or not names or len(set(names)) != len(names):
             raise ValueError(
-                f"--learners: unknown {unknown}; the {self.preset} preset has {', '.join(by_name)}"
+                f"--learners must list distinct learners of the {self.preset} preset "
+                f"({', '.join(by_name)}), comma-separated; got {self.learners!r}"
             )
         return [by_name[n] for n in names]
 
@@ -433,9 +470,11 @@ def compare(config: CompareConfig) -> dict[str, Any]:
     """Run the whole comparison; returns paths and the summary table (see module docstring)."""
     from agent_envs.training.report import ReportSection, build_report, display_table
     from agent_envs.training.results import summarize
+    from agent_envs.training.storage import write_json_atomic
     from agent_envs.training.train import torch_threads
 
     started = time.perf_counter()
+    config.validate()
     preset = PRESETS[config.preset]
     learners = config.selected_learners()
     out = config.out_dir
@@ -567,7 +606,7 @@ def compare(config: CompareConfig) -> dict[str, Any]:
         "training_wall_time_s": round(train_done - started, 1),
         "summary": json.loads(summary.to_json(orient="records")),
     }
-    (out / "comparison.json").write_text(json.dumps(record, indent=2) + "\n")
+    write_json_atomic(out / "comparison.json", record)
     print(table.to_string(index=False))
     print(f"report: {paths['markdown']} and {paths['html']} ({total:.0f} s in all)")
     return {"paths": paths, "summary": summary, "table": table, "record": record, "runs": run_dirs}

@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ from agent_envs.training.defaults import (
     parse_env_kwargs,
     parse_json_object,
 )
+from agent_envs.training.sb3_arguments import NOISE_KEYS, check_hyperparams
 
 #: The training wrapper that makes the end of the horizon terminal (see
 #: agent_envs.training.wrappers).
@@ -39,10 +41,12 @@ HORIZON_WRAPPER = "agent_envs.training.wrappers.HorizonAsTermination"
 #: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
 #: (rl-zoo3 reads them itself).
 ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "env_wrapper")
-#: rl-zoo3 keys turned into an SB3 action-noise object (TD3).
-NOISE_KEYS = ("noise_type", "noise_std")
 #: `--vec-env` choices: SB3 VecEnvs of the training envs (native: NativeVecEnv, one batch).
 VEC_ENV_CHOICES = ("native", "dummy", "subproc")
+#: Largest --timesteps (and evaluation / checkpoint period) accepted.
+MAX_TIMESTEPS = 10**12
+#: Largest seed: SB3 seeds numpy's legacy global generator, which takes 32-bit seeds.
+MAX_SEED = 2**32 - 1
 
 # Measured on N = 10, m = 20 (README.md, "Training agents"): the good controls are small next
 # to max_control (the proportional control 12 (xbar - x) is ~10% of it), so the policies start
@@ -229,7 +233,8 @@ class TrainConfig:
     verbose: int = option_field(0, "SB3 verbosity (0, 1, 2)")
     resume: str | None = option_field(
         None,
-        "resume the run in this directory from its last checkpoint (its config.json is used; "
+        "resume the run in this directory from its newest checkpoint whose files match the run's "
+        "manifest.json (damaged newer ones are skipped, with a message; its config.json is used; "
         "--timesteps may raise the total)",
     )
 
@@ -238,29 +243,53 @@ class TrainConfig:
         self.hyperparams = parse_json_object(self.hyperparams, "--hyperparams")
 
     def validate(self) -> TrainConfig:
-        """Check every option; raise ValueError naming the option. Returns self."""
+        """Check every option; raise ValueError/TypeError naming the option. Returns self.
+
+        Imports torch and SB3 (for --device and --hyperparams); creates nothing.
+        """
         self.algo = check_algo(self.algo)
         check_env_id(self.env_id)
-        for name in ("timesteps",):
-            _check_int(name, getattr(self, name), 1)
-        for name in ("eval_freq", "checkpoint_freq", "seed", "eval_seed", "verbose"):
-            _check_int(name, getattr(self, name), 0)
-        for name in ("torch_threads",):
-            _check_int(name, getattr(self, name), 0)
-        _check_int("eval_episodes", self.eval_episodes, 1)
+        if self.env_id not in (GYM_ENV_ID, PETTINGZOO_ENV_ID):
+            raise ValueError(
+                f"--env-id {self.env_id!r} is not a swarm env; agent-envs train trains on "
+                f"{GYM_ENV_ID!r} (one controller) or {PETTINGZOO_ENV_ID!r} (one agent per member)"
+            )
+        _check_int("timesteps", self.timesteps, 1, MAX_TIMESTEPS)
+        for name in ("eval_freq", "checkpoint_freq"):
+            _check_int(name, getattr(self, name), 0, MAX_TIMESTEPS)
+        for name in ("seed", "eval_seed"):
+            _check_int(name, getattr(self, name), 0, MAX_SEED)
+        _check_int("verbose", self.verbose, 0, 2)
+        _check_int("torch_threads", self.torch_threads, 0, 1024)
+        _check_int("eval_episodes", self.eval_episodes, 1, 10_000)
         if self.n_envs is not None:
-            _check_int("n_envs", self.n_envs, 1)
+            _check_int("n_envs", self.n_envs, 1, 1024)
         if self.vec_env not in VEC_ENV_CHOICES:
             raise ValueError(f"--vec-env must be one of {VEC_ENV_CHOICES}, got {self.vec_env!r}")
         for name in ("turnpike_beta", "turnpike_delta"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if not (
+                isinstance(value, (int, float))
+                and not isinstance(value, bool)
+                and math.isfinite(value)
+                and value > 0
+            ):
                 raise ValueError(f"--{name.replace('_', '-')} must be a number > 0, got {value!r}")
+        if self.run_name is not None:
+            check_run_name(self.run_name)
+        check_device(self.device)
         unknown = set(self.hyperparams) & set(ZOO_KEYS)
         if unknown:
             raise ValueError(
                 f"--hyperparams takes SB3 keyword arguments only; {sorted(unknown)} are set by "
                 "--n-envs, --timesteps, --normalize and --env-kwargs"
+            )
+        kwargs, n_envs, _, policy = resolve_hyperparams(self)
+        check_hyperparams(self.algo, self.hyperparams, policy)
+        if self.algo in ("ppo", "a2c") and int(kwargs.get("n_steps", 2)) * n_envs < 2:
+            raise ValueError(
+                "--hyperparams n_steps times the number of envs must be > 1 (SB3's rollout "
+                f"needs two samples), got n_steps={kwargs.get('n_steps')} with {n_envs} env(s)"
             )
         return self
 
@@ -276,10 +305,56 @@ class TrainConfig:
         return cls(**data)
 
 
-def _check_int(name: str, value: Any, minimum: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        flag = "--" + name.replace("_", "-")
-        raise ValueError(f"{flag} must be an integer >= {minimum}, got {value!r}")
+def _check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -> None:
+    flag = "--" + name.replace("_", "-")
+    allowed = f"in [{minimum}, {maximum}]" if maximum is not None else f">= {minimum}"
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{flag} must be an integer {allowed}, got {value!r}")
+    if value < minimum or (maximum is not None and value > maximum):
+        raise ValueError(f"{flag} must be an integer {allowed}, got {value!r}")
+
+
+def check_run_name(name: str) -> str:
+    """A run name is one folder name: no path separator, not empty, not '.' or '..'."""
+    if (
+        not isinstance(name, str)
+        or name in ("", ".", "..")
+        or "/" in name
+        or os.sep in name
+        or (os.altsep is not None and os.altsep in name)
+    ):
+        raise ValueError(
+            f"--run-name must be one folder name (no '/', not '.' or '..'), got {name!r}"
+        )
+    return name
+
+
+def check_device(device: str) -> str:
+    """`device` if torch can use it here: auto, cpu, or an available cuda[:i] / mps device."""
+    import torch
+
+    if device == "auto":
+        return device
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError, ValueError):
+        raise ValueError(
+            f"--device must be a torch device: auto, cpu, cuda, cuda:INDEX or mps; got {device!r}"
+        ) from None
+    if dev.type == "cpu":
+        return device
+    if dev.type == "cuda":
+        count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if count == 0:
+            raise ValueError(f"--device {device}: no CUDA device is available (use cpu)")
+        if dev.index is not None and dev.index >= count:
+            raise ValueError(f"--device {device}: only {count} CUDA device(s) (0..{count - 1})")
+        return device
+    if dev.type == "mps":
+        if not torch.backends.mps.is_available():
+            raise ValueError(f"--device {device}: MPS is not available here (use cpu)")
+        return device
+    raise ValueError(f"--device {device!r}: Stable-Baselines3 runs on auto, cpu, cuda or mps")
 
 
 def resolve_hyperparams(

@@ -10,8 +10,13 @@ from agent_envs.training.config import TrainConfig
 from agent_envs.training.defaults import GYM_ENV_ID, is_multiagent
 
 
-def make_gym_env(env_id: str, env_kwargs: dict[str, Any] | None = None):
-    """`gym.make(env_id, **env_kwargs)` after registering the swarm envs."""
+def make_gym_env(
+    env_id: str, env_kwargs: dict[str, Any] | None = None, option: str = "--env-kwargs"
+):
+    """`gym.make(env_id, **env_kwargs)` after registering the swarm envs.
+
+    An unknown or mistyped keyword is a ValueError naming `option`.
+    """
     import gymnasium as gym
 
     import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
@@ -19,7 +24,9 @@ def make_gym_env(env_id: str, env_kwargs: dict[str, Any] | None = None):
     try:
         return gym.make(env_id, **(env_kwargs or {}))
     except TypeError as exc:  # unknown or mistyped keyword: a user error, not a crash
-        raise ValueError(f"--env-kwargs {env_kwargs}: {exc}") from None
+        # gym.make re-raises the env's TypeError with the kwargs appended; show the env's own
+        original = exc.__context__ if isinstance(exc.__context__, TypeError) else exc
+        raise ValueError(f"{option} {env_kwargs}: {original}") from None
 
 
 def eval_env_id(config: TrainConfig) -> str:
@@ -35,9 +42,20 @@ def make_eval_vec_env(env_id: str, env_kwargs: dict[str, Any] | None, n_episodes
     return DummyVecEnv([lambda: make_gym_env(env_id, kwargs)] * int(n_episodes))
 
 
-def env_description(env_id: str, env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
-    """N, d, n_steps, integrator and the full kwargs of the Gymnasium env a run uses."""
-    env = make_gym_env(env_id, env_kwargs)
+def env_description(
+    env_id: str, env_kwargs: dict[str, Any] | None, option: str = "--env-kwargs"
+) -> dict[str, Any]:
+    """N, d, n_steps, integrator and the full kwargs of the Gymnasium env a run uses.
+
+    Builds the env once, so it also validates `env_kwargs` (errors name `option`).
+    """
+    try:
+        env = make_gym_env(env_id, env_kwargs, option)
+    except ValueError as exc:
+        message = str(exc)
+        raise ValueError(
+            message if message.startswith(option) else f"{option}: {message}"
+        ) from None
     try:
         base = env.unwrapped
         params = base.params

@@ -31,9 +31,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from agent_envs.training.defaults import DEFAULT_TEST_SEEDS, GYM_ENV_ID
+from agent_envs.training.defaults import (
+    DEFAULT_TEST_SEEDS,
+    GYM_ENV_ID,
+    check_env_id,
+    is_multiagent,
+)
 from agent_envs.training.policies import PolicySpec, resolve_policy
 from agent_envs.training.results import EPISODE_COLUMNS, Episode, EvaluationResults, stack_episodes
+from agent_envs.training.storage import check_output_dir
 
 
 def rollout(
@@ -105,6 +111,37 @@ def rollout(
     )
 
 
+def make_swarm_env(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> Any:
+    """`gym.make(env_id, **env_kwargs)` for a swarm env; ValueError naming the bad input.
+
+    The id must be registered (`check_env_id`) and make an env of this package (one with
+    ``unwrapped.params``); an unknown or mistyped keyword is reported as ``--env-kwargs``.
+    """
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401  (registers the env ids)
+
+    check_env_id(env_id)
+    if is_multiagent(env_id):
+        raise ValueError(
+            f"--env-id {env_id!r} is the PettingZoo env; policies are evaluated on its Gymnasium "
+            f"twin {GYM_ENV_ID!r} (a parameter-shared model acts there agent by agent)"
+        )
+    try:
+        env = gym.make(env_id, **dict(env_kwargs or {}))
+    except TypeError as exc:
+        # gym.make re-raises the env's TypeError with the kwargs appended; show the env's own
+        original = exc.__context__ if isinstance(exc.__context__, TypeError) else exc
+        raise ValueError(f"--env-kwargs {dict(env_kwargs or {})}: {original}") from None
+    if not hasattr(env.unwrapped, "params"):
+        env.close()
+        raise ValueError(
+            f"--env-id {env_id!r} is not a swarm env (its env has no swarm parameters); "
+            f"use {GYM_ENV_ID!r}"
+        )
+    return env
+
+
 def evaluate_policies(
     policies: Mapping[str, PolicySpec] | Sequence[str],
     env_id: str = GYM_ENV_ID,
@@ -132,11 +169,10 @@ def evaluate_policies(
         progress: show a tqdm bar over the episodes.
         out_dir: when given, `save` the results there.
     """
-    import gymnasium as gym
     from tqdm.auto import tqdm
 
-    import agent_envs  # noqa: F401  (registers the env ids)
     from agent_envs.baselines import FeedbackController
+    from agent_envs.validation import check_seed
 
     if not isinstance(policies, Mapping):
         policies = {
@@ -144,22 +180,31 @@ def evaluate_policies(
         }
     if not policies:
         raise ValueError("no policies to evaluate")
-    seeds = [int(s) for s in seeds]
+    seeds = [check_seed(s) for s in seeds]
     if not seeds:
         raise ValueError("no seeds to evaluate on")
     env_kwargs = dict(env_kwargs or {})
+    if out_dir is not None:
+        check_output_dir(out_dir, "out_dir")
     rows: list[dict[str, Any]] = []
     trajectories: dict[str, dict[str, np.ndarray]] = {}
     descriptions: dict[str, dict] = {}
-    total = len(policies) * len(seeds)
-    bar = tqdm(total=total, desc="evaluate", unit="ep", disable=not progress)
     env_info: dict[str, Any] = {}
+    # Every input is checked before the first episode: the env (id, kwargs, reset options),
+    # every policy (built or loaded for its own env) and the seeds.
+    envs: dict[str, Any] = {}
     try:
+        resolved = {}
         for name, spec in policies.items():
-            env = gym.make(env_id, **env_kwargs)
-            try:
-                policy, desc = resolve_policy(spec, env, baseline_kwargs)
-                descriptions[name] = desc
+            env = envs[name] = make_swarm_env(env_id, env_kwargs)
+            resolved[name], descriptions[name] = resolve_policy(spec, env, baseline_kwargs)
+        first = next(iter(envs.values()))
+        first.reset(seed=seeds[0], options=dict(reset_options) if reset_options else None)
+        total = len(policies) * len(seeds)
+        bar = tqdm(total=total, desc="evaluate", unit="ep", disable=not progress)
+        try:
+            for name, policy in resolved.items():
+                env = envs[name]
                 episodes = []
                 for seed in seeds:
                     bar.set_postfix_str(f"{name} seed={seed}")
@@ -180,10 +225,11 @@ def evaluate_policies(
                     "jacobian": str(getattr(inner, "jacobian", "")),
                     "params": {k: getattr(inner.params, k) for k in inner.params.field_names()},
                 }
-            finally:
-                env.close()
+        finally:
+            bar.close()
     finally:
-        bar.close()
+        for env in envs.values():
+            env.close()
     meta = {
         "env_id": env_id,
         "env_kwargs": env_kwargs,
@@ -203,9 +249,4 @@ def evaluate_policies(
     return results
 
 
-# --------------------------------------------------------------------------------------------
-# CLI
-# --------------------------------------------------------------------------------------------
-
-
-__all__ = ["evaluate_policies", "rollout"]
+__all__ = ["evaluate_policies", "make_swarm_env", "rollout"]

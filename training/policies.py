@@ -4,10 +4,13 @@ A policy is any SB3 `PolicyPredictor` (an object with
 ``predict(obs, state, episode_start, deterministic) -> (action, state)``), a baseline name
 ("turnpike", "proportional", "zero", built for the env), a callable ``env -> PolicyPredictor``,
 or the path of a saved SB3 model (``.zip``; ``ALGO:PATH`` to name the algorithm, otherwise it is
-read from the file). A `VecNormalize` statistics file next to the model is found and applied to
-the observations, frozen (see `find_vecnormalize`). A model trained on the PettingZoo env's
-per-agent observations (shape (3d+1,)) is run on the Gymnasium env with one action per agent from
-that agent's own observation (`PerAgentPolicy`), so every policy is scored in the same cost units.
+read from the file; ``PATH:STATS.pkl`` to name its `VecNormalize` statistics). The statistics
+are applied to the observations, frozen; they are unpickled only when the user named them, when
+the manifest of the run that saved them records their SHA-256, or from the rl-zoo3 run the
+named model belongs to (`find_statistics`, the trust boundary). A model trained on the PettingZoo
+env's per-agent observations (shape (3d+1,)) is run on the Gymnasium env with one action per
+agent from that agent's own observation (`PerAgentPolicy`), so every policy is scored in the same
+cost units.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import pickle
 import re
 import zipfile
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +29,21 @@ import numpy as np
 
 from agent_envs.envs.observation import agent_observations_from_global
 from agent_envs.training.defaults import ALGORITHMS, algorithm_class
+from agent_envs.training.storage import find_manifest
+
+
+def read_model_data(path: str | os.PathLike) -> dict[str, Any]:
+    """The JSON ``data`` member of an SB3 model zip; ValueError when it is not one."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            data = json.loads(zf.read("data"))
+    except (OSError, zipfile.BadZipFile, KeyError, ValueError, EOFError) as exc:
+        raise ValueError(
+            f"{path} is not a readable Stable-Baselines3 model zip ({type(exc).__name__}: {exc})"
+        ) from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path} is not a Stable-Baselines3 model zip (its data is no object)")
+    return data
 
 
 def detect_algo(path: str | os.PathLike) -> str:
@@ -34,9 +53,9 @@ def detect_algo(path: str | os.PathLike) -> str:
     ActorCriticPolicy is PPO when the file has PPO's ``clip_range``, else A2C. Raises ValueError
     when it cannot tell (use ``ALGO:PATH``) or the algorithm is not in `ALGORITHMS`.
     """
-    with zipfile.ZipFile(path) as zf:
-        data = json.loads(zf.read("data"))
-    module = str(data.get("policy_class", {}).get("__module__", ""))
+    data = read_model_data(path)
+    policy_class = data.get("policy_class")
+    module = str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
     for algo in ("sac", "td3"):
         if f"stable_baselines3.{algo}." in module:
             return algo
@@ -48,41 +67,159 @@ def detect_algo(path: str | os.PathLike) -> str:
     )
 
 
-def vecnormalize_candidates(model_path: str | os.PathLike) -> list[Path]:
-    """Where the VecNormalize statistics of a saved model may be, in the order they are tried.
+@dataclass(frozen=True)
+class ModelSpec:
+    """A saved SB3 model named on the command line: ``[ALGO:]MODEL.zip[:STATS.pkl]``.
 
-    For a model ``DIR/STEM.zip``: ``STEM_vecnormalize.pkl``; for ``X_model.zip``:
-    ``X_vecnormalize.pkl`` (``best_model.zip`` -> ``best_vecnormalize.pkl``); for a checkpoint
-    ``P_T_steps.zip``: ``P_vecnormalize_T_steps.pkl`` (SB3 `CheckpointCallback`); then
-    ``vecnormalize.pkl`` and ``vec_normalize.pkl`` (rl-zoo3) in the same folder.
+    `algo` is None when it is to be read from the file; `statistics` is the VecNormalize file
+    the user named (None: looked up by `find_statistics`).
+    """
+
+    path: Path
+    algo: str | None = None
+    statistics: Path | None = None
+
+    @classmethod
+    def parse(cls, spec: str | os.PathLike) -> ModelSpec:
+        """Split ``[ALGO:]MODEL[.zip][:STATS.pkl]`` (a '.zip' is added when only it exists)."""
+        text = os.fspath(spec)
+        algo = None
+        match = re.match(r"^([A-Za-z0-9_]+):(.+)$", text)
+        if match and match.group(1).lower() in ALGORITHMS:
+            algo, text = match.group(1).lower(), match.group(2)
+        statistics = None
+        head, sep, tail = text.rpartition(":")
+        if sep and head and tail.endswith(".pkl"):
+            text, statistics = head, Path(tail)
+        path = Path(text)
+        if not path.is_file() and Path(text + ".zip").is_file():
+            path = Path(text + ".zip")
+        return cls(path, algo, statistics)
+
+
+#: Why a statistics file may be unpickled (`Statistics.source` -> the words `evaluate` prints).
+STATISTICS_SOURCES = {
+    "named": "named on the command line",
+    "manifest": "SHA-256 verified against the run's manifest.json",
+    "rl-zoo3": "the rl-zoo3 run's statistics",
+}
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """The VecNormalize statistics chosen for a model and why they may be unpickled."""
+
+    path: Path
+    #: a key of `STATISTICS_SOURCES`: "named" (by the user), "manifest" (hash recorded by the
+    #: run that wrote them) or "rl-zoo3" (the statistics of the rl-zoo3 run of the named model)
+    source: str
+
+
+def own_run_candidates(model_path: str | os.PathLike) -> list[Path]:
+    """Where a run of `agent-envs train` keeps the statistics of a model, in order.
+
+    ``DIR/STEM.zip`` -> ``STEM_vecnormalize.pkl`` (best_model, final_model); a checkpoint
+    ``P_T_steps.zip`` -> ``P_vecnormalize_T_steps.pkl`` (SB3 `CheckpointCallback` names).
     """
     path = Path(model_path)
     stem = path.name[:-4] if path.name.endswith(".zip") else path.name
     names = [f"{stem}_vecnormalize.pkl"]
-    if stem.endswith("_model"):
-        names.append(f"{stem[: -len('_model')]}_vecnormalize.pkl")
     checkpoint = re.fullmatch(r"(.+)_(\d+)_steps", stem)
     if checkpoint:
         names.append(f"{checkpoint.group(1)}_vecnormalize_{checkpoint.group(2)}_steps.pkl")
-    names += ["vecnormalize.pkl", "vec_normalize.pkl"]
     return [path.parent / name for name in names]
 
 
-def find_vecnormalize(model_path: str | os.PathLike) -> Path | None:
-    """The first existing file of `vecnormalize_candidates`, or None."""
-    for candidate in vecnormalize_candidates(model_path):
+def rl_zoo3_statistics(model_path: str | os.PathLike) -> Path | None:
+    """The statistics of an rl-zoo3 run the model belongs to, or None if it is not one.
+
+    rl-zoo3 writes ``<log>/<algo>/<env>_<id>/`` with the models (``<env>.zip``,
+    ``best_model.zip``, checkpoints ``rl_model_<T>_steps.zip`` + ``rl_model_vecnormalize_<T>_
+    steps.pkl``) and a folder ``<env>/`` holding ``args.yml``, ``config.yml`` and
+    ``vecnormalize.pkl`` (the final statistics, which rl-zoo3's own ``enjoy`` loads for every
+    model of the run). A checkpoint gets its own statistics; every other model the run's.
+    """
+    path = Path(model_path)
+    folder = path.parent
+    runs = (
+        [
+            sub
+            for sub in sorted(folder.iterdir())
+            if sub.is_dir() and (sub / "args.yml").is_file() and (sub / "config.yml").is_file()
+        ]
+        if folder.is_dir()
+        else []
+    )
+    if len(runs) != 1:
+        return None
+    stem = path.name[:-4] if path.name.endswith(".zip") else path.name
+    checkpoint = re.fullmatch(r"rl_model_(\d+)_steps", stem)
+    if checkpoint:
+        candidate = folder / f"rl_model_vecnormalize_{checkpoint.group(1)}_steps.pkl"
         if candidate.is_file():
             return candidate
-    return None
+    candidate = runs[0] / "vecnormalize.pkl"
+    return candidate if candidate.is_file() else None
+
+
+#: Pickles next to a model that are never loaded unless named (other tools' names).
+UNVERIFIED_NAMES = ("vecnormalize.pkl", "vec_normalize.pkl")
+
+
+def find_statistics(spec: ModelSpec) -> Statistics | None:
+    """The VecNormalize statistics to use with a saved model, or None when it has none.
+
+    The trust boundary (a pickle runs code when loaded, so only these are unpickled):
+
+    1. the file the user named (``MODEL.zip:STATS.pkl``);
+    2. the statistics a run of `agent-envs train` saved with the model, when that run's
+       ``manifest.json`` records their SHA-256 and the file still matches it;
+    3. the statistics of the rl-zoo3 run whose model the user named (`rl_zoo3_statistics`).
+
+    A statistics file next to the model that none of these vouches for is refused with a
+    ValueError saying how to name it.
+    """
+    if spec.statistics is not None:
+        if not spec.statistics.is_file():
+            raise FileNotFoundError(
+                f"no VecNormalize statistics file at {spec.statistics} (named after {spec.path})"
+            )
+        return Statistics(spec.statistics, "named")
+    zoo = rl_zoo3_statistics(spec.path)
+    if zoo is not None:
+        return Statistics(zoo, "rl-zoo3")
+    found = [c for c in own_run_candidates(spec.path) if c.is_file()]
+    found += [spec.path.parent / n for n in UNVERIFIED_NAMES if (spec.path.parent / n).is_file()]
+    if not found:
+        return None
+    candidate = found[0]
+    manifest = find_manifest(candidate)
+    problem = manifest.problem(candidate) if manifest is not None else "no manifest.json"
+    if problem is None:
+        return Statistics(candidate, "manifest")
+    raise ValueError(
+        f"refusing to load the statistics {candidate} found next to {spec.path.name}: they are "
+        f"not vouched for by a run this project wrote ({problem}); a pickle runs code when "
+        f"loaded, so if you trust the file name it explicitly: {spec.path}:{candidate}"
+    )
 
 
 def load_vecnormalize(path: str | os.PathLike):
     """A frozen VecNormalize (training=False, norm_reward=False) from its pickle, without a venv.
 
     Only its `normalize_obs` is used, so the env itself stays unwrapped (raw rewards and infos).
+    Call it only on a file `find_statistics` chose. ValueError when the file is not a whole
+    VecNormalize pickle.
     """
-    with open(path, "rb") as fh:
-        vec_normalize = pickle.load(fh)
+    try:
+        with open(path, "rb") as fh:
+            vec_normalize = pickle.load(fh)
+    except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, IndexError) as exc:
+        raise ValueError(f"{path} is not a readable VecNormalize statistics file ({exc})") from None
+    if not hasattr(vec_normalize, "normalize_obs"):
+        raise ValueError(
+            f"{path} holds a {type(vec_normalize).__name__}, not VecNormalize statistics"
+        )
     vec_normalize.training = False
     vec_normalize.norm_reward = False
     return vec_normalize
@@ -131,30 +268,66 @@ class PerAgentPolicy:
         return (actions[0] if obs.ndim == 1 else actions), None
 
 
-def load_sb3_policy(spec: str | os.PathLike, env: Any, device: str = "cpu") -> tuple[Any, dict]:
-    """Load a saved SB3 model (``PATH`` or ``ALGO:PATH``) as a policy for `env`.
+def check_model(spec: str | os.PathLike | ModelSpec) -> tuple[ModelSpec, str, Statistics | None]:
+    """Check a saved-model spec without unpickling anything: (spec, algorithm, statistics).
 
-    Applies VecNormalize statistics found next to it (`find_vecnormalize`) and wraps a per-agent
-    model in `PerAgentPolicy`. Returns the policy and a description dict (path, algo, vecnormalize).
+    The file must exist and be an SB3 model zip; an algorithm given as ``ALGO:`` must match the
+    file's (when the file tells); the statistics are chosen by `find_statistics`. Raises
+    FileNotFoundError / ValueError naming the file.
     """
-    text = os.fspath(spec)
-    match = re.match(r"^([A-Za-z0-9_]+):(.+)$", text)
-    algo = None
-    if match and match.group(1).lower() in ALGORITHMS:
-        algo, text = match.group(1).lower(), match.group(2)
-    path = Path(text)
-    if not path.is_file() and Path(text + ".zip").is_file():
-        path = Path(text + ".zip")
-    if not path.is_file():
-        raise FileNotFoundError(f"no saved model at {text!r} (and no baseline of that name)")
-    algo = algo or detect_algo(path)
-    model = algorithm_class(algo).load(path, device=device)
+    model = spec if isinstance(spec, ModelSpec) else ModelSpec.parse(spec)
+    if not model.path.is_file():
+        raise FileNotFoundError(
+            f"{os.fspath(model.path)!r} is neither a baseline ({', '.join(_baseline_names())}) "
+            "nor a saved model file"
+        )
+    read_model_data(model.path)
+    algo = model.algo
+    try:
+        detected = detect_algo(model.path)
+    except ValueError:
+        if algo is None:
+            raise
+        detected = algo
+    if algo is not None and detected != algo:
+        raise ValueError(
+            f"{model.path} holds a {detected.upper()} model, not {algo.upper()}; write "
+            f"{detected}:{model.path} (or leave the algorithm out: it is read from the file)"
+        )
+    return model, detected, find_statistics(model)
+
+
+def _baseline_names() -> tuple[str, ...]:
+    from agent_envs.baselines import BASELINES
+
+    return tuple(BASELINES)
+
+
+def load_sb3_policy(spec: str | os.PathLike, env: Any, device: str = "cpu") -> tuple[Any, dict]:
+    """Load a saved SB3 model (``[ALGO:]PATH[:STATS.pkl]``) as a policy for `env`.
+
+    Applies the VecNormalize statistics `find_statistics` allows (frozen, observations only)
+    and wraps a per-agent model in `PerAgentPolicy`. Returns the policy and a description dict
+    (path, algo, vecnormalize, vecnormalize_source).
+    """
+    model_spec, algo, stats = check_model(spec)
+    path = model_spec.path
+    try:
+        model = algorithm_class(algo).load(path, device=device)
+    except (ValueError, TypeError, KeyError, RuntimeError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"cannot load {path} as an SB3 {algo.upper()} model: {exc}") from None
     policy: Any = model
-    info: dict[str, Any] = {"kind": "sb3", "path": str(path), "algo": algo, "vecnormalize": None}
-    stats = find_vecnormalize(path)
+    info: dict[str, Any] = {
+        "kind": "sb3",
+        "path": str(path),
+        "algo": algo,
+        "vecnormalize": None,
+        "vecnormalize_source": None,
+    }
     if stats is not None:
-        policy = NormalizedObservationPolicy(policy, load_vecnormalize(stats))
-        info["vecnormalize"] = str(stats)
+        policy = NormalizedObservationPolicy(policy, load_vecnormalize(stats.path))
+        info["vecnormalize"] = str(stats.path)
+        info["vecnormalize_source"] = stats.source
     obs_shape = tuple(model.observation_space.shape or ())
     env_shape = tuple(env.observation_space.shape or ())
     inner = env.unwrapped

@@ -41,6 +41,7 @@ from agent_envs.training.results import (
     merge_results,
     summarize,
 )
+from agent_envs.training.storage import check_output_dir
 
 
 @dataclass
@@ -68,6 +69,18 @@ def _color(i: int) -> str:
     return f"C{i % 10}"
 
 
+def check_seed_index(seed_index: int, n_seeds: int) -> int:
+    """`seed_index` if it picks one of `n_seeds` seeds; ValueError naming --seed-index."""
+    if isinstance(seed_index, bool) or not isinstance(seed_index, int):
+        raise TypeError(f"--seed-index must be an integer, got {type(seed_index).__name__}")
+    if not 0 <= seed_index < n_seeds:
+        raise ValueError(
+            f"--seed-index must be in [0, {n_seeds - 1}] (the results hold {n_seeds} seeds), "
+            f"got {seed_index}"
+        )
+    return seed_index
+
+
 def plot_trajectories(results: EvaluationResults, path: str | os.PathLike, seed_index: int = 0):
     """One panel per policy: every agent's path-mean position (coordinate 0) against time."""
     policies = [p for p in results.policies if p in results.trajectories]
@@ -79,7 +92,7 @@ def plot_trajectories(results: EvaluationResults, path: str | os.PathLike, seed_
         ax.set_visible(False)
     for ax, policy in zip(axes.flat, policies, strict=False):
         tr = results.trajectories[policy]
-        s = min(seed_index, len(tr["seeds"]) - 1)
+        s = check_seed_index(seed_index, len(tr["seeds"]))
         x = tr["mean_positions"][s, :, :, 0]
         ax.plot(tr["times"], x, lw=0.6, color="tab:blue", alpha=0.55)
         ax.axhline(tr["target"][s, 0], color="k", ls="--", lw=1, label="target")
@@ -304,10 +317,12 @@ def build_report(
         results: one or several `EvaluationResults` or evaluation folders (merged).
         out_dir: the report folder (created).
         title: the report's title.
-        reference: the policy the ratios are taken to (skipped when absent).
+        reference: the policy the ratios are taken to; the default (turnpike) is skipped when
+            absent, any other name must be an evaluated policy (ValueError otherwise).
         extra_sections: `ReportSection`s appended after the standard ones.
         command: the command that produced the results, printed in the report.
-        seed_index: which seed's trajectories the trajectory plot shows.
+        seed_index: which seed's trajectories the trajectory plot shows (ValueError when
+            out of range).
         confidence: level of the confidence intervals.
 
     Returns:
@@ -316,10 +331,17 @@ def build_report(
     """
     items = [results] if isinstance(results, (EvaluationResults, str, os.PathLike)) else results
     merged = merge_results([_as_results(r) for r in items])
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     if reference is not None and reference not in merged.policies:
+        if reference != DEFAULT_REFERENCE:
+            raise ValueError(
+                f"reference {reference!r} is not an evaluated policy; the results hold "
+                f"{', '.join(merged.policies)}"
+            )
         reference = None
+    if merged.trajectories:
+        check_seed_index(seed_index, min(len(t["seeds"]) for t in merged.trajectories.values()))
+    out = check_output_dir(out_dir, "--out")
+    out.mkdir(parents=True, exist_ok=True)
     summary = summarize(merged.episodes, reference, confidence)
     summary.to_csv(out / "summary.csv", index=False)
     paths = {
@@ -419,6 +441,7 @@ def _seed_text(seeds: Sequence[int]) -> str:
 __all__ = [
     "ReportSection",
     "build_report",
+    "check_seed_index",
     "display_table",
     "plot_running_cost",
     "plot_trajectories",

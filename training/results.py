@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -197,16 +198,22 @@ class EvaluationResults:
         folder = p if p.is_dir() else p.parent
         if not (folder / "episodes.csv").is_file():
             raise FileNotFoundError(f"no episodes.csv in {folder} (not an evaluation folder)")
-        episodes = pd.read_csv(folder / "episodes.csv")
-        meta = {}
-        if (folder / "meta.json").is_file():
-            meta = json.loads((folder / "meta.json").read_text())
-        trajectories: dict[str, dict[str, np.ndarray]] = {}
-        for policy, rel in meta.get("trajectory_files", {}).items():
-            f = folder / rel
-            if f.is_file():
-                with np.load(f) as data:
-                    trajectories[policy] = {k: data[k] for k in data.files}
+        try:
+            episodes = pd.read_csv(folder / "episodes.csv")
+            meta = {}
+            if (folder / "meta.json").is_file():
+                meta = json.loads((folder / "meta.json").read_text())
+            trajectories: dict[str, dict[str, np.ndarray]] = {}
+            for policy, rel in dict(meta.get("trajectory_files", {})).items():
+                f = folder / rel
+                if f.is_file():
+                    with np.load(f) as data:
+                        trajectories[policy] = {k: data[k] for k in data.files}
+        except (ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{folder} holds a damaged evaluation ({exc})") from None
+        missing = [c for c in EPISODE_COLUMNS if c not in episodes.columns]
+        if missing:
+            raise ValueError(f"{folder}/episodes.csv lacks the columns {missing}")
         return cls(episodes=episodes, trajectories=trajectories, meta=meta, source=folder)
 
 

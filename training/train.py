@@ -26,10 +26,14 @@ A run directory ``{out}/{env}__{algo}__{seed}__{unix time}`` holds:
     final_model.zip + final_model_vecnormalize.pkl  at the end of training
     summary.json           timesteps, wall time, last validation result
     tb/                    TensorBoard logs
+    manifest.json          SHA-256 and size of every .zip and .pkl above
+    .lock                  empty; flock-ed while a process trains in the run
 
-Interrupting a run (Ctrl-C) saves a checkpoint first; ``--resume RUN_DIR`` continues from the
-last complete checkpoint (model, VecNormalize statistics, replay buffer, timesteps done, the
-learning curve up to that point).
+The folder is created with an exclusive ``os.mkdir`` (a second process gets a ValueError), and
+every file is written atomically (`agent_envs.training.storage`). Interrupting a run (Ctrl-C)
+saves a checkpoint first; ``--resume RUN_DIR`` continues from the newest checkpoint whose files
+are whole and match the manifest (model, VecNormalize statistics, replay buffer, timesteps done,
+the learning curve up to that point), skipping damaged newer ones with a message.
 """
 
 from __future__ import annotations
@@ -53,6 +57,13 @@ from agent_envs.training.environments import (
     make_eval_vec_env,
     make_training_env,
 )
+from agent_envs.training.storage import (
+    RunLock,
+    check_output_dir,
+    create_run_directory,
+    remove_stale_temporaries,
+    write_json_atomic,
+)
 
 #: Options that may change when resuming; all others come from the run's config.json.
 RESUME_OVERRIDES = (
@@ -71,40 +82,54 @@ def default_run_name(config: TrainConfig) -> str:
     return f"{env}__{config.algo}__{config.seed}__{int(time.time())}"
 
 
-def _write_json(path: Path, data: Any) -> None:
-    path.write_text(json.dumps(data, indent=2, default=str) + "\n")
-
-
 def train(config: TrainConfig, callbacks: Sequence[Any] | None = None) -> Path:
     """Train one agent; return its run directory.
 
-    With `config.resume` set to a run directory, the run continues from its last complete
-    checkpoint: its config.json defines the run, except `timesteps`, `progress_bar`,
-    `verbose`, `device` and `tensorboard`, which are taken from `config`.
-    `callbacks` are extra SB3 callbacks appended to the run's own.
+    Everything is validated before anything is written: the options, the env kwargs, the
+    output folder and, when resuming, the checkpoint to continue from. A new run directory is
+    created exclusively (a second process with the same run directory gets a ValueError), and
+    the run holds its lock (`agent_envs.training.storage.RunLock`) while it trains.
+
+    With `config.resume` set to a run directory, the run continues from its newest verified
+    checkpoint (`agent_envs.training.checkpoints.resumable_checkpoint`; damaged newer ones are
+    skipped with a message): its config.json defines the run, except `RESUME_OVERRIDES`,
+    which are taken from `config`. `callbacks` are extra SB3 callbacks appended to the run's own.
     """
     if config.resume:
         run_dir = Path(config.resume)
-        saved_path = run_dir / "config.json"
-        if not saved_path.exists():
-            raise ValueError(f"--resume {run_dir}: no config.json there (not a run directory)")
-        saved = TrainConfig.from_dict(json.loads(saved_path.read_text()))
+        saved = TrainConfig.from_dict(_read_run_config(run_dir))
         for name in RESUME_OVERRIDES:
             setattr(saved, name, getattr(config, name))
         saved.resume = str(run_dir)
         config = saved.validate()
+        description = env_description(eval_env_id(config), config.env_kwargs)
+        lock = RunLock(run_dir).acquire()
     else:
         config.validate()
+        check_output_dir(config.out, "--out")
+        description = env_description(eval_env_id(config), config.env_kwargs)
         run_dir = Path(config.out) / (config.run_name or default_run_name(config))
-        if (run_dir / "config.json").exists():
-            raise ValueError(
-                f"run directory {run_dir} exists; pass --resume {run_dir} to continue it or "
-                "choose another --run-name"
-            )
-    env_description(eval_env_id(config), config.env_kwargs)  # validate before creating files
-    run_dir.mkdir(parents=True, exist_ok=True)
-    with torch_threads(config.torch_threads):
-        return _train_in(config, run_dir, list(callbacks or []))
+        create_run_directory(run_dir)  # exclusive: a second process stops here
+        lock = RunLock(run_dir).acquire()
+    try:
+        with torch_threads(config.torch_threads):
+            return _train_in(config, run_dir, list(callbacks or []), description)
+    finally:
+        lock.release()
+
+
+def _read_run_config(run_dir: Path) -> dict[str, Any]:
+    """The config.json of a run directory; ValueError naming --resume when it is not one."""
+    saved_path = run_dir / "config.json"
+    if not saved_path.is_file():
+        raise ValueError(f"--resume {run_dir}: no config.json there (not a run directory)")
+    try:
+        data = json.loads(saved_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"--resume {run_dir}: config.json is unreadable ({exc})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"--resume {run_dir}: config.json is not a JSON object")
+    return data
 
 
 @contextlib.contextmanager
@@ -125,20 +150,20 @@ def torch_threads(n: int):
         torch.set_num_threads(previous)
 
 
-def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) -> Path:
+def _train_in(
+    config: TrainConfig, run_dir: Path, extra_callbacks: list[Any], description: dict[str, Any]
+) -> Path:
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agent_envs.baselines import ProportionalController, TurnpikeController, ZeroController
     from agent_envs.training.callbacks import SwarmEvalCallback, read_learning_curve
     from agent_envs.training.checkpoints import (
-        CHECKPOINT_PREFIX,
         FINAL_MODEL,
-        FINAL_VECNORMALIZE,
-        ReplayBufferPruningCheckpointCallback,
-        checkpoint_file,
-        latest_checkpoint,
+        checkpoint_callback,
+        resumable_checkpoint,
         save_checkpoint,
+        save_model_with_statistics,
     )
     from agent_envs.training.policies import live_policy
 
@@ -146,21 +171,34 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
     normalize = normalize_kwargs is not None
     off_policy = config.algo in OFF_POLICY
     eval_id = eval_env_id(config)
-    description = env_description(eval_id, config.env_kwargs)  # also validates env_kwargs
 
-    # Every run ends with a checkpoint of its final state (below), so the newest complete
-    # checkpoint is where a resumed run continues, finished or interrupted.
-    checkpoint = latest_checkpoint(run_dir, off_policy, normalize) if config.resume else None
-    if checkpoint is not None and checkpoint[0] >= config.timesteps:
+    # Every run ends with a checkpoint of its final state (below), so the newest valid
+    # checkpoint is where a resumed run continues, finished or interrupted. Nothing in the run
+    # directory is rewritten before it is verified.
+    point = None
+    if config.resume:
+        point, skipped = resumable_checkpoint(run_dir, off_policy, normalize)
+        for line in skipped:
+            print(f"{run_dir.name}: skipping the damaged {line}", file=sys.stderr)
+        if point is not None and skipped:
+            print(
+                f"{run_dir.name}: resuming from the newest valid checkpoint, {point.model.name}",
+                file=sys.stderr,
+            )
+        if point is not None and point.buffer_note:
+            print(f"{run_dir.name}: {point.buffer_note}", file=sys.stderr)
+    if point is not None and point.steps >= config.timesteps:
         print(
-            f"{run_dir.name}: {checkpoint[0]} timesteps already done (>= --timesteps "
+            f"{run_dir.name}: {point.steps} timesteps already done (>= --timesteps "
             f"{config.timesteps}); nothing to train"
         )
         return run_dir
+    for folder in (run_dir, run_dir / "checkpoints"):  # left by a killed run; we hold the lock
+        remove_stale_temporaries(folder)
     stored = {**config.to_dict(), "resume": None}
-    _write_json(run_dir / "config.json", stored)
-    _write_json(run_dir / "env.json", description)
-    _write_json(
+    write_json_atomic(run_dir / "config.json", stored)
+    write_json_atomic(run_dir / "env.json", description)
+    write_json_atomic(
         run_dir / "hyperparams.json",
         {
             "algo": config.algo,
@@ -174,7 +212,7 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
     venv = make_training_env(config, n_envs)
     cls = algorithm_class(config.algo)
     tb_log = str(run_dir / "tb") if config.tensorboard else None
-    if checkpoint is None:
+    if point is None:
         if normalize:
             venv = VecNormalize(venv, **normalize_kwargs)
         action_dim = int(np.prod(venv.action_space.shape))
@@ -189,19 +227,17 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
         )
         done = 0
     else:
-        steps, model_path = checkpoint
-        if normalize:
-            stats_path = checkpoint_file(run_dir, "vecnormalize", steps)
-            venv = VecNormalize.load(str(stats_path), venv)
+        if point.vecnormalize is not None:  # verified against the run's manifest
+            venv = VecNormalize.load(str(point.vecnormalize), venv)
             venv.training = True
-        model = cls.load(model_path, env=venv, device=config.device, tensorboard_log=tb_log)
+        model = cls.load(point.model, env=venv, device=config.device, tensorboard_log=tb_log)
         model.verbose = config.verbose
-        if off_policy:
-            model.load_replay_buffer(checkpoint_file(run_dir, "replay_buffer", steps))
+        if point.replay_buffer is not None:
+            model.load_replay_buffer(point.replay_buffer)
         done = int(model.num_timesteps)
         # a fresh, reproducible seeding of the resumed part
         model.set_random_seed(config.seed + done)
-        print(f"resuming {run_dir.name} from {model_path.name} ({done} timesteps done)")
+        print(f"resuming {run_dir.name} from {point.model.name} ({done} timesteps done)")
 
     sb3_envs = venv.num_envs
     shape = (description["n_agents"], description["dim"]) if is_multiagent(config.env_id) else None
@@ -212,13 +248,7 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
     callbacks: list[Any] = []
     if config.checkpoint_freq > 0:
         callbacks.append(
-            ReplayBufferPruningCheckpointCallback(
-                save_freq=max(config.checkpoint_freq // sb3_envs, 1),
-                save_path=str(run_dir / "checkpoints"),
-                name_prefix=CHECKPOINT_PREFIX,
-                save_replay_buffer=off_policy,
-                save_vecnormalize=normalize,
-            )
+            checkpoint_callback(max(config.checkpoint_freq // sb3_envs, 1), run_dir, off_policy)
         )
     eval_callback = None
     if config.eval_freq > 0:
@@ -254,7 +284,7 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
                 total_timesteps=remaining,
                 callback=CallbackList(callbacks),
                 progress_bar=config.progress_bar,
-                reset_num_timesteps=checkpoint is None,
+                reset_num_timesteps=point is None,
                 tb_log_name="run",
             )
         except KeyboardInterrupt:
@@ -271,12 +301,12 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
         eval_callback.evaluate_now()  # the final model is always on the learning curve
     wall = time.perf_counter() - start
     save_checkpoint(model, run_dir, off_policy)  # the final state is the newest checkpoint
-    model.save(run_dir / FINAL_MODEL)
-    stats = model.get_vec_normalize_env()
-    if stats is not None:
-        stats.save(str(run_dir / FINAL_VECNORMALIZE))
+    save_model_with_statistics(model, run_dir, FINAL_MODEL)
     summary_path = run_dir / "summary.json"
-    previous = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    try:
+        previous = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    except ValueError:
+        previous = {}
     summary = {
         "run_name": run_dir.name,
         "algo": config.algo,
@@ -287,7 +317,7 @@ def _train_in(config: TrainConfig, run_dir: Path, extra_callbacks: list[Any]) ->
         "train_wall_time_s": round(float(previous.get("train_wall_time_s", 0.0)) + wall, 2),
         "last_eval": eval_callback.history[-1] if eval_callback and eval_callback.history else None,
     }
-    _write_json(summary_path, summary)
+    write_json_atomic(summary_path, summary)
     venv.close()
     return run_dir
 
@@ -303,11 +333,7 @@ def config_from_options(options: dict[str, Any]) -> TrainConfig:
     """
     given = dict(options)
     if given.get("resume"):
-        run_dir = Path(given["resume"])
-        saved_path = run_dir / "config.json"
-        if not saved_path.exists():
-            raise ValueError(f"--resume {run_dir}: no config.json there (not a run directory)")
-        base = json.loads(saved_path.read_text())
+        base = _read_run_config(Path(given["resume"]))
         fixed = sorted(set(given) - set(RESUME_OVERRIDES) - {"resume"})
         if fixed:
             flags = ", ".join("--" + n.replace("_", "-") for n in fixed)

@@ -154,14 +154,24 @@ def markdown_table(rows: list[dict]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def _progress(runs: tuple[Run, ...]):
+    """`runs` with a tqdm bar when tqdm (the ``train`` extra) is installed, else plainly.
+
+    This reproduction needs only the core, so it runs on the minimal install too.
+    """
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return runs
+    return tqdm(runs, desc="uncontrolled runs", unit="run")
+
+
 def reproduce(out: Path, n_agents: int = 100, n_paths: int = 20, seed: int = 0) -> list[dict]:
     """Run every experiment, write figures, results.md and results.json into `out`."""
-    from tqdm import tqdm
-
     out.mkdir(parents=True, exist_ok=True)
     runs = PAPER_RUNS + JACOBIAN_STUDY
     results: list[tuple[dict, Trajectory]] = []
-    for run in tqdm(runs, desc="uncontrolled runs", unit="run"):
+    for run in _progress(runs):
         results.append(run_one(run, n_agents, n_paths, seed))
     rows = [row for row, _ in results]
     for figure in dict.fromkeys(r.figure for r in PAPER_RUNS):
