@@ -108,3 +108,31 @@ def test_bad_state_shape_is_rejected():
     model = SwarmModel(SwarmParams(n_agents=5))
     with pytest.raises(ValueError, match=r"\(\.\.\., 5, 1\)"):
         model.drift(0.0, np.zeros((4, 1)))
+
+
+def test_a_user_kernel_returning_a_read_only_array_is_not_written_into():
+    """The frozen linearization must not modify (or fail on) the array a user kernel returns."""
+
+    class ConstantKernel:
+        symmetric = True
+
+        def __init__(self, n: int) -> None:
+            self.matrix = np.full((n, n), 2.0)
+            self.matrix.flags.writeable = False
+
+        def value(self, xk, xl):
+            return np.broadcast_to(self.matrix, np.broadcast_shapes(xk.shape, xl.shape)[:-1])
+
+        def grad_x(self, xk, xl):
+            return np.zeros((*np.broadcast_shapes(xk.shape, xl.shape)[:-1], xk.shape[-1]))
+
+        def grad_y(self, xk, xl):
+            return self.grad_x(xk, xl)
+
+    n = 5
+    kernel = ConstantKernel(n)
+    model = SwarmModel(SwarmParams(n_agents=n, kernel=kernel))
+    x = np.linspace(-1.0, 1.0, n)[:, None]
+    lin = model.frozen_linearization(x)
+    np.testing.assert_allclose(lin, 2.0 * (np.ones((n, n)) - n * np.eye(n)) / n)
+    np.testing.assert_array_equal(kernel.matrix, np.full((n, n), 2.0))

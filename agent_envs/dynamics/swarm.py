@@ -116,6 +116,10 @@ class SwarmModel:
         """L(x) = (P(x) - diag(P(x) 1)) / N; shape (..., N, N)."""
         p = self.interaction_matrix(x)
         xp = arrays.namespace(p)
+        if not isinstance(self.kernel, CuckerSmaleKernel) and isinstance(p, np.ndarray):
+            # the in-place steps below may only write into an array we own: a user kernel may
+            # return a cached, read-only or broadcast array
+            p = np.array(p, dtype=float, copy=True)
         p = arrays.subtract_diagonal(p, xp.sum(p, axis=-1))
         return arrays.divide_fresh(p, self.n_agents)
 

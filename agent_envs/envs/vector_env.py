@@ -24,7 +24,7 @@ for torch on the CPU) the state, the kernel matrices, the integrator steps, cost
 observations are torch tensors on that device (the core is written once against the Array
 API, `agent_envs.arrays`). The Brownian increments are still drawn by each env's numpy
 generator and moved to the device in one transfer per step, so the torch env follows the
-numpy env to round-off (1e-10, tested on the CPU). Observations, rewards and flags come out as
+numpy env to round-off (tests/test_vector_env.py compares them on the CPU). Observations, rewards and flags come out as
 numpy arrays unless ``tensor_output=True`` (then torch tensors on the device); infos are numpy.
 """
 

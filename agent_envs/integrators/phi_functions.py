@@ -156,7 +156,7 @@ def _krylov_action(
     symmetric: bool = False,
     check_every: int = 4,
 ) -> Any | None:
-    """Arnoldi (CGS2) on each column of V; returns None when not converged at max_dim.
+    """Arnoldi (CGS2) on each column of V; returns (result, converged per member).
 
     The columns are handled as rows internally: W (..., k, n). The basis vectors are kept in a
     list and stacked, never written in place, so autograd differentiates through the final
@@ -236,12 +236,13 @@ def _lanczos_action(
     coefficient of q_{j-1} taken as the projection <A q_j - a_j q_j, q_{j-1}> (b_{j-1} up to
     rounding) and no reorthogonalization against older vectors: for functions of a matrix with
     a bounded spectrum the approximation converges in spite of the loss of orthogonality
-    (Druskin, Greenbaum & Knizhnerman, 1998); against the dense eigh the result agrees to about
-    1e-11 relative on the swarm's L(x) and exact Jacobian. Stopped when Saad's error estimate
+    (Druskin, Greenbaum & Knizhnerman, 1998); tests/test_phi_functions.py checks it against the
+    dense eigh on the swarm's L(x) and exact Jacobian. Stopped when Saad's error estimate
     b_m |e_m^T phi_p(T_m) e_1| is below rtol |phi_p(T_m) e_1|, checked every `check_every`
     steps from m = 3.5 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
-    the exponential has not converged yet), or at a happy breakdown; None when not converged
-    by `max_dim` (also when m reaches n: the basis is then not exact). Differentiable on torch
+    the exponential has not converged yet), or at a happy breakdown; a member that reaches `max_dim`
+    first (also when m reaches n: the basis is then not exact) counts as not converged.
+    Returns (result, converged per batch member). Differentiable on torch
     (list-built basis, no in-place writes to the basis).
 
     Batch members (the leading axes; the k columns of one member stop together) are decided
