@@ -17,13 +17,13 @@ The few pieces the standard lacks or where the libraries differ live here and no
   L(x) of a swarm at consensus has an (N-1)-fold eigenvalue).
 - `subtract_diagonal`: P - diag(s), in place on a fresh numpy array, functional on torch.
 - conversions (`asarray`, `to_numpy`) and the choice of library and device (`resolve`).
-- `hot_path_threads`: the BLAS thread pools limited to `HOT_PATH_BLAS_THREADS` (1) while the
-  core steps, restored afterwards. The core's matrices are small (N x N, N ~ 100): with more
-  than one BLAS thread per process, several processes on a loaded machine oversubscribe the
-  cores and every small product waits for its threads (README, "Benchmarks", has the
-  measurement: benchmarks/bench_blas_threads.py). threadpoolctl (the library scikit-learn uses for the same job) finds the BLAS
-  libraries numpy and scipy loaded; one controller is built on first use and only the pools
-  whose size differs are touched, so a call costs a few microseconds. torch's own intra-op
+- `hot_path_threads`: the BLAS thread pools limited to `HOT_PATH_BLAS_THREADS` (1) while the core
+  steps, restored afterwards. The core's matrices are small (N x N, N ~ 100): with more than one
+  BLAS thread per process, several processes on a loaded machine oversubscribe the cores and every
+  small product waits for its threads (README, "Benchmarks", has the measurement:
+  benchmarks/bench_blas_threads.py). threadpoolctl (the library scikit-learn uses for the same job)
+  finds the BLAS libraries numpy and scipy loaded; one controller is built on first use and only the
+  pools whose size differs are touched, so a call costs a few microseconds. torch's own intra-op
   pool is left alone.
 
 torch is imported lazily, only when a torch tensor is seen or a torch backend is asked for:

@@ -19,13 +19,13 @@ paths. "expm" and "eigh" are per-matrix LAPACK calls, and the Krylov iterations 
 symmetric matrix, Arnoldi otherwise) stop member by member, so every env matches its single
 twin bit for bit.
 
-Arrays: numpy by default. With ``device="cuda"`` (or any torch device, or ``backend="torch"``
-for torch on the CPU) the state, the kernel matrices, the integrator steps, costs and
-observations are torch tensors on that device (the core is written once against the Array
-API, `agent_envs.arrays`). The Brownian increments are still drawn by each env's numpy
-generator and moved to the device in one transfer per step, so the torch env follows the
-numpy env to round-off (tests/test_vector_env.py compares them on the CPU). Observations, rewards and flags come out as
-numpy arrays unless ``tensor_output=True`` (then torch tensors on the device); infos are numpy.
+Arrays: numpy by default. With ``device="cuda"`` (or any torch device, or ``backend="torch"`` for
+torch on the CPU) the state, the kernel matrices, the integrator steps, costs and observations are
+torch tensors on that device (the core is written once against the Array API, `agent_envs.arrays`).
+The Brownian increments are still drawn by each env's numpy generator and moved to the device in one
+transfer per step, so the torch env follows the numpy env to round-off (tests/test_vector_env.py
+compares them on the CPU). Observations, rewards and flags come out as numpy arrays unless
+``tensor_output=True`` (then torch tensors on the device); infos are numpy.
 """
 
 from __future__ import annotations
