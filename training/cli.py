@@ -22,6 +22,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "agent_envs.training.reproduce_turnpike",
         "paper Section 5.2 (Figs. 5-6): turnpike-controlled runs, figures and a results table",
     ),
+    "reproduce-turnpike-property": (
+        "agent_envs.training.turnpike_property",
+        "thm:turnpike_stochastic measured: optimal solutions for T = 0.5..8, arcs, rates, bounds",
+    ),
     "evaluate": (
         "agent_envs.training.evaluate",
         "run policies on an env over fixed seeds, store results",
@@ -37,7 +41,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.
-REPRODUCTIONS = ("uncontrolled", "turnpike")
+REPRODUCTIONS = ("uncontrolled", "turnpike", "turnpike-property")
 
 
 def _normalise(argv: list[str]) -> list[str]:
