@@ -5,36 +5,49 @@ built from a seed; integrators never draw. `simulate` spawns two independent chi
 from the seed, one for the initial positions and one for the Brownian increments, so giving
 `initial_positions` does not change the noise, and every integrator sees the same increments
 for the same seed.
+
+Arrays: numpy by default; torch (CPU or CUDA) when torch tensors are passed in
+(`initial_positions`, `control`, `control_rate`) or `backend="torch"`/`device=` asks for it
+(`agent_envs.arrays.resolve`). The Brownian increments are always drawn by numpy from the seed
+and then moved to the device, so a torch run sees exactly the increments of the numpy run with
+the same seed. On torch the trajectory is differentiable with respect to the initial positions
+and the control (the stepping is functional: no in-place writes).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from agent_envs import arrays
 from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
 from agent_envs.integrators import DEFAULT_JACOBIAN, Integrator, make_integrator
+from agent_envs.integrators.base import DriftModel
 from agent_envs.params import SwarmParams, check_int, check_positive
 
 #: A state is flagged as diverged when it is non-finite or max |x| exceeds this.
 DEFAULT_DIVERGENCE_THRESHOLD = 1e4
 
-ControlSpec = None | np.ndarray | Callable[[float, np.ndarray], np.ndarray]
+ControlSpec = Any  # None | array | Callable[[float, array], array]
 
 
 def as_positions(positions: Any, n_agents: int, dim: int, name: str = "initial_positions"):
-    """Validate positions of shape (N,) (only for d = 1) or (N, d); return (N, d) floats."""
-    arr = np.asarray(positions, dtype=float)
+    """Validate positions of shape (N,) (only for d = 1) or (N, d); return (N, d) floats.
+
+    A torch tensor stays a tensor (same device, autograd kept); anything else becomes numpy.
+    """
+    arr = positions if arrays.is_torch(positions) else np.asarray(positions, dtype=float)
+    xp = arrays.namespace(arr)
     if arr.ndim == 1 and dim == 1:
         arr = arr[:, None]
-    if arr.shape != (n_agents, dim):
+    if tuple(arr.shape) != (n_agents, dim):
         allowed = f"({n_agents},) or ({n_agents}, 1)" if dim == 1 else f"({n_agents}, {dim})"
-        raise ValueError(f"{name} must have shape {allowed}, got {np.shape(positions)}")
-    if not np.all(np.isfinite(arr)):
+        got = tuple(getattr(positions, "shape", np.shape(positions)))
+        raise ValueError(f"{name} must have shape {allowed}, got {got}")
+    if not bool(xp.all(xp.isfinite(arr))):
         raise ValueError(f"{name} must be finite")
     return arr
 
@@ -70,27 +83,30 @@ def check_phi_method_fits_kernel(
         )
 
 
-def diverged_paths(x: np.ndarray, threshold: float = DEFAULT_DIVERGENCE_THRESHOLD) -> np.ndarray:
-    """Per path (leading axes of x (..., N, d)): True if non-finite or max |x| > threshold."""
-    bad = ~np.isfinite(x) | (np.abs(x) > threshold)
-    return np.any(bad, axis=(-2, -1))
+def diverged_paths(x: Any, threshold: float = DEFAULT_DIVERGENCE_THRESHOLD) -> Any:
+    """Per path (leading axes of x (..., N, d)): True if non-finite or max |x| > threshold.
+
+    In the library of x (a bool array of the leading shape).
+    """
+    xp = arrays.namespace(x)
+    bad = ~xp.isfinite(x) | (xp.abs(x) > threshold)
+    return xp.any(bad, axis=(-2, -1))
 
 
-def _control_at(control: ControlSpec, n: int, t: float, x: np.ndarray, name: str) -> Any:
+def _control_at(control: ControlSpec, n: int, t: float, x: Any, name: str) -> Any:
     if control is None:
         return None
-    if callable(control):
-        u = np.asarray(control(t, x), dtype=float)
-    else:
-        u = control[n]
+    u = control(t, x) if callable(control) else control[n]
+    u = arrays.asarray(u, like=x)
+    xp = arrays.namespace(x)
     try:
-        u = np.broadcast_to(u, x.shape)
-    except ValueError:
+        u = xp.broadcast_to(u, tuple(x.shape))
+    except (ValueError, RuntimeError):
         raise ValueError(
-            f"{name} at step {n} has shape {np.shape(u)}, which does not broadcast to the "
-            f"state shape {x.shape}"
+            f"{name} at step {n} has shape {tuple(u.shape)}, which does not broadcast to the "
+            f"state shape {tuple(x.shape)}"
         ) from None
-    if not np.all(np.isfinite(u)):
+    if not bool(xp.all(xp.isfinite(u))):
         raise ValueError(f"{name} at step {n} is not finite")
     return u
 
@@ -98,14 +114,15 @@ def _control_at(control: ControlSpec, n: int, t: float, x: np.ndarray, name: str
 def _validate_control_array(control: Any, n_steps: int, n_agents: int, dim: int, name: str):
     if control is None or callable(control):
         return control
-    arr = np.asarray(control, dtype=float)
+    arr = control if arrays.is_torch(control) else np.asarray(control, dtype=float)
     if dim == 1 and arr.ndim == 2:
         arr = arr[..., None]
-    if arr.ndim not in (3, 4) or arr.shape[0] != n_steps or arr.shape[-2:] != (n_agents, dim):
+    shape = tuple(arr.shape)
+    if arr.ndim not in (3, 4) or shape[0] != n_steps or shape[-2:] != (n_agents, dim):
         raise ValueError(
             f"{name} must be None, a callable(t, x) -> u, or an array of shape "
             f"(n_steps, N, d) = ({n_steps}, {n_agents}, {dim}) or (n_steps, n_paths, N, d); "
-            f"got shape {np.shape(control)}"
+            f"got shape {tuple(np.shape(control)) if not arrays.is_torch(control) else shape}"
         )
     return arr
 
@@ -115,19 +132,21 @@ class Trajectory:
     """The result of `simulate`.
 
     Attributes:
-        times: (m + 1,) the time grid t_n = n tau.
-        positions: (m + 1, n_paths, N, d). When a path diverges, integration stops and the rows
+        times: (m + 1,) the time grid t_n = n tau (numpy).
+        positions: (m + 1, n_paths, N, d), numpy or a torch tensor (the simulation's library;
+            differentiable on torch). When a path diverges, integration stops and the rows
             after `divergence_step` are NaN (flagged by `diverged`, never silent).
-        controls: (m, n_paths, N, d) the control applied on each step (zeros for no control).
+        controls: (m, n_paths, N, d) the control applied on each step (zeros for no control),
+            in the simulation's library.
         diverged: True if any path became non-finite or exceeded `divergence_threshold`.
         divergence_step: the first step index n at which a path diverged, else None.
-        diverged_paths: (n_paths,) which paths diverged.
+        diverged_paths: (n_paths,) which paths diverged (numpy bool).
         wall_time: seconds spent integrating.
     """
 
     times: np.ndarray
-    positions: np.ndarray
-    controls: np.ndarray
+    positions: Any
+    controls: Any
     diverged: bool
     divergence_step: int | None
     diverged_paths: np.ndarray
@@ -137,9 +156,9 @@ class Trajectory:
     params: SwarmParams = field(repr=False)
 
     @property
-    def mean_positions(self) -> np.ndarray:
+    def mean_positions(self) -> Any:
         """Positions averaged over the Brownian paths: (m + 1, N, d)."""
-        return self.positions.mean(axis=1)
+        return arrays.namespace(self.positions).mean(self.positions, axis=1)
 
 
 def _generators(seed: int | np.random.Generator | None):
@@ -168,11 +187,15 @@ def simulate(
     control_rate: ControlSpec = None,
     phi_method: str | None = None,
     divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD,
+    model: DriftModel | None = None,
+    increments: Any = None,
+    backend: str | None = None,
+    device: Any = None,
 ) -> Trajectory:
     """Integrate the swarm SDE on [0, T] with m = `n_steps` steps for `n_paths` Brownian paths.
 
     Args:
-        params: the model.
+        params: the model (N, d, horizon T; the dynamics unless `model` is given).
         integrator: a registry name ("em", "ee", "heun", "erb", "serb") or an Integrator.
         jacobian: "frozen" (default, L(x)) or "exact" (dF/dx), for "erb"/"serb"; with an
             integrator instance, leave it None (the instance's own choice is used).
@@ -185,6 +208,14 @@ def simulate(
         control_rate: du/dt in the same forms, for the phi2 term of `eq:serbaut` (optional).
         phi_method: "auto" (default), "expm", "eigh" or "krylov" (see `phi_action`).
         divergence_threshold: max |x| beyond which a path counts as diverged.
+        model: a drift model following `agent_envs.integrators.base.DriftModel`
+            (``drift(t, x, u)``, ``drift_and_linearization(t, x, u, kind)``, ``sigma``), e.g. a
+            closed loop whose drift contains a feedback law; default `SwarmModel(params)`.
+        increments: the Brownian increments dW, shape (n_steps, n_paths, N, d), variance tau;
+            default drawn from the seed (then `seed` only draws the initial positions).
+        backend: "numpy", "torch" or None (torch when a torch tensor is passed in or `device`
+            is given, numpy otherwise).
+        device: a torch device ("cpu", "cuda", ...) for the torch backend.
     """
     if not isinstance(params, SwarmParams):
         raise TypeError(f"params must be a SwarmParams, got {type(params).__name__}")
@@ -204,45 +235,63 @@ def simulate(
         jacobian = DEFAULT_JACOBIAN if jacobian is None else jacobian
         phi_method = "auto" if phi_method is None else phi_method
         scheme = make_integrator(integrator, jacobian=jacobian, phi_method=phi_method)
-        check_phi_method_fits_kernel(params, integrator, jacobian, phi_method)
+        if model is None:
+            check_phi_method_fits_kernel(params, integrator, jacobian, phi_method)
+    xp, dev, dtype = arrays.resolve(backend, device, initial_positions, control, control_rate)
     n, d = params.n_agents, params.dim
     control = _validate_control_array(control, n_steps, n, d, "control")
     control_rate = _validate_control_array(control_rate, n_steps, n, d, "control_rate")
-    model = SwarmModel(params)
+    if model is None:
+        model = SwarmModel(params)
     init_rng, noise_rng = _generators(seed)
     if initial_positions is None:
         x0 = uniform_positions(init_rng, n, d)
     else:
         x0 = as_positions(initial_positions, n, d)
+    shape = (n_paths, n, d)
+    if increments is None:
+        increments = brownian_increments(noise_rng, (n_steps, *shape), params.horizon / n_steps)
+    elif tuple(getattr(increments, "shape", np.shape(increments))) != (n_steps, *shape):
+        raise ValueError(
+            f"increments must have shape (n_steps, n_paths, N, d) = {(n_steps, *shape)}, "
+            f"got {tuple(getattr(increments, 'shape', np.shape(increments)))}"
+        )
+    x0 = arrays.asarray(x0, xp=xp, device=dev, dtype=dtype)
+    increments = arrays.asarray(increments, xp=xp, device=dev, dtype=dtype)
 
     dt = params.horizon / n_steps
     times = np.linspace(0.0, params.horizon, n_steps + 1)
-    positions = np.full((n_steps + 1, n_paths, n, d), np.nan)
-    controls = np.zeros((n_steps, n_paths, n, d))
-    x = np.broadcast_to(x0, (n_paths, n, d)).copy()
-    positions[0] = x
+    x = xp.broadcast_to(x0, shape)
+    if arrays.is_numpy_namespace(xp):
+        x = x.copy()
+    states = [x]
+    applied = []
     bad = np.zeros(n_paths, dtype=bool)
     divergence_step = None
     start = time.perf_counter()
     for step in range(n_steps):
-        t = times[step]
+        t = float(times[step])
         u = _control_at(control, step, t, x, "control")
         du = _control_at(control_rate, step, t, x, "control_rate")
-        if u is not None:
-            controls[step] = u
-        dw = brownian_increments(noise_rng, x.shape, dt)
+        applied.append(u)
         with np.errstate(over="ignore", invalid="ignore"):
-            x = scheme.step(model, x, u, t, dt, dw, du_dt=du)
-        bad = diverged_paths(x, divergence_threshold)
-        if np.any(bad):
+            x = scheme.step(model, x, u, t, dt, increments[step], du_dt=du)
+        flags = diverged_paths(x, divergence_threshold)
+        if bool(xp.any(flags)):
+            bad = arrays.to_numpy(flags)
             divergence_step = step + 1
             break
-        positions[step + 1] = x
+        states.append(x)
     wall = time.perf_counter() - start
+    nan_state = arrays.asarray(np.full(shape, np.nan), like=states[0])
+    zero_control = arrays.zeros(shape, like=states[0])
+    states += [nan_state] * (n_steps + 1 - len(states))
+    controls = [zero_control if u is None else u for u in applied]
+    controls += [zero_control] * (n_steps - len(controls))
     return Trajectory(
         times=times,
-        positions=positions,
-        controls=controls,
+        positions=xp.stack(states, axis=0),
+        controls=xp.stack(controls, axis=0),
         diverged=divergence_step is not None,
         divergence_step=divergence_step,
         diverged_paths=bad,

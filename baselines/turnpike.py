@@ -38,6 +38,7 @@ each path's own stiff interaction; we measured single paths scattering under SER
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Mapping
 from typing import Any
@@ -144,31 +145,52 @@ class CheapClosedLoopModel:
     (eps = 0.05, m = 50) while their mean still looked right.
     """
 
-    def __init__(self, model: Any, target: np.ndarray, beta: float = DEFAULT_BETA) -> None:
+    def __init__(
+        self,
+        model: Any,
+        target: np.ndarray,
+        beta: float = DEFAULT_BETA,
+        until: float = math.inf,
+    ) -> None:
         self.model = model
         self.sigma = model.sigma
         self.n_agents = model.n_agents
         self.dim = model.dim
         self.target = np.asarray(target, dtype=float).reshape(model.dim)
         self.beta = float(beta)
+        self.until = float(until)
+
+    def feedback_on(self, t: float) -> bool:
+        """True while t < `until` (the turnpike time tbar; up to 1e-9 of round-off).
+
+        The switch is a function of t: a scheme that evaluates the drift at t + tau inside a
+        step (Heun's predictor) sees the open loop there once t + tau >= tbar.
+        """
+        return t < self.until - 1e-9
 
     def control(self, x: np.ndarray) -> np.ndarray:
         """u(x) = beta (xbar - x) - L(x) x per path, same shape as x (..., N, d)."""
         x = np.asarray(x, dtype=float)
         return self.beta * (self.target - x) - self.model.interaction_drift(x)
 
-    def drift(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+    def drift(self, t: float, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """F(t, x, u + u_fb(x)) with the feedback u_fb while `feedback_on(t)`, else F(t, x, u)."""
         x = np.asarray(x, dtype=float)
-        f = self.model.drift(x, self.control(x))
+        if not self.feedback_on(t):
+            return self.model.drift(t, x, u)
+        f = self.model.drift(t, x, self.control(x))
         return f if u is None else f + u
 
-    def drift_and_linearization(self, x: np.ndarray, u: np.ndarray | None, kind: str):
+    def drift_and_linearization(self, t: float, x: np.ndarray, u: np.ndarray | None, kind: str):
+        """(F, -beta I) while the feedback is on; the wrapped model's pair afterwards."""
         from agent_envs.dynamics.swarm import Linearization
 
+        if not self.feedback_on(t):
+            return self.model.drift_and_linearization(t, x, u, kind)
         x = np.asarray(x, dtype=float)
         eye = np.broadcast_to(np.eye(self.n_agents), (*x.shape[:-2], self.n_agents, self.n_agents))
         lin = Linearization(-self.beta * eye, per_coordinate=True, symmetric=True)
-        return self.drift(x, u), lin
+        return self.drift(t, x, u), lin
 
 
 # --------------------------------------------------------------------------------------------

@@ -61,7 +61,7 @@ def bench_phi(sizes) -> None:
         model = SwarmModel(SwarmParams(n_agents=n))
         x = np.random.default_rng(0).uniform(-1, 1, (n, 1))
         a = 0.04 * model.frozen_linearization(x)
-        v = model.drift(x)
+        v = model.drift(0.0, x)
         res = {
             m: _timeit(lambda m=m, a=a, v=v: phi_action(a, v, 1, method=m, symmetric=True))
             for m in ("expm", "eigh", "krylov")

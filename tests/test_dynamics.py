@@ -19,8 +19,8 @@ def _fd_jacobian(model, x, h=1e-6):
     for j in range(n * d):
         e = np.zeros(n * d)
         e[j] = h
-        fp = model.drift((flat + e).reshape(n, d))
-        fm = model.drift((flat - e).reshape(n, d))
+        fp = model.drift(0.0, (flat + e).reshape(n, d))
+        fm = model.drift(0.0, (flat - e).reshape(n, d))
         jac[:, j] = (fp - fm).reshape(-1) / (2 * h)
     return jac
 
@@ -57,9 +57,9 @@ def test_drift_is_frozen_linearization_times_state_and_batched():
     u = np.random.default_rng(4).normal(size=(6, 2))
     lx = model.frozen_linearization(x)
     assert lx.shape == (4, 3, 6, 6)
-    np.testing.assert_allclose(model.drift(x, u), lx @ x + u)
+    np.testing.assert_allclose(model.drift(0.0, x, u), lx @ x + u)
     # the batched call equals the one-by-one calls
-    np.testing.assert_allclose(model.drift(x)[2, 1], model.drift(x[2, 1]))
+    np.testing.assert_allclose(model.drift(0.0, x)[2, 1], model.drift(0.0, x[2, 1]))
     # explicit double sum of eq:dynamics
     n = 6
     xs = x[0, 0]
@@ -107,4 +107,4 @@ def test_user_kernel_is_accepted():
 def test_bad_state_shape_is_rejected():
     model = SwarmModel(SwarmParams(n_agents=5))
     with pytest.raises(ValueError, match=r"\(\.\.\., 5, 1\)"):
-        model.drift(np.zeros((4, 1)))
+        model.drift(0.0, np.zeros((4, 1)))

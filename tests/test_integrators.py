@@ -42,7 +42,7 @@ def _order(errors):
 def _ode_reference(model, x0, horizon, control=None):
     def rhs(t, y):
         u = None if control is None else control(t)
-        return model.drift(y.reshape(x0.shape), u).reshape(-1)
+        return model.drift(0.0, y.reshape(x0.shape), u).reshape(-1)
 
     sol = solve_ivp(rhs, (0, horizon), x0.reshape(-1), method="DOP853", rtol=1e-12, atol=1e-13)
     return sol.y[:, -1].reshape(x0.shape)
@@ -227,7 +227,7 @@ def test_exact_jacobian_of_a_symmetric_non_radial_kernel_is_not_treated_as_symme
 
     model = SwarmModel(SwarmParams(n_agents=100, kernel=Product(), sigma=0.0))
     x = np.random.default_rng(0).uniform(-1, 1, (1, 100, 1))
-    _, lin = model.drift_and_linearization(x, None, "exact")
+    _, lin = model.drift_and_linearization(0.0, x, None, "exact")
     assert not lin.symmetric
     dw = np.zeros_like(x)
     auto = make_integrator("erb", jacobian="exact").step(model, x, None, 0.0, 0.05, dw)

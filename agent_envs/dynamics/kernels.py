@@ -12,6 +12,9 @@ attribute `symmetric` (True when p(x, y) = p(y, x) for every pair, which makes t
 linearization L(x) a symmetric matrix). The exact Jacobian is symmetric only when, in addition,
 p depends on |x - y| alone; a kernel says so with the optional attribute `radial = True`
 (otherwise the exponential integrators treat the exact Jacobian as non-symmetric).
+
+Kernels receive numpy arrays or torch tensors (see `agent_envs.arrays`) and must answer in the
+same library; write them with array methods/operators or `arrays.namespace(xk)`.
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ from __future__ import annotations
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+
+from agent_envs import arrays
 
 
 @runtime_checkable
@@ -59,6 +64,8 @@ class CuckerSmaleKernel:
             raise ValueError("weights must be a positive finite scalar or 1-D array")
         self.alpha = float(alpha)
         self.weights = w
+        self._scalar_weight = float(w) if w.ndim == 0 else None
+        self._weights_cache: dict = {}
         self.symmetric = bool(w.ndim == 0 or np.all(w == w.flat[0]))
         self.radial = True  # p depends on |x_k - x_l| (and the index l): see the module doc
 
@@ -77,17 +84,31 @@ class CuckerSmaleKernel:
         kernel.symmetric = epsilon_min == epsilon_max
         return kernel
 
-    def _denominator(self, xk: np.ndarray, xl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _weights_like(self, x):
+        """The weights w as a float, or as an (N,) array of x's library and device."""
+        if self._scalar_weight is not None:
+            return self._scalar_weight
+        if not arrays.is_torch(x):
+            return self.weights
+        key = (x.device, x.dtype)
+        if key not in self._weights_cache:
+            self._weights_cache[key] = arrays.asarray(self.weights, like=x)
+        return self._weights_cache[key]
+
+    def _denominator(self, xk, xl):
         r = xl - xk
-        return r, self.alpha**2 + np.sum(r * r, axis=-1)
+        xp = arrays.namespace(r)
+        if r.shape[-1] == 1:
+            return r, self.alpha**2 + r[..., 0] * r[..., 0]
+        return r, self.alpha**2 + xp.sum(r * r, axis=-1)
 
-    def value(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+    def value(self, xk, xl):
         _, denom = self._denominator(xk, xl)
-        return self.weights / denom
+        return self._weights_like(xk) / denom
 
-    def grad_x(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
+    def grad_x(self, xk, xl):
         r, denom = self._denominator(xk, xl)
-        return (2.0 * self.weights / denom**2)[..., None] * r
+        return (2.0 * self._weights_like(xk) / denom**2)[..., None] * r
 
     def grad_y(self, xk: np.ndarray, xl: np.ndarray) -> np.ndarray:
         return -self.grad_x(xk, xl)

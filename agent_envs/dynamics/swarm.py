@@ -1,4 +1,4 @@
-"""The swarm's drift F(x, u), its exact Jacobian J(x) and its frozen-kernel linearization L(x).
+"""The swarm's drift F(t, x, u), its exact Jacobian J(x) and its frozen-kernel linearization L(x).
 
 State arrays have shape (..., N, d): any leading batch axes (Brownian paths, envs), then the
 N agents, then the d coordinates. With P[k, l] = p(x_k, x_l) and s_k = sum_l P[k, l], the
@@ -19,14 +19,21 @@ is an (Nd, Nd) matrix made of d x d blocks, with r_kl = x_l - x_k:
 For the Cucker-Smale kernel, ``r ⊗ dp/dy = -2 w r r^T / D^2``, so J_kl = 0 in d = 1 exactly
 when |x_k - x_l| = alpha and it turns negative for agents farther apart than alpha: the exact
 Jacobian is then indefinite (positive eigenvalues), unlike L(x).
+
+The swarm's drift does not depend on t; the argument is there so that every drift model (a
+closed loop with a time-dependent feedback law, for instance) has the same signature
+`drift(t, x, u)`. Every method takes numpy arrays or torch tensors (see `agent_envs.arrays`)
+and answers in the same library; on torch it is differentiable.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from agent_envs import arrays
 from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
 from agent_envs.params import SwarmParams
 
@@ -51,21 +58,25 @@ class Linearization:
     flattened state (..., Nd) (the exact Jacobian).
     """
 
-    matrix: np.ndarray
+    matrix: Any
     per_coordinate: bool
     symmetric: bool
 
-    def as_columns(self, v: np.ndarray) -> np.ndarray:
-        """Reshape a state (..., N, d) into the (..., n, k) column block A acts on."""
+    def as_columns(self, v: Any) -> Any:
+        """The state-shaped v (..., N, d) as the block of vectors A acts on."""
         if self.per_coordinate:
             return v
-        return v.reshape(*v.shape[:-2], -1, 1)
+        xp = arrays.namespace(v)
+        return xp.reshape(v, (*v.shape[:-2], v.shape[-2] * v.shape[-1], 1))
 
-    def from_columns(self, w: np.ndarray, like: np.ndarray) -> np.ndarray:
+    def from_columns(self, w: Any, like: Any) -> Any:
         """Inverse of `as_columns`: back to the state shape of `like`."""
-        return w.reshape(like.shape)
+        if self.per_coordinate and tuple(w.shape) == tuple(like.shape):
+            return w
+        xp = arrays.namespace(w)
+        return xp.reshape(w, tuple(like.shape))
 
-    def apply(self, v: np.ndarray) -> np.ndarray:
+    def apply(self, v: Any) -> Any:
         """A v for a state-shaped v (..., N, d)."""
         return self.from_columns(self.matrix @ self.as_columns(v), v)
 
@@ -73,9 +84,11 @@ class Linearization:
 class SwarmModel:
     """Drift, Jacobian and frozen linearization of the swarm SDE for given `SwarmParams`.
 
-    The integrators see only `drift`, `drift_and_linearization` and `sigma`; the controllers and
-    envs use `interaction_drift` and `interaction_matrix`. Every method is batched over leading
-    axes.
+    The integrators see only `drift`, `drift_and_linearization` and `sigma` (the `DriftModel`
+    protocol of `agent_envs.integrators.base`); the controllers and envs use
+    `interaction_drift` and `interaction_matrix`. Every method is batched over leading axes.
+    The model holds only the dynamics (kernel, noise, N, d): the target and gamma are cost
+    parameters and do not enter it.
     """
 
     def __init__(self, params: SwarmParams) -> None:
@@ -85,65 +98,66 @@ class SwarmModel:
         self.dim = params.dim
         self.sigma = params.sigma
 
-    def _check_state(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        if x.ndim < 2 or x.shape[-2:] != (self.n_agents, self.dim):
+    def _check_state(self, x: Any) -> Any:
+        if not arrays.is_torch(x):
+            x = np.asarray(x, dtype=float)
+        if x.ndim < 2 or tuple(x.shape[-2:]) != (self.n_agents, self.dim):
             raise ValueError(
-                f"state must have shape (..., {self.n_agents}, {self.dim}), got {x.shape}"
+                f"state must have shape (..., {self.n_agents}, {self.dim}), got {tuple(x.shape)}"
             )
         return x
 
-    def interaction_matrix(self, x: np.ndarray) -> np.ndarray:
+    def interaction_matrix(self, x: Any) -> Any:
         """P(x) with P[..., k, l] = p(x_k, x_l); shape (..., N, N)."""
         x = self._check_state(x)
         return self.kernel.value(x[..., :, None, :], x[..., None, :, :])
 
-    def frozen_linearization(self, x: np.ndarray) -> np.ndarray:
+    def frozen_linearization(self, x: Any) -> Any:
         """L(x) = (P(x) - diag(P(x) 1)) / N; shape (..., N, N)."""
         p = self.interaction_matrix(x)
-        n = self.n_agents
-        diag = np.arange(n)
-        p[..., diag, diag] -= p.sum(axis=-1)
-        return p / n
+        xp = arrays.namespace(p)
+        return arrays.subtract_diagonal(p, xp.sum(p, axis=-1)) / self.n_agents
 
-    def interaction_drift(self, x: np.ndarray) -> np.ndarray:
+    def interaction_drift(self, x: Any) -> Any:
         """(1/N) sum_l p(x_k, x_l)(x_l - x_k) = L(x) x; shape (..., N, d)."""
         x = self._check_state(x)
         return self.frozen_linearization(x) @ x
 
-    def drift(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
-        """F(x, u) = L(x) x + u of `eq:dyn_matrix`; x and u broadcast to (..., N, d)."""
+    def drift(self, t: float, x: Any, u: Any = None) -> Any:
+        """F(t, x, u) = L(x) x + u of `eq:dyn_matrix`; x and u broadcast to (..., N, d)."""
         f = self.interaction_drift(x)
         return f if u is None else f + u
 
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
+    def jacobian(self, x: Any) -> Any:
         """The exact Jacobian dF/dx (see the module docstring); shape (..., Nd, Nd).
 
         Rows and columns are ordered agent-major: index k*d + i is coordinate i of agent k.
         """
         x = self._check_state(x)
+        xp = arrays.namespace(x)
         n, d = self.n_agents, self.dim
         xk, xl = x[..., :, None, :], x[..., None, :, :]
         r = xl - xk  # (..., N, N, d)
         p = self.kernel.value(xk, xl)  # (..., N, N)
         gx = self.kernel.grad_x(xk, xl)
         gy = self.kernel.grad_y(xk, xl)
-        eye = np.eye(d)
+        eye_d = arrays.asarray(np.eye(d), like=x)
+        eye_n = arrays.asarray(np.eye(n), like=x)
         # Off-diagonal blocks for every (k, l); at l = k they hold p_kk I / N, which the
         # diagonal sum below cancels by including its own l = k term (-p_kk I / N).
-        blocks = r[..., :, None] * gy[..., None, :] + p[..., None, None] * eye  # (..,N,N,d,d)
-        diag_blocks = np.sum(r[..., :, None] * gx[..., None, :] - p[..., None, None] * eye, -3)
-        idx = np.arange(n)
-        blocks[..., idx, idx, :, :] += diag_blocks
-        blocks /= n
+        blocks = r[..., :, None] * gy[..., None, :] + p[..., None, None] * eye_d  # (..,N,N,d,d)
+        diag_blocks = xp.sum(
+            r[..., :, None] * gx[..., None, :] - p[..., None, None] * eye_d, axis=-3
+        )
+        blocks = (blocks + eye_n[..., None, None] * diag_blocks[..., :, None, :, :]) / n
         # (..., N, N, d, d) -> (..., N, d, N, d) -> (..., Nd, Nd)
-        blocks = np.swapaxes(blocks, -3, -2)
-        return blocks.reshape(*x.shape[:-2], n * d, n * d)
+        blocks = xp.moveaxis(blocks, -2, -3)
+        return xp.reshape(blocks, (*x.shape[:-2], n * d, n * d))
 
     def drift_and_linearization(
-        self, x: np.ndarray, u: np.ndarray | None, kind: str
-    ) -> tuple[np.ndarray, Linearization]:
-        """F(x, u) and the ``"exact"`` or ``"frozen"`` linearization, sharing the work of L(x)."""
+        self, t: float, x: Any, u: Any, kind: str
+    ) -> tuple[Any, Linearization]:
+        """F(t, x, u) and the ``"exact"`` or ``"frozen"`` linearization, sharing L(x)."""
         if kind not in ("exact", "frozen"):
             raise ValueError(f"jacobian must be 'exact' or 'frozen', got {kind!r}")
         x = self._check_state(x)

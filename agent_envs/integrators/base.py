@@ -9,13 +9,16 @@ order when sigma = 0 is `deterministic_order`) and `needs_jacobian`. Integrators
 numbers: the Brownian increments `dW` (same shape as `x`, variance `dt`) come in from outside,
 so every scheme can be compared on the same noise.
 
-`model` is anything with `drift(x, u)`, `sigma` and, for exponential schemes,
-`drift_and_linearization(x, u, kind)` (see `agent_envs.dynamics.swarm.SwarmModel`).
+`model` is anything with `drift(t, x, u)`, `sigma` and, for exponential schemes,
+`drift_and_linearization(t, x, u, kind)` (see `agent_envs.dynamics.swarm.SwarmModel`); a
+closed-loop model whose drift includes a time-dependent feedback law fits the same protocol.
+States are numpy arrays or torch tensors (`agent_envs.arrays`); the schemes only use
+operators and the model, so they run (and differentiate, on torch) on either.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -25,10 +28,12 @@ class DriftModel(Protocol):
 
     sigma: float
 
-    def drift(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray: ...
+    def drift(self, t: float, x: Any, u: Any = None) -> Any:
+        """F(t, x, u), the state shape (..., N, d)."""
+        ...
 
-    def drift_and_linearization(self, x: np.ndarray, u: np.ndarray | None, kind: str):
-        """(F(x, u), Linearization) for exponential schemes."""
+    def drift_and_linearization(self, t: float, x: Any, u: Any, kind: str):
+        """(F(t, x, u), Linearization) for exponential schemes; kind "exact" or "frozen"."""
         ...
 
 

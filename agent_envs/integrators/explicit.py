@@ -18,14 +18,14 @@ from agent_envs.integrators.base import DriftModel, Integrator
 
 
 class EulerMaruyama(Integrator):
-    """x+ = x + dt F(x, u) + sigma dW (`eq:eulermaru`); strong order 1 for additive noise."""
+    """x+ = x + dt F(t, x, u) + sigma dW (`eq:eulermaru`); strong order 1 for additive noise."""
 
     name = "em"
     strong_order = 1.0
     deterministic_order = 1.0
 
     def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> np.ndarray:
-        return x + dt * model.drift(x, u) + model.sigma * dW
+        return x + dt * model.drift(t, x, u) + model.sigma * dW
 
 
 class ExplicitEuler(EulerMaruyama):
@@ -43,7 +43,7 @@ class Heun(Integrator):
 
     def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> np.ndarray:
         noise = model.sigma * dW
-        f0 = model.drift(x, u)
+        f0 = model.drift(t, x, u)
         predictor = x + dt * f0 + noise
         u1 = u if du_dt is None or u is None else u + dt * du_dt
-        return x + 0.5 * dt * (f0 + model.drift(predictor, u1)) + noise
+        return x + 0.5 * dt * (f0 + model.drift(t + dt, predictor, u1)) + noise

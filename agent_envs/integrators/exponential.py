@@ -16,8 +16,9 @@ Euler for x' = L(x) x + u, of order 1. SERB has strong order 1 for additive nois
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
+from agent_envs import arrays
 from agent_envs.integrators.base import DriftModel, Integrator
 from agent_envs.integrators.phi_functions import PHI_METHODS, phi_action
 
@@ -42,8 +43,8 @@ class RosenbrockEuler(Integrator):
     def deterministic_order(self) -> float:  # type: ignore[override]
         return 2.0 if self.jacobian == "exact" else 1.0
 
-    def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> np.ndarray:
-        rhs, lin = model.drift_and_linearization(x, u, self.jacobian)
+    def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> Any:
+        rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
         noise = model.sigma * dW
         if self.stochastic_correction and model.sigma != 0.0:
             rhs = rhs + lin.apply(noise)
@@ -51,7 +52,7 @@ class RosenbrockEuler(Integrator):
         kw = {"method": self.phi_method, "symmetric": lin.symmetric}
         incr = dt * phi_action(scaled, lin.as_columns(rhs), 1, **kw)
         if du_dt is not None:
-            v = np.broadcast_to(du_dt, rhs.shape)
+            v = arrays.namespace(rhs).broadcast_to(du_dt, tuple(rhs.shape))
             incr = incr + dt**2 * phi_action(scaled, lin.as_columns(v), 2, **kw)
         return x + lin.from_columns(incr, x) + noise
 

@@ -1,0 +1,253 @@
+"""Array libraries behind one dispatch: numpy (the default) and torch (CPU/CUDA, differentiable).
+
+The numerical core (kernels, drift, Jacobians, phi-functions, integrators, costs, simulate) is
+written once against the Python Array API standard: every function asks `namespace(x, ...)`
+for the module `xp` of its arguments and calls ``xp.exp``, ``xp.linalg.eigh``, ``xp.concat``...
+For numpy arrays that module is numpy itself (numpy >= 2 implements the standard in its main
+namespace, and its plain functions carry the least per-call overhead); for torch tensors it is
+`array_api_compat.torch`. Mixing the two in one call is an error of the caller.
+
+The few pieces the standard lacks or where the libraries differ live here and nowhere else:
+
+- `expm`: `scipy.linalg.expm` (Pade, scaling and squaring) vs `torch.linalg.matrix_exp`.
+- `symmetric_function_action`: f(A) V = Q f(Lambda) Q^T V for a symmetric A. On torch with
+  autograd it is a custom `torch.autograd.Function` whose backward uses the Daleckii-Krein
+  formula with divided differences of f, so the gradient stays finite at repeated eigenvalues
+  (where `torch.linalg.eigh`'s own backward divides by lambda_i - lambda_j = 0; the frozen
+  L(x) of a swarm at consensus has an (N-1)-fold eigenvalue).
+- `subtract_diagonal`: P - diag(s), in place on a fresh numpy array, functional on torch.
+- conversions (`asarray`, `to_numpy`) and the choice of library and device (`resolve`).
+
+torch is imported lazily, only when a torch tensor is seen or a torch backend is asked for:
+`import agent_envs` and every numpy call leave it unimported.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+from array_api_compat import is_torch_array
+
+#: The array libraries `resolve` accepts.
+BACKENDS = ("numpy", "torch")
+
+_NUMPY_XP: Any = np
+if int(np.__version__.split(".")[0]) < 2:  # numpy 1.x: the standard through the compat layer
+    import array_api_compat.numpy as _compat_numpy
+
+    _NUMPY_XP = _compat_numpy
+
+
+def _torch_xp() -> Any:
+    import array_api_compat.torch as xp_torch
+
+    return xp_torch
+
+
+def is_torch(x: Any) -> bool:
+    """True for a torch tensor (never imports torch)."""
+    return "torch" in sys.modules and is_torch_array(x)
+
+
+def namespace(*arrays: Any) -> Any:
+    """The Array API namespace of `arrays` (None and Python scalars are ignored).
+
+    numpy (itself) when no torch tensor is among them, `array_api_compat.torch` otherwise.
+    """
+    for a in arrays:
+        if is_torch(a):
+            return _torch_xp()
+    return _NUMPY_XP
+
+
+def is_numpy_namespace(xp: Any) -> bool:
+    return xp is _NUMPY_XP
+
+
+def resolve(backend: str | None, device: Any, *arrays: Any) -> tuple[Any, Any, Any]:
+    """(xp, device, dtype) for a computation given a requested backend/device and its inputs.
+
+    `backend` None picks torch when one of `arrays` is a torch tensor or a `device` is given,
+    numpy otherwise. The dtype is float64, or the floating dtype of the first torch tensor in
+    `arrays`. Raises ValueError naming `backend`/`device` on a bad choice.
+    """
+    if backend is not None and backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS} or None, got {backend!r}")
+    tensors = [a for a in arrays if is_torch(a)]
+    if backend is None:
+        backend = "torch" if tensors or device is not None else "numpy"
+    if backend == "numpy":
+        if tensors:
+            raise ValueError("backend='numpy' was asked for, but torch tensors were passed in")
+        if device not in (None, "cpu"):
+            raise ValueError(f"device must be None or 'cpu' with backend='numpy', got {device!r}")
+        return _NUMPY_XP, None, np.float64
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - depends on the install
+        raise ValueError(
+            "backend='torch' needs torch installed (pip install 'agent-envs[train]')"
+        ) from None
+    dtype = torch.float64
+    for t in tensors:
+        if t.is_floating_point():
+            dtype = t.dtype
+            break
+    if device is None:
+        device = tensors[0].device if tensors else torch.device("cpu")
+    else:
+        try:
+            device = torch.device(device)
+        except (RuntimeError, TypeError) as exc:
+            raise ValueError(f"device must name a torch device, got {device!r}: {exc}") from None
+    return _torch_xp(), device, dtype
+
+
+def asarray(obj: Any, like: Any = None, *, xp: Any = None, device: Any = None, dtype: Any = None):
+    """`obj` as an array of the library, device and floating dtype of `like` (or of xp/device).
+
+    numpy inputs to a torch target are copied onto the device; a torch tensor already there is
+    returned unchanged (autograd history kept).
+    """
+    if like is not None:
+        xp = namespace(like)
+        if is_torch(like):
+            device, dtype = like.device, (dtype or like.dtype)
+    if xp is None or is_numpy_namespace(xp):
+        return np.asarray(obj, dtype=dtype or np.float64)
+    import torch
+
+    if is_torch(obj):
+        return obj.to(device=device, dtype=dtype or obj.dtype)
+    return torch.as_tensor(np.asarray(obj), dtype=dtype or torch.float64, device=device)
+
+
+def to_numpy(x: Any) -> np.ndarray:
+    """A numpy copy/view of an array of either library (detached from autograd)."""
+    if is_torch(x):
+        return x.detach().cpu().numpy()
+    return np.asarray(x)
+
+
+def zeros(shape: tuple[int, ...], like: Any) -> Any:
+    """Zeros of `shape` in the library, device and dtype of `like`."""
+    if is_torch(like):
+        import torch
+
+        return torch.zeros(shape, dtype=like.dtype, device=like.device)
+    return np.zeros(shape, dtype=np.result_type(like, np.float64))
+
+
+def expm(a: Any) -> Any:
+    """The matrix exponential of a batch (..., n, n)."""
+    if is_torch(a):
+        import torch
+
+        return torch.linalg.matrix_exp(a)
+    return scipy.linalg.expm(a)
+
+
+def subtract_diagonal(p: Any, s: Any) -> Any:
+    """P - diag(s) for P (..., n, n) and s (..., n). Modifies a numpy P in place (callers pass a
+    fresh array); functional on torch so autograd sees it."""
+    if is_torch(p):
+        import torch
+
+        return p - torch.diag_embed(s)
+    n = p.shape[-1]
+    idx = np.arange(n)
+    p[..., idx, idx] -= s
+    return p
+
+
+def symmetric_function_action(
+    a: Any,
+    v: Any,
+    f: Callable[[Any], Any],
+    df: Callable[[Any], Any],
+) -> Any:
+    """f(A) V = Q f(Lambda) Q^T V for symmetric A (..., n, n) and V (..., n, k).
+
+    A is symmetrized, (A + A^T)/2, before its eigendecomposition A = Q Lambda Q^T, so the
+    result is a function of the symmetric part only. `f` maps eigenvalues to f(lambda)
+    elementwise, `df` to f'(lambda); both take and return arrays of the same library.
+
+    Gradient (torch): with G = dL/dY, Y = f(A) V,
+        dL/dV = f(A) G,
+        dL/dA = sym(Q (F o (Q^T G V^T Q)) Q^T),
+    F_ij = (f(lambda_i) - f(lambda_j)) / (lambda_i - lambda_j), and f'((lambda_i + lambda_j)/2)
+    when |lambda_i - lambda_j| <= 1e-6 max(1, |lambda_i|, |lambda_j|) (Daleckii-Krein; the
+    midpoint derivative is the divided difference up to O(delta^2 f''')).
+    """
+    if is_torch(a) or is_torch(v):
+        import torch
+
+        if torch.is_grad_enabled() and (a.requires_grad or v.requires_grad):
+            return _symmetric_action_function().apply(a, v, f, df)
+    xp = namespace(a, v)
+    a = 0.5 * (a + xp.matrix_transpose(a))
+    lam, q = xp.linalg.eigh(a)
+    coef = xp.matrix_transpose(q) @ v
+    return q @ (f(lam)[..., None] * coef)
+
+
+#: Relative gap below which two eigenvalues count as equal in the divided differences.
+DIVIDED_DIFFERENCE_TOL = 1e-6
+
+
+def divided_differences(lam: Any, f_lam: Any, df: Callable[[Any], Any]) -> Any:
+    """F_ij = (f(l_i) - f(l_j)) / (l_i - l_j), f'((l_i + l_j)/2) for close l: (..., n, n)."""
+    xp = namespace(lam)
+    li, lj = lam[..., :, None], lam[..., None, :]
+    gap = li - lj
+    scale = xp.maximum(xp.maximum(xp.abs(li), xp.abs(lj)), xp.ones_like(gap))
+    close = xp.abs(gap) <= DIVIDED_DIFFERENCE_TOL * scale
+    quotient = (f_lam[..., :, None] - f_lam[..., None, :]) / xp.where(close, 1.0, gap)
+    return xp.where(close, df(0.5 * (li + lj)), quotient)
+
+
+_FUNCTION_CLASS: Any = None
+
+
+def _symmetric_action_function() -> Any:
+    """The torch.autograd.Function of `symmetric_function_action` (built on first use)."""
+    global _FUNCTION_CLASS
+    if _FUNCTION_CLASS is not None:
+        return _FUNCTION_CLASS
+    import torch
+    from torch.autograd.function import once_differentiable
+
+    class SymmetricFunctionAction(torch.autograd.Function):
+        @staticmethod
+        def forward(ctx, a, v, f, df):
+            a_sym = 0.5 * (a + a.mT)
+            lam, q = torch.linalg.eigh(a_sym)
+            f_lam = f(lam)
+            coef = q.mT @ v
+            ctx.save_for_backward(lam, q, f_lam, coef)
+            ctx.df = df
+            ctx.shapes = (a.shape, v.shape)
+            return q @ (f_lam[..., None] * coef)
+
+        @staticmethod
+        @once_differentiable
+        def backward(ctx, grad):
+            lam, q, f_lam, coef = ctx.saved_tensors
+            a_shape, v_shape = ctx.shapes
+            qg = q.mT @ grad  # Q^T G
+            grad_a = grad_v = None
+            if ctx.needs_input_grad[1]:
+                grad_v = (q @ (f_lam[..., None] * qg)).sum_to_size(v_shape)
+            if ctx.needs_input_grad[0]:
+                dd = divided_differences(lam, f_lam, ctx.df)
+                inner = dd * (qg @ coef.mT)  # F o (Q^T G V^T Q)
+                grad_a = q @ inner @ q.mT
+                grad_a = (0.5 * (grad_a + grad_a.mT)).sum_to_size(a_shape)
+            return grad_a, grad_v, None, None
+
+    _FUNCTION_CLASS = SymmetricFunctionAction
+    return _FUNCTION_CLASS
