@@ -157,10 +157,10 @@ class DiscreteCostObjective:
             initial_positions=self.x0,
             control=controls,
         )
-        x = traj.positions[:-1]  # (m, K, N, d): the left rectangle rule skips x^m
-        state = torch.sum((x - self.target) ** 2, dim=(-2, -1)).mean(dim=-1)  # (m,)
-        effort = self.params.gamma * torch.sum(controls**2, dim=(-2, -1))  # (m,)
-        return self.dt / self.params.n_agents * torch.sum(state + effort)
+        costs = discrete_cost(
+            traj.positions, traj.controls, self.target, self.params.gamma, self.dt
+        )
+        return torch.mean(costs)
 
     def __call__(self, flat: np.ndarray) -> tuple[float, np.ndarray]:
         torch = self.torch

@@ -262,7 +262,12 @@ def test_non_convergence_warns_and_is_flagged():
 
 def test_baselines_import_without_torch_and_solve_names_the_extra():
     code = (
-        "import sys; sys.modules['torch'] = None\n"
+        "import sys\n"
+        "class NoTorch:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] == 'torch':\n"
+        "            raise ImportError('no torch here')\n"
+        "sys.meta_path.insert(0, NoTorch())\n"
         "import agent_envs.baselines as b\n"
         "from agent_envs.params import SwarmParams\n"
         "try:\n"
