@@ -106,6 +106,7 @@ def main() -> None:
         max_control=150.0,
         gtol=args.gtol,
         max_iterations=args.max_iterations,
+        threads=args.threads,
         **common,
     )
     wall = time.perf_counter() - start
