@@ -50,6 +50,8 @@ from agent_envs.training.config import (
 )
 
 BASELINE_POLICIES = ("turnpike", "proportional", "zero")
+#: the optimal-control references (`agent_envs.baselines.optimal_controllers`)
+OPTIMUM_POLICIES = ("optimal", "mpc")
 #: first held-out test seed (seeds TEST_SEED .. TEST_SEED + n - 1), as
 #: `agent_envs.training.evaluate`
 TEST_SEED = 10_000
@@ -179,6 +181,13 @@ class CompareConfig:
     progress_bar: bool = option_field(True, "progress bars")
     verbose: int = option_field(0, "SB3 verbosity")
     torch_threads: int = option_field(1, "torch threads (1 is fastest for these small networks)")
+    optimum: str = option_field(
+        ",".join(OPTIMUM_POLICIES),
+        "comma-separated optimal-control references evaluated with the baselines (optimal = "
+        "open-loop optimum, the V of the 'gap to optimal' column; mpc = receding horizon); '' "
+        "for none. Seconds per episode at N = 10; the paper preset's N = 100 takes ~40 s per "
+        "optimal episode and far longer for mpc",
+    )
 
     def __post_init__(self) -> None:
         self.env_kwargs = parse_json_object(self.env_kwargs, "--env-kwargs")
@@ -187,8 +196,15 @@ class CompareConfig:
             raise ValueError(f"--preset must be one of {', '.join(PRESETS)}; got {self.preset!r}")
         if not (isinstance(self.timesteps_scale, (int, float)) and self.timesteps_scale > 0):
             raise ValueError(f"--timesteps-scale must be > 0, got {self.timesteps_scale!r}")
+        unknown = [p for p in self.optimum_policies if p not in OPTIMUM_POLICIES]
+        if unknown:
+            raise ValueError(f"--optimum takes {', '.join(OPTIMUM_POLICIES)}; got {unknown}")
         if self.test_episodes is not None and self.test_episodes < 2:
             raise ValueError(f"--test-episodes must be >= 2, got {self.test_episodes}")
+
+    @property
+    def optimum_policies(self) -> list[str]:
+        return [p.strip() for p in self.optimum.split(",") if p.strip()]
 
     @property
     def out_dir(self) -> Path:
@@ -469,8 +485,9 @@ def compare(config: CompareConfig) -> dict[str, Any]:
             run_dirs[learner.name] = train_learner(config, learner, runs_dir)
         train_done = time.perf_counter()
 
-        print(f"evaluating {len(BASELINE_POLICIES) + len(run_dirs)} policies on {n_test} seeds")
-        policies: dict[str, Any] = {name: name for name in BASELINE_POLICIES}
+        references = [*BASELINE_POLICIES, *config.optimum_policies]
+        print(f"evaluating {len(references) + len(run_dirs)} policies on {n_test} seeds")
+        policies: dict[str, Any] = {name: name for name in references}
         policies.update({name: str(best_model_path(d)) for name, d in run_dirs.items()})
         results = evaluate_all(policies, env_kwargs, seeds, out / "evaluation", config.progress_bar)
         transfer = None

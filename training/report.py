@@ -39,6 +39,8 @@ from agent_envs.plotting import headless_pyplot
 from agent_envs.training.evaluate import EvaluationResults
 
 DEFAULT_REFERENCE = "turnpike"
+#: the policy whose cost is V in the "gap to optimal" column (skipped when not evaluated)
+DEFAULT_OPTIMUM = "optimal"
 
 
 @dataclass
@@ -83,7 +85,10 @@ def mean_confidence_interval(values: Sequence[float], confidence: float = 0.95):
 
 
 def summarize(
-    episodes: pd.DataFrame, reference: str | None = DEFAULT_REFERENCE, confidence: float = 0.95
+    episodes: pd.DataFrame,
+    reference: str | None = DEFAULT_REFERENCE,
+    confidence: float = 0.95,
+    optimum: str | None = DEFAULT_OPTIMUM,
 ) -> pd.DataFrame:
     """One row per policy: cost statistics, ratio to `reference`, divergence rate, etc.
 
@@ -93,10 +98,21 @@ def summarize(
     divergence_rate, mean_final_distance (non-diverged episodes), mean_control_energy,
     mean_saturated_fraction, mean_turnpike_time.
 
+    With `optimum` (the open-loop optimal controller, "optimal") among the policies: the gap to
+    optimal (cost - V) / V per seed, V = the optimum's cost on the same seed, as gap_to_optimal
+    with its t-CI gap_ci_low/high. V is the optimal open-loop plan's cost on the env's own noise,
+    so a feedback policy (MPC, a learner) can have a negative gap.
+
     A diverged episode ends early with the cost accumulated so far, which would make a diverging
-    policy look cheap: the ratios are NaN (shown as n/a) when the policy or the reference has a
-    diverged episode.
+    policy look cheap: the ratios and gaps are NaN (shown as n/a) when the policy or the
+    reference (optimum) has a diverged episode.
     """
+    best = None
+    if optimum is not None and optimum in set(episodes["policy"]):
+        best_rows = episodes[episodes["policy"] == optimum]
+        best = best_rows.set_index("seed")["total_cost"]
+        if bool(best_rows["diverged"].astype(bool).any()):
+            best = best * float("nan")
     rows = []
     ref = None
     ref_diverged = False
@@ -129,6 +145,14 @@ def summarize(
                     "paired_ratio_ci_high",
                 ):
                     row[key] = float("nan")
+        if best is not None:
+            paired = group.set_index("seed")["total_cost"]
+            common = paired.index.intersection(best.index)
+            gaps = ((paired.loc[common] - best.loc[common]) / best.loc[common]).to_numpy(float)
+            if bool(group["diverged"].astype(bool).any()):
+                gaps = gaps * float("nan")
+            gm, gl, gh = mean_confidence_interval(gaps, confidence)
+            row.update(gap_to_optimal=gm, gap_ci_low=gl, gap_ci_high=gh)
         diverged = group["diverged"].astype(bool)
         row["divergence_rate"] = float(diverged.mean())
         row["mean_final_distance"] = float(group.loc[~diverged, "final_distance"].mean())
@@ -272,6 +296,10 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _pct(v: Any) -> str:
+    return f"{100 * v:+.2f}%" if np.isfinite(v) else "n/a"
+
+
 def display_table(summary: pd.DataFrame, reference: str | None) -> pd.DataFrame:
     """The summary as strings for the report (CI merged into one column)."""
     out = pd.DataFrame({"policy": summary["policy"], "episodes": summary["episodes"]})
@@ -289,6 +317,16 @@ def display_table(summary: pd.DataFrame, reference: str | None) -> pd.DataFrame:
                 summary["paired_ratio"],
                 summary["paired_ratio_ci_low"],
                 summary["paired_ratio_ci_high"],
+                strict=True,
+            )
+        ]
+    if "gap_to_optimal" in summary:
+        out["gap to optimal [95% CI]"] = [
+            f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
+            for m, lo, hi in zip(
+                summary["gap_to_optimal"],
+                summary["gap_ci_low"],
+                summary["gap_ci_high"],
                 strict=True,
             )
         ]
@@ -473,6 +511,13 @@ def build_report(
             f"'ratio to {reference}' divides mean costs; 'paired ratio' averages the per-seed "
             f"ratios (same seeds). "
             if reference
+            else ""
+        )
+        + (
+            "'gap to optimal' is the per-seed (cost - V) / V, V = the cost of the optimal "
+            "open-loop plan (policy 'optimal', solved from each episode's start) on the same "
+            "seed, mean and t-interval; a feedback policy can beat it (negative gap). "
+            if "gap_to_optimal" in summary
             else ""
         )
         + "A diverged episode stops early, so its cost covers only the steps it ran: read the "
