@@ -38,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -301,9 +302,13 @@ def run(args: argparse.Namespace) -> int:
     from agent_envs.simulator import uniform_positions
 
     for horizon in args.horizons:
-        steps = horizon / args.tau
-        if not args.tau > 0 or abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
-            raise SystemExit(f"--tau must divide every horizon; {horizon} / {args.tau} = {steps}")
+        steps = horizon / args.tau if args.tau > 0 else float("nan")
+        if not (args.tau > 0 and horizon > 0 and abs(steps - round(steps)) <= 1e-9):
+            print(
+                f"error: --tau must be > 0 and divide every horizon; {horizon} / {args.tau}",
+                file=sys.stderr,
+            )
+            return 2
     args.out.mkdir(parents=True, exist_ok=True)
     x0 = uniform_positions(np.random.default_rng(args.seed), args.n_agents, 1)
     settings = [
