@@ -131,8 +131,8 @@ class DiscreteCostObjective:
 
     Every call simulates the K paths from x^0 with the increments of `seed` (the same on every
     call: the sample-average problem is deterministic) and back-propagates the sample-mean
-    discrete cost. A diverged forward simulation (non-finite cost) returns `penalty` and a zero
-    gradient, so the line search backs off.
+    discrete cost, on the torch `device` (default CPU). A diverged forward simulation
+    (non-finite cost) returns `penalty` and a zero gradient, so the line search backs off.
     """
 
     def __init__(
@@ -146,6 +146,7 @@ class DiscreteCostObjective:
         seed: int,
         initial_positions: np.ndarray,
         penalty: float = 1e10,
+        device: Any = None,
     ) -> None:
         self.torch = import_torch()
         self.params = params
@@ -156,8 +157,10 @@ class DiscreteCostObjective:
         self.n_paths = n_paths
         self.seed = seed
         self.shape = (n_steps, params.n_agents, params.dim)
-        self.x0 = self.torch.as_tensor(initial_positions, dtype=self.torch.float64)
-        self.target = self.torch.as_tensor(params.target_vector, dtype=self.torch.float64)
+        self.device = self.torch.device("cpu" if device is None else device)
+        f64 = self.torch.float64
+        self.x0 = self.torch.as_tensor(initial_positions, dtype=f64, device=self.device)
+        self.target = self.torch.as_tensor(params.target_vector, dtype=f64, device=self.device)
         self.dt = params.horizon / n_steps
         self.penalty = float(penalty)
         self.evaluations = 0
@@ -184,12 +187,14 @@ class DiscreteCostObjective:
     def __call__(self, flat: np.ndarray) -> tuple[float, np.ndarray]:
         torch = self.torch
         self.evaluations += 1
-        u = torch.tensor(flat.reshape(self.shape), dtype=torch.float64, requires_grad=True)
+        u = torch.tensor(
+            flat.reshape(self.shape), dtype=torch.float64, device=self.device, requires_grad=True
+        )
         value = self.cost(u)
         if not bool(torch.isfinite(value)):
             return self.penalty, np.zeros_like(flat)
         value.backward()
-        grad = u.grad.detach().numpy().reshape(-1)
+        grad = u.grad.detach().cpu().numpy().reshape(-1)
         if not np.all(np.isfinite(grad)):
             return self.penalty, np.zeros_like(flat)
         return float(value.detach()), grad.astype(float)
@@ -291,6 +296,7 @@ def solve_optimal_control(
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
     memory: int = DEFAULT_MEMORY,
     threads: int | None = 1,
+    device: Any = None,
     warn: bool = True,
 ) -> OptimalControlResult:
     """Minimize the sample-mean discrete cost over open-loop controls (module docstring).
@@ -310,6 +316,7 @@ def solve_optimal_control(
         max_iterations: cap on L-BFGS-B iterations.
         memory: L-BFGS-B memory.
         threads: torch intra-op threads during the solve (None: torch's own setting).
+        device: the torch device of the forward/backward simulations ("cpu" default, "cuda").
         warn: issue a RuntimeWarning when not converged (set False for capped MPC re-solves).
 
     Returns:
@@ -350,6 +357,7 @@ def solve_optimal_control(
         n_paths,
         int(seed),
         x0,
+        device=device,
     )
     with torch_threads(objective.torch, threads):
         run = minimize_in_box(objective, start.reshape(-1), bound, gtol, max_iterations, memory)

@@ -55,6 +55,7 @@ def main() -> None:
     parser.add_argument("--max-iterations", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
+    parser.add_argument("--device", default="cpu", help="torch device of the solve (cpu, cuda)")
     args = parser.parse_args()
 
     import torch
@@ -71,12 +72,20 @@ def main() -> None:
         "initial_positions": x0,
     }
     objective = DiscreteCostObjective(
-        params, args.integrator, "frozen", "auto", args.n_steps, args.n_paths, 0, x0
+        params,
+        args.integrator,
+        "frozen",
+        "auto",
+        args.n_steps,
+        args.n_paths,
+        0,
+        x0,
+        device=args.device,
     )
 
     def forward_torch() -> None:
         with torch.no_grad():
-            objective.cost(torch.as_tensor(u))
+            objective.cost(torch.as_tensor(u, device=objective.device))
 
     times = {
         "forward (numpy simulate)": best_time(
@@ -87,7 +96,7 @@ def main() -> None:
     }
     print(
         f"N = {args.n_agents}, m = {args.n_steps}, K = {args.n_paths}, {args.integrator} (frozen),"
-        f" eps = {args.epsilon}; torch threads {args.threads}, "
+        f" eps = {args.epsilon}; device {args.device}, torch threads {args.threads}, "
         f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}, "
         f"{platform.processor() or platform.machine()}"
     )
@@ -107,6 +116,7 @@ def main() -> None:
         gtol=args.gtol,
         max_iterations=args.max_iterations,
         threads=args.threads,
+        device=args.device,
         **common,
     )
     wall = time.perf_counter() - start

@@ -333,3 +333,23 @@ def test_controllers_reject_per_agent_rows():
     ctrl = OptimalController(env, noise_free=True)
     with pytest.raises(ValueError, match="per-agent"):
         ctrl.predict(np.zeros(4, np.float32))
+
+
+@pytest.mark.parametrize(
+    "device",
+    [
+        "cpu",
+        pytest.param(
+            "cuda",
+            marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA"),
+        ),
+    ],
+)
+def test_device_gives_the_same_solution(device):
+    params = SwarmParams(n_agents=5, epsilon=0.05, sigma=0.01)
+    common = {"n_steps": 6, "n_paths": 3, "seed": 2}
+    base = solve_optimal_control(params, **common)
+    res = solve_optimal_control(params, device=device, **common)
+    assert res.converged
+    np.testing.assert_allclose(res.controls, base.controls, rtol=1e-6, atol=1e-6)
+    assert res.cost == pytest.approx(base.cost, rel=1e-10)
