@@ -353,3 +353,16 @@ def test_device_gives_the_same_solution(device):
     assert res.converged
     np.testing.assert_allclose(res.controls, base.controls, rtol=1e-6, atol=1e-6)
     assert res.cost == pytest.approx(base.cost, rel=1e-10)
+
+
+def test_act_on_the_pettingzoo_parallel_env_reaches_the_value():
+    from agent_envs import swarm_v0
+
+    env = swarm_v0.parallel_env(n_agents=4, n_steps=5, sigma=0.0)
+    obs, _ = env.reset(seed=1)
+    ctrl = OptimalController(env, noise_free=True)
+    total = 0.0
+    while env.agents:
+        obs, rewards, _, _, _ = env.step(ctrl.act(obs))
+        total -= sum(rewards.values())
+    assert total == pytest.approx(ctrl.last_result.cost, rel=1e-5)
