@@ -17,6 +17,14 @@ The few pieces the standard lacks or where the libraries differ live here and no
   L(x) of a swarm at consensus has an (N-1)-fold eigenvalue).
 - `subtract_diagonal`: P - diag(s), in place on a fresh numpy array, functional on torch.
 - conversions (`asarray`, `to_numpy`) and the choice of library and device (`resolve`).
+- `hot_path_threads`: the BLAS thread pools limited to `HOT_PATH_BLAS_THREADS` (1) while the
+  core steps, restored afterwards. The core's matrices are small (N x N, N ~ 100): with more
+  than one BLAS thread per process, several processes on a loaded machine oversubscribe the
+  cores and every small product waits for its threads (the README measured the env 5-13x
+  slower). threadpoolctl (the library scikit-learn uses for the same job) finds the BLAS
+  libraries numpy and scipy loaded; one controller is built on first use and only the pools
+  whose size differs are touched, so a call costs a few microseconds. torch's own intra-op
+  pool is left alone.
 
 torch is imported lazily, only when a torch tensor is seen or a torch backend is asked for:
 `import agent_envs` and every numpy call leave it unimported.
@@ -25,7 +33,8 @@ torch is imported lazily, only when a torch tensor is seen or a torch backend is
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -34,6 +43,42 @@ from array_api_compat import is_torch_array
 
 #: The array libraries `resolve` accepts.
 BACKENDS = ("numpy", "torch")
+
+#: BLAS threads inside `hot_path_threads` (None: leave the pools as they are).
+HOT_PATH_BLAS_THREADS: int | None = 1
+_BLAS_LIBRARIES: list[Any] | None = None
+
+
+def _blas_libraries() -> list[Any]:
+    global _BLAS_LIBRARIES
+    if _BLAS_LIBRARIES is None:
+        from threadpoolctl import ThreadpoolController
+
+        controller = ThreadpoolController()
+        _BLAS_LIBRARIES = [lib for lib in controller.lib_controllers if lib.user_api == "blas"]
+    return _BLAS_LIBRARIES
+
+
+@contextmanager
+def hot_path_threads() -> Iterator[None]:
+    """Limit the BLAS pools to `HOT_PATH_BLAS_THREADS` inside the block; restore them after.
+
+    Set `agent_envs.arrays.HOT_PATH_BLAS_THREADS = None` to keep your own thread settings.
+    """
+    limit = HOT_PATH_BLAS_THREADS
+    changed = []
+    if limit is not None:
+        for lib in _blas_libraries():
+            before = lib.get_num_threads()
+            if before != limit:
+                lib.set_num_threads(limit)
+                changed.append((lib, before))
+    try:
+        yield
+    finally:
+        for lib, before in changed:
+            lib.set_num_threads(before)
+
 
 _NUMPY_XP: Any = np
 if int(np.__version__.split(".")[0]) < 2:  # numpy 1.x: the standard through the compat layer
@@ -149,6 +194,46 @@ def expm(a: Any) -> Any:
 
         return torch.linalg.matrix_exp(a)
     return scipy.linalg.expm(a)
+
+
+def tridiagonal(diag: Any, off: Any) -> Any:
+    """The symmetric tridiagonal T (..., m, m) with diagonal `diag` (..., m) and off-diagonal
+    `off` (..., m - 1)."""
+    m = diag.shape[-1]
+    if is_torch(diag):
+        import torch
+
+        t = torch.diag_embed(diag)
+        if m > 1:
+            t = t + torch.diag_embed(off, offset=1) + torch.diag_embed(off, offset=-1)
+        return t
+    t = np.zeros((*diag.shape, m), dtype=np.result_type(diag, np.float64))
+    idx = np.arange(m)
+    t[..., idx, idx] = diag
+    t[..., idx[:-1], idx[1:]] = off
+    t[..., idx[1:], idx[:-1]] = off
+    return t
+
+
+def divide_fresh(p: Any, c: float) -> Any:
+    """p / c, in place for a fresh numpy array (saves a large temporary), functional on torch."""
+    if is_torch(p):
+        return p / c
+    return np.divide(p, c, out=p)
+
+
+def add_diagonal_blocks(blocks: Any, diag: Any) -> Any:
+    """blocks[..., k, k, :, :] += diag[..., k, :, :] for blocks (..., N, N, d, d): in place on a
+    fresh numpy array, functional on torch."""
+    n = blocks.shape[-3]
+    if is_torch(blocks):
+        import torch
+
+        eye = torch.eye(n, dtype=blocks.dtype, device=blocks.device)
+        return blocks + eye[..., None, None] * diag[..., :, None, :, :]
+    idx = np.arange(n)
+    blocks[..., idx, idx, :, :] += diag
+    return blocks
 
 
 def subtract_diagonal(p: Any, s: Any) -> Any:

@@ -269,19 +269,19 @@ def simulate(
     bad = np.zeros(n_paths, dtype=bool)
     divergence_step = None
     start = time.perf_counter()
-    for step in range(n_steps):
-        t = float(times[step])
-        u = _control_at(control, step, t, x, "control")
-        du = _control_at(control_rate, step, t, x, "control_rate")
-        applied.append(u)
-        with np.errstate(over="ignore", invalid="ignore"):
+    with arrays.hot_path_threads(), np.errstate(over="ignore", invalid="ignore"):
+        for step in range(n_steps):
+            t = float(times[step])
+            u = _control_at(control, step, t, x, "control")
+            du = _control_at(control_rate, step, t, x, "control_rate")
+            applied.append(u)
             x = scheme.step(model, x, u, t, dt, increments[step], du_dt=du)
-        flags = diverged_paths(x, divergence_threshold)
-        if bool(xp.any(flags)):
-            bad = arrays.to_numpy(flags)
-            divergence_step = step + 1
-            break
-        states.append(x)
+            flags = diverged_paths(x, divergence_threshold)
+            if bool(xp.any(flags)):
+                bad = arrays.to_numpy(flags)
+                divergence_step = step + 1
+                break
+            states.append(x)
     wall = time.perf_counter() - start
     nan_state = arrays.asarray(np.full(shape, np.nan), like=states[0])
     zero_control = arrays.zeros(shape, like=states[0])

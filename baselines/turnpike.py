@@ -139,6 +139,10 @@ class CheapClosedLoopModel:
     (Section 5.2). The drift is evaluated through the wrapped `SwarmModel` (no copy of the
     kernel formulas).
 
+    With `until` = tbar the feedback acts while t < tbar and the model is the open-loop swarm
+    afterwards (drift F(t, x, u), the wrapped model's linearization): the paper's whole
+    procedure is then one `simulate(..., model=...)` run.
+
     Why per path: cancelling only the path-mean interaction, with the per-path remainder
     L(x) x - E[L(x) x] left in a drift whose linearization is -beta I, integrates that stiff
     remainder explicitly; we measured it to blow up individual paths in the stiff setting

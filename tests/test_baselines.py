@@ -319,3 +319,32 @@ def test_evaluate_policy_on_supersuit_vec_env_of_pettingzoo():
     assert tbar.shape == (10,) and np.all(tbar > 0)
     assert np.all(tbar[:5] == tbar[0]) and np.all(tbar[5:] == tbar[5])
     venv.close()
+
+
+def test_closed_loop_model_switches_off_at_until_inside_simulate():
+    # Feedback on for t < 2 tau, then the open-loop swarm: the run equals a closed-loop run
+    # for 2 steps continued by an open-loop run from there, on the same increments.
+    from dataclasses import replace
+
+    from agent_envs import make_integrator, simulate
+
+    params = SwarmParams(n_agents=8, epsilon=0.05, sigma=0.01, target=0.7)
+    dt, m = 0.02, 5
+    x0 = np.linspace(-1, 1, 8)
+    dw = np.random.default_rng(3).standard_normal((m, 2, 8, 1)) * np.sqrt(dt)
+    kw = dict(integrator="serb", n_paths=2, initial_positions=x0)
+    params_m = replace(params, horizon=m * dt)
+    model = CheapClosedLoopModel(SwarmModel(params), [0.7], beta=12.0, until=2 * dt)
+    both = simulate(params_m, n_steps=m, model=model, increments=dw, **kw)
+    closed = simulate(
+        replace(params, horizon=2 * dt),
+        n_steps=2,
+        model=CheapClosedLoopModel(SwarmModel(params), [0.7], beta=12.0),
+        increments=dw[:2],
+        **kw,
+    )
+    np.testing.assert_array_equal(both.positions[:3], closed.positions)
+    x, scheme, plain = both.positions[2], make_integrator("serb"), SwarmModel(params)
+    for n in range(2, m):
+        x = scheme.step(plain, x, None, n * dt, dt, dw[n])
+        np.testing.assert_allclose(both.positions[n + 1], x, rtol=1e-13, atol=1e-15)

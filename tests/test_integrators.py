@@ -253,3 +253,29 @@ def test_registry_and_metadata():
         make_integrator("rk4")
     with pytest.raises(ValueError, match="jacobian"):
         make_integrator("serb", jacobian="approx")
+
+
+class _TimeDrift:
+    """x' = t (+ u): the drift depends on t only, linearization 0."""
+
+    sigma = 0.0
+
+    def drift(self, t, x, u=None):
+        return np.full_like(x, t) if u is None else np.full_like(x, t) + u
+
+    def drift_and_linearization(self, t, x, u, kind):
+        from agent_envs.dynamics.swarm import Linearization
+
+        zero = np.zeros((*x.shape[:-2], x.shape[-2], x.shape[-2]))
+        return self.drift(t, x, u), Linearization(zero, True, True)
+
+
+@pytest.mark.parametrize(
+    "name, expected",
+    [("em", 0.3 * 0.1), ("heun", 0.1 * (0.3 + 0.4) / 2), ("erb", 0.3 * 0.1), ("serb", 0.03)],
+)
+def test_integrators_pass_the_time_to_the_drift(name, expected):
+    # x' = t from t = 0.3 over dt = 0.1: EM/ERB/SERB use F(t_n); Heun averages F(t_n), F(t_n + dt).
+    x = np.zeros((1, 3, 1))
+    x1 = make_integrator(name).step(_TimeDrift(), x, None, 0.3, 0.1, np.zeros_like(x))
+    np.testing.assert_allclose(x1, expected, rtol=1e-14)

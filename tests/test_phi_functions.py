@@ -108,3 +108,14 @@ def test_bad_arguments():
         phi_action(a, np.ones((3, 1)), order=0)
     with pytest.raises(ValueError, match="shapes"):
         phi_action(a, np.ones((4, 1)))
+
+
+def test_krylov_broadcasts_vectors_over_a_batch_of_matrices():
+    rng = np.random.default_rng(4)
+    b = rng.normal(size=(3, 90, 90))
+    a = -np.einsum("bij,bkj->bik", b, b) / 90 * 10.0
+    v = rng.normal(size=(90, 1))  # no batch axis: shared by the three matrices
+    for symmetric in (True, False):
+        got = phi_action(a, v, 1, method="krylov", symmetric=symmetric)
+        ref = phi_action(a, np.broadcast_to(v, (3, 90, 1)), 1, method="expm")
+        np.testing.assert_allclose(got, ref, rtol=1e-8, atol=1e-10)

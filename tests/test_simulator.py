@@ -130,3 +130,22 @@ def test_divergence_is_flagged_not_silent():
 def test_bad_arguments_raise_clear_errors(kwargs, match):
     with pytest.raises((ValueError, TypeError), match=match):
         simulate(SwarmParams(n_agents=4), **{"n_steps": 5, **kwargs})
+
+
+def test_hot_path_limits_blas_threads_and_restores_them():
+    from threadpoolctl import ThreadpoolController
+
+    from agent_envs import arrays
+
+    controller = ThreadpoolController()
+    blas = controller.select(user_api="blas")
+    if not blas.lib_controllers:
+        pytest.skip("no BLAS library found by threadpoolctl")
+    with controller.limit(limits=2, user_api="blas"):
+        before = [lib["num_threads"] for lib in blas.info()]
+        with arrays.hot_path_threads():
+            inside = [lib["num_threads"] for lib in controller.select(user_api="blas").info()]
+        simulate(SwarmParams(n_agents=5), n_steps=2, n_paths=1, seed=0)
+        after = [lib["num_threads"] for lib in controller.select(user_api="blas").info()]
+    assert inside == [1] * len(inside)
+    assert after == before

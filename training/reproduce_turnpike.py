@@ -141,60 +141,58 @@ def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_pat
 def run_closed_loop_mode(
     run: TurnpikeRun, seed: int, x0: np.ndarray, n_steps: int, n_paths: int
 ) -> RunRecord:
-    """The paper's procedure: closed-loop `eq:dyn_mean` on [0, tbar], then u = 0 (core API)."""
+    """The paper's procedure: closed-loop `eq:dyn_mean` on [0, tbar], then u = 0 (core API).
+
+    One `simulate` call on `CheapClosedLoopModel(..., until=tbar)`, whose drift carries the
+    per-path cheap feedback while t < tbar and is the open-loop swarm afterwards; the controls
+    and costs are then read off the trajectory at each step's start.
+    """
     from agent_envs.costs import running_cost
     from agent_envs.dynamics.swarm import SwarmModel
     from agent_envs.integrators import make_integrator
     from agent_envs.params import SwarmParams
-    from agent_envs.simulator import (
-        DEFAULT_DIVERGENCE_THRESHOLD,
-        brownian_increments,
-        diverged_paths,
-    )
+    from agent_envs.simulator import brownian_increments, simulate
 
     kw = run.env_kwargs(x0.shape[0], n_steps, n_paths)
     params = SwarmParams(**{k: kw[k] for k in SwarmParams.field_names() if k in kw})
-    model = SwarmModel(params)
     target = params.target_vector
-    closed = CheapClosedLoopModel(model, target, BETA)
-    scheme = make_integrator(run.integrator, jacobian=run.jacobian)
-    dt = params.horizon / n_steps
     tbar = turnpike_time(x0, target, BETA, DELTA, params.horizon)
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 5, 2]))
+    closed = CheapClosedLoopModel(SwarmModel(params), target, BETA, until=tbar)
+    dt = params.horizon / n_steps
     n, d = params.n_agents, params.dim
-    x = np.broadcast_to(x0, (n_paths, n, d)).copy()
-    mean_positions = np.full((n_steps + 1, n, d), np.nan)
-    mean_positions[0] = x.mean(axis=0)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 5, 2]))
+    start = time.perf_counter()
+    traj = simulate(
+        params,
+        make_integrator(run.integrator, jacobian=run.jacobian),
+        n_steps=n_steps,
+        n_paths=n_paths,
+        initial_positions=x0,
+        model=closed,
+        increments=brownian_increments(rng, (n_steps, n_paths, n, d), dt),
+    )
+    wall = time.perf_counter() - start
     controls = np.zeros((n_steps, n, d))
     costs = np.zeros(n_steps)
-    diverged, divergence_step = False, None
     max_u = 0.0
-    start = time.perf_counter()
-    for step in range(n_steps):
-        t = step * dt
-        cheap = t < tbar - 1e-9
-        u = closed.control(x) if cheap else np.zeros_like(x)  # per path (n_paths, N, d)
+    for step in range(traj.divergence_step or n_steps):
+        x = traj.positions[step]
+        on = closed.feedback_on(float(traj.times[step]))
+        u = closed.control(x) if on else np.zeros_like(x)  # per path (n_paths, N, d)
         controls[step] = u.mean(axis=0)
         max_u = max(max_u, float(np.max(np.abs(u))))
         costs[step] = float(np.mean(running_cost(x, u, target, params.gamma)))
-        dw = brownian_increments(rng, x.shape, dt)
-        with np.errstate(over="ignore", invalid="ignore"):
-            x = scheme.step(closed if cheap else model, x, None, t, dt, dw)
-        if np.any(diverged_paths(x, DEFAULT_DIVERGENCE_THRESHOLD)):
-            diverged, divergence_step = True, step + 1
-            break
-        mean_positions[step + 1] = x.mean(axis=0)
     return RunRecord(
-        times=np.linspace(0.0, params.horizon, n_steps + 1),
-        mean_positions=mean_positions,
+        times=traj.times,
+        mean_positions=traj.mean_positions,
         controls=controls,
         running_cost=costs,
         target=run.target,
         tbar=float(tbar),
         dt=dt,
-        diverged=diverged,
-        divergence_step=divergence_step,
-        wall_time=time.perf_counter() - start,
+        diverged=traj.diverged,
+        divergence_step=traj.divergence_step,
+        wall_time=wall,
         max_abs_u=max_u,
     )
 

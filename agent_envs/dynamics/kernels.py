@@ -103,6 +103,12 @@ class CuckerSmaleKernel:
         return r, self.alpha**2 + xp.sum(r * r, axis=-1)
 
     def value(self, xk, xl):
+        if xk.shape[-1] == 1 and not arrays.is_torch(xk):
+            # numpy, d = 1: the same arithmetic in one (..., N, N) buffer (no large temporaries)
+            r = xl[..., 0] - xk[..., 0]
+            np.multiply(r, r, out=r)
+            r += self.alpha**2
+            return np.divide(self._weights_like(xk), r, out=r)
         _, denom = self._denominator(xk, xl)
         return self._weights_like(xk) / denom
 

@@ -116,7 +116,8 @@ class SwarmModel:
         """L(x) = (P(x) - diag(P(x) 1)) / N; shape (..., N, N)."""
         p = self.interaction_matrix(x)
         xp = arrays.namespace(p)
-        return arrays.subtract_diagonal(p, xp.sum(p, axis=-1)) / self.n_agents
+        p = arrays.subtract_diagonal(p, xp.sum(p, axis=-1))
+        return arrays.divide_fresh(p, self.n_agents)
 
     def interaction_drift(self, x: Any) -> Any:
         """(1/N) sum_l p(x_k, x_l)(x_l - x_k) = L(x) x; shape (..., N, d)."""
@@ -142,14 +143,13 @@ class SwarmModel:
         gx = self.kernel.grad_x(xk, xl)
         gy = self.kernel.grad_y(xk, xl)
         eye_d = arrays.asarray(np.eye(d), like=x)
-        eye_n = arrays.asarray(np.eye(n), like=x)
         # Off-diagonal blocks for every (k, l); at l = k they hold p_kk I / N, which the
         # diagonal sum below cancels by including its own l = k term (-p_kk I / N).
         blocks = r[..., :, None] * gy[..., None, :] + p[..., None, None] * eye_d  # (..,N,N,d,d)
         diag_blocks = xp.sum(
             r[..., :, None] * gx[..., None, :] - p[..., None, None] * eye_d, axis=-3
         )
-        blocks = (blocks + eye_n[..., None, None] * diag_blocks[..., :, None, :, :]) / n
+        blocks = arrays.divide_fresh(arrays.add_diagonal_blocks(blocks, diag_blocks), n)
         # (..., N, N, d, d) -> (..., N, d, N, d) -> (..., Nd, Nd)
         blocks = xp.moveaxis(blocks, -2, -3)
         return xp.reshape(blocks, (*x.shape[:-2], n * d, n * d))

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.observation import global_observation
@@ -149,6 +150,11 @@ class EpisodeConfig:
     def dt(self) -> float:
         """The time step tau = T / m."""
         return self.params.horizon / self.n_steps
+
+
+def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
+    """True when a and b differ at most in the cost parameters (target, gamma)."""
+    return dataclasses.replace(a, target=b.target, gamma=b.gamma) == b
 
 
 class _CachedLinearizationModel(SwarmModel):
@@ -295,8 +301,11 @@ class SwarmEpisode:
             params = dataclasses.replace(params, target=target)
             _check_target(params, self.config.divergence_threshold)
         if params != self.params:
+            # target and gamma are cost parameters: a new target keeps the dynamics model
+            # (and its kernel); only a change of the dynamics would rebuild it.
+            if not same_dynamics(params, self.params):
+                self.model = _CachedLinearizationModel(params)
             self.params = params
-            self.model = _CachedLinearizationModel(params)
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
         drift = self._mean_drift_at(x)
@@ -315,12 +324,14 @@ class SwarmEpisode:
             )
         cost = float(np.mean(running_cost(x, control, self._target, self.params.gamma)))
         dw = brownian_increments(rng, x.shape, self.dt)
-        with np.errstate(over="ignore", invalid="ignore"):
-            x_next = self.integrator.step(self.model, x, control, self.time, self.dt, dw)
-        diverged = bool(np.any(diverged_paths(x_next, self.config.divergence_threshold)))
-        if not diverged:
-            drift = self._mean_drift_at(x_next)
-            diverged = not np.all(np.isfinite(drift))
+        # BLAS limited to one thread while stepping (see agent_envs.arrays.hot_path_threads).
+        with arrays.hot_path_threads():
+            with np.errstate(over="ignore", invalid="ignore"):
+                x_next = self.integrator.step(self.model, x, control, self.time, self.dt, dw)
+            diverged = bool(np.any(diverged_paths(x_next, self.config.divergence_threshold)))
+            if not diverged:
+                drift = self._mean_drift_at(x_next)
+                diverged = not np.all(np.isfinite(drift))
         if diverged:
             self.diverged = True
         else:

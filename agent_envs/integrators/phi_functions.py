@@ -7,20 +7,29 @@
 (..., n, k), batched over leading axes. Three strategies, one implementation each:
 
 - ``"expm"``: the exponential of the augmented (n + p k) block matrix
-  [[A, V, 0], [0, 0, I], [0, 0, 0]] (Sidje's Expokit trick), via `scipy.linalg.expm`
-  (Pade with scaling and squaring). Dense, O((n+pk)^3); the reference for small n.
-- ``"eigh"``: A = Q diag(lambda) Q^T for symmetric A, phi_p(A) V = Q phi_p(lambda) Q^T V.
-- ``"krylov"``: Arnoldi (with classical Gram-Schmidt run twice) builds an orthonormal basis
-  Q_m of span{v, Av, ..., A^{m-1} v} and H_m = Q_m^T A Q_m; then
-  phi_p(A) v ~ |v| Q_m phi_p(H_m) e_1, the small phi evaluated by "expm". The dimension m grows
-  until two successive approximations agree to `rtol` (checked every few steps) or a happy
-  breakdown; O(m n^2) for a dense A, so the method of choice for large n. If it has not
-  converged at `max_krylov_dim`, a `RuntimeWarning` is issued and the dense method is used.
+  [[A, V, 0], [0, 0, I], [0, 0, 0]] (Sidje's Expokit trick), via `scipy.linalg.expm` /
+  `torch.linalg.matrix_exp` (Pade with scaling and squaring). Dense, O((n+pk)^3); the
+  reference for small n.
+- ``"eigh"``: A = Q diag(lambda) Q^T for symmetric A, phi_p(A) V = Q phi_p(lambda) Q^T V. On
+  torch its gradient comes from the Daleckii-Krein formula with divided differences of phi_p
+  (`agent_envs.arrays.symmetric_function_action`), finite at repeated eigenvalues (the frozen
+  L(x) at consensus), where torch.linalg.eigh's own backward is not.
+- ``"krylov"``: phi_p(A) v ~ |v| Q_m phi_p(H_m) e_1 on an orthonormal basis Q_m of
+  span{v, Av, ..., A^{m-1} v}, H_m = Q_m^T A Q_m. Symmetric A: Lanczos (three-term recurrence,
+  H_m tridiagonal, stopped by Saad's a posteriori error estimate); otherwise Arnoldi with
+  classical Gram-Schmidt run twice, stopped when two successive approximations agree to
+  `rtol`. O(m n^2) for a dense A, so the method of choice for large n and for batches. If it
+  has not converged at `max_krylov_dim`, a `RuntimeWarning` is issued and the dense method is
+  used. On torch it is differentiated through its final basis.
 
-``"auto"`` picks "expm" for n <= 64, "eigh" for a single symmetric matrix with n <= 128, and
-"krylov" otherwise: the crossovers measured by benchmarks/bench_integrators.py on 2 cores with
-one BLAS thread (at n = 100, one path: eigh 0.7 ms, expm 1.2 ms, krylov 1.0 ms; with 20 paths
-krylov wins; at n >= 200 krylov wins by 2.5x-7x).
+All three are written once for numpy and torch (`agent_envs.arrays`).
+
+``"auto"`` picks "expm" for n <= 48, and for larger n "krylov" except for a single matrix with
+n <= 80 (n <= 128 if it is not symmetric), where "expm" is still cheaper: the crossovers
+measured on numpy by benchmarks/bench_integrators.py (table 1) with one BLAS thread.
+For a gradient on torch (forward and backward, N = 100 batched over 20 paths),
+benchmarks/bench_gradient.py measures "krylov" cheapest, then "eigh", with "expm" far behind
+(matrix_exp's backward is a second exponential of a doubled matrix); the README has the numbers.
 """
 
 from __future__ import annotations
@@ -34,8 +43,10 @@ import numpy as np
 from agent_envs import arrays
 
 PHI_METHODS = ("auto", "expm", "eigh", "krylov")
-_AUTO_EXPM_MAX = 64
-_AUTO_EIGH_MAX = 128
+# Crossovers of "auto" (measured by benchmarks/bench_integrators.py, one BLAS thread).
+_AUTO_EXPM_MAX = 48
+_AUTO_EXPM_SINGLE_MAX = 80
+_AUTO_EXPM_SINGLE_NONSYMMETRIC_MAX = 128
 _TAYLOR_TERMS = 16
 
 
@@ -155,7 +166,8 @@ def _krylov_action(
     n = a.shape[-1]
     max_dim = min(max_dim, n)
     at = xp.matrix_transpose(a)
-    rows = xp.matrix_transpose(v)  # (..., k, n)
+    batch = tuple(np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2])))
+    rows = xp.matrix_transpose(xp.broadcast_to(v, (*batch, *v.shape[-2:])))  # (..., k, n)
     beta = xp.linalg.vector_norm(rows, axis=-1)  # (..., k)
     safe_beta = xp.where(beta > 0, beta, 1.0)
     basis = [rows / safe_beta[..., None]]
@@ -206,14 +218,105 @@ def _krylov_action(
     return xp.matrix_transpose(out * beta[..., None])
 
 
+def _lanczos_action(
+    a: Any, v: Any, order: int, rtol: float, max_dim: int, check_every: int = 3
+) -> Any | None:
+    """Lanczos for symmetric A: phi_p(A) v ~ |v| Q_m phi_p(T_m) e_1, T_m tridiagonal.
+
+    The three-term recurrence b_j q_{j+1} = A q_j - a_j q_j - b_{j-1} q_{j-1}, with the
+    coefficients of q_{j-1} and q_j taken as projections and the new vector projected once more
+    off q_j (local reorthogonalization), but not off the older vectors: for functions of a
+    matrix with a bounded spectrum the approximation converges in spite of the loss of
+    orthogonality (Druskin, Greenbaum & Knizhnerman, 1998). Stopped when Saad's error estimate
+    b_m |e_m^T phi_p(T_m) e_1| is below rtol |phi_p(T_m) e_1|, checked every `check_every`
+    steps from m = 3.5 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
+    the exponential has not converged yet), or at a happy breakdown; None when not converged
+    by `max_dim` (also when m reaches n: the basis is then not exact). Differentiable on torch
+    (list-built basis, no in-place writes).
+    """
+    xp = arrays.namespace(a, v)
+    n = a.shape[-1]
+    max_dim = min(max_dim, n)
+    batch = tuple(np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2])))
+    at = xp.matrix_transpose(a)
+    q = xp.matrix_transpose(xp.broadcast_to(v, (*batch, *v.shape[-2:])))  # (..., k, n)
+    beta0 = xp.linalg.vector_norm(q, axis=-1)  # (..., k)
+    if bool(xp.any(beta0 == 0)):
+        q = q / xp.where(beta0 > 0, beta0, 1.0)[..., None]
+    else:
+        q = q / beta0[..., None]
+    basis = [q]
+    alphas: list[Any] = []
+    betas: list[Any] = []
+    norm_inf = float(arrays.to_numpy(xp.max(xp.sum(xp.abs(a), axis=-1))))
+    first_check = max(2, min(max_dim, math.ceil(3.5 * math.sqrt(norm_inf))))
+    tiny = 1e-12 * (norm_inf + 1e-300)
+    coeffs = None
+    converged = False
+    w_prev = None
+    for j in range(max_dim):
+        w = q @ at
+        alpha = xp.vecdot(w, q)
+        w = w - alpha[..., None] * q
+        if w_prev is not None:
+            # the three-term recurrence's b_{j-1} q_{j-1} term, with the coefficient computed
+            # as the projection onto q_{j-1} (equal to b_{j-1} up to rounding)
+            w = w - xp.vecdot(w, w_prev)[..., None] * w_prev
+        corr = xp.vecdot(w, q)  # and against q_j (rounding drift of the recurrence)
+        w = w - corr[..., None] * q
+        alpha = alpha + corr
+        b = xp.linalg.vector_norm(w, axis=-1)
+        alphas.append(alpha)
+        m = j + 1
+        b_host = arrays.to_numpy(b)
+        any_breakdown = float(b_host.min()) <= tiny
+        # m == n without convergence: the space is exhausted but, without full
+        # reorthogonalization, the basis is not exact; the caller then uses the dense method.
+        converged = any_breakdown and bool(np.all(b_host <= tiny))
+        done = converged or m == max_dim
+        if done or (m >= first_check and (m - first_check) % check_every == 0):
+            t = arrays.tridiagonal(xp.stack(alphas, axis=-1), _stack_or_empty(xp, betas, alpha))
+            coeffs = _small_phi_e1(t, order, True)  # (..., k, m)
+            if not done:
+                c = arrays.to_numpy(coeffs)
+                est = b_host * np.abs(c[..., -1])
+                if np.all(est <= rtol * np.linalg.norm(c, axis=-1) + 1e-300):
+                    converged = done = True
+        if done:
+            break
+        if any_breakdown:
+            stop = arrays.asarray(b_host <= tiny, like=w) > 0.5
+            w = xp.where(stop[..., None], 0.0, w / xp.where(stop, 1.0, b)[..., None])
+        else:
+            w = w / b[..., None]
+        betas.append(b)
+        w_prev, q = q, w
+        basis.append(q)
+    assert coeffs is not None
+    if not converged:
+        return None
+    m = coeffs.shape[-1]
+    stacked = xp.stack(basis[:m], axis=-2)  # (..., k, m, n)
+    out = (coeffs[..., None, :] @ stacked)[..., 0, :]
+    return xp.matrix_transpose(out * beta0[..., None])
+
+
+def _stack_or_empty(xp: Any, items: list[Any], like: Any) -> Any:
+    if items:
+        return xp.stack(items, axis=-1)
+    return xp.zeros((*like.shape, 0), dtype=like.dtype)
+
+
 def _auto_method(a: Any, v: Any, symmetric: bool) -> str:
     n = a.shape[-1]
     batch = np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2]))
-    n_matrices = int(np.prod(batch, dtype=int))
+    single = int(np.prod(batch, dtype=int)) == 1
     if n <= _AUTO_EXPM_MAX:
         return "expm"
-    if symmetric and n <= _AUTO_EIGH_MAX and n_matrices == 1:
-        return "eigh"
+    if symmetric:
+        return "expm" if single and n <= _AUTO_EXPM_SINGLE_MAX else "krylov"
+    if n <= _AUTO_EXPM_SINGLE_MAX or (single and n <= _AUTO_EXPM_SINGLE_NONSYMMETRIC_MAX):
+        return "expm"
     return "krylov"
 
 
@@ -257,7 +360,13 @@ def phi_action(
         return _eigh_action(a, v, order)
     if method == "expm":
         return _augmented_expm(a, v, order)
-    result = _krylov_action(a, v, order, rtol, max_krylov_dim, symmetric)
+    if symmetric:
+        result = _lanczos_action(a, v, order, rtol, max_krylov_dim)
+    else:
+        result = _krylov_action(a, v, order, rtol, max_krylov_dim, symmetric)
+    if result is None and symmetric and max_krylov_dim >= a.shape[-1]:
+        # Lanczos ran through the whole space (n is small): the dense method is as cheap.
+        return _eigh_action(a, v, order)
     if result is None:
         fallback = "eigh" if symmetric else "expm"
         warnings.warn(
