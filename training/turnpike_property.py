@@ -30,7 +30,8 @@ run takes minutes on 2 cores; `--n-agents 100 --n-paths 20 --tau 0.02` is the pa
 Each T is warm-started from the previous T's solution followed by zeros.
 
 Outputs in --out: `turnpike_property.png`, `turnpike_property.csv` / `.md` (one row per setting
-and T) and `curves.npz` (D_n per run).
+and T), `curves.npz` (D_n per run) and `meta.json`. Library use:
+`reproduce(out, TurnpikePropertyConfig(...))`; `add_arguments`/`run` are the thin CLI layer.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -155,15 +156,56 @@ class Setting:
         )
 
 
-def run_setting(setting: Setting, args: argparse.Namespace, x0: np.ndarray) -> list[dict]:
+@dataclass(frozen=True)
+class TurnpikePropertyConfig:
+    """Sizes and settings of the experiment (module docstring); validated on construction."""
+
+    n_agents: int = 20
+    n_paths: int = 10
+    tau: float = 0.05
+    horizons: tuple[float, ...] = HORIZONS
+    sigmas: tuple[float, ...] = SIGMAS
+    epsilons: tuple[float, ...] = EPSILONS
+    kernels: tuple[str, ...] = KERNELS
+    delta: float = DELTA
+    seed: int = 0
+    max_control: float = 150.0
+    gtol: float = 1e-6
+    max_iterations: int = 500
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.tau > 0:
+            raise ValueError(f"tau must be > 0, got {self.tau}")
+        for horizon in self.horizons:
+            steps = horizon / self.tau
+            if not (horizon > 0 and abs(steps - round(steps)) <= 1e-9):
+                raise ValueError(
+                    f"tau must divide every horizon (> 0); {horizon} / {self.tau} = {steps:g}"
+                )
+        unknown = sorted(set(self.kernels) - set(KERNELS))
+        if unknown:
+            raise ValueError(f"kernels must be among {KERNELS}, got {unknown}")
+
+    @property
+    def settings(self) -> list[Setting]:
+        return [
+            Setting(kernel, eps, sigma)
+            for kernel in self.kernels
+            for eps in self.epsilons
+            for sigma in self.sigmas
+        ]
+
+
+def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray) -> list[dict]:
     """Solve every horizon of one setting (warm-started), return one row per T."""
     from agent_envs.baselines.optimal_control import solve_optimal_control
 
     rows, previous = [], None
-    for horizon in args.horizons:
-        n_steps = round(horizon / args.tau)
-        params = setting.params(args.n_agents, horizon)
-        n_paths = 1 if setting.sigma == 0.0 else args.n_paths
+    for horizon in config.horizons:
+        n_steps = round(horizon / config.tau)
+        params = setting.params(config.n_agents, horizon)
+        n_paths = 1 if setting.sigma == 0.0 else config.n_paths
         warm = None
         if previous is not None:
             warm = np.zeros((n_steps, *previous.shape[1:]))
@@ -173,18 +215,18 @@ def run_setting(setting: Setting, args: argparse.Namespace, x0: np.ndarray) -> l
             "serb",
             n_steps=n_steps,
             n_paths=n_paths,
-            seed=args.seed,
+            seed=config.seed,
             initial_positions=x0,
-            max_control=args.max_control,
+            max_control=config.max_control,
             initial_controls=warm,
-            gtol=args.gtol,
-            max_iterations=args.max_iterations,
+            gtol=config.gtol,
+            max_iterations=config.max_iterations,
         )
         previous = res.controls
         target = params.target_vector
         dt = params.horizon / n_steps
         curve = turnpike_curve(res.mean_positions, res.controls, target)
-        rates = arc_rates(res.times[:n_steps], curve, args.delta)
+        rates = arc_rates(res.times[:n_steps], curve, config.delta)
         c0 = cheap_constant(dt, params.gamma, kernel_bound(params))
         start = float(np.sum((x0 - target) ** 2))
         bound = c0 * params.gamma / (2.0 * params.n_agents) * start
@@ -211,7 +253,7 @@ def run_setting(setting: Setting, args: argparse.Namespace, x0: np.ndarray) -> l
                 "times": res.times[:n_steps],
             }
         )
-        if args.progress:
+        if config.progress:
             print(
                 f"  {setting.label:40s} T={horizon:<4g} m={n_steps:<4d} V={res.cost:.5f} "
                 f"it={res.iterations:<4d} conv={res.converged} entry={rates.entry_rate:7.2f} "
@@ -298,34 +340,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", dest="progress", action="store_false")
 
 
-def run(args: argparse.Namespace) -> int:
+def reproduce(out: Path, config: TurnpikePropertyConfig) -> list[dict]:
+    """Run every setting and horizon, write the figure, tables and meta.json into `out`."""
     from agent_envs.simulator import uniform_positions
 
-    for horizon in args.horizons:
-        steps = horizon / args.tau if args.tau > 0 else float("nan")
-        if not (args.tau > 0 and horizon > 0 and abs(steps - round(steps)) <= 1e-9):
-            print(
-                f"error: --tau must be > 0 and divide every horizon; {horizon} / {args.tau}",
-                file=sys.stderr,
-            )
-            return 2
-    args.out.mkdir(parents=True, exist_ok=True)
-    x0 = uniform_positions(np.random.default_rng(args.seed), args.n_agents, 1)
-    settings = [
-        Setting(kernel, eps, sigma)
-        for kernel in args.kernels
-        for eps in args.epsilons
-        for sigma in args.sigmas
-    ]
+    out.mkdir(parents=True, exist_ok=True)
+    x0 = uniform_positions(np.random.default_rng(config.seed), config.n_agents, 1)
     start = time.perf_counter()
     rows: list[dict] = []
-    for setting in settings:
-        rows += run_setting(setting, args, x0)
-    write_tables(rows, args.out)
-    plot(rows, settings, args.delta, args.out / "turnpike_property.png")
-    meta = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}
-    meta["seconds"] = time.perf_counter() - start
-    meta.pop("func", None)
-    (args.out / "meta.json").write_text(json.dumps(meta, indent=2, default=str))
-    print(f"wrote {args.out}/turnpike_property.png, .csv, .md ({meta['seconds']:.0f} s)")
+    for setting in config.settings:
+        rows += run_setting(setting, config, x0)
+    write_tables(rows, out)
+    plot(rows, config.settings, config.delta, out / "turnpike_property.png")
+    meta = {**asdict(config), "seconds": time.perf_counter() - start}
+    (out / "meta.json").write_text(json.dumps(meta, indent=2, default=str))
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    names = [f.name for f in fields(TurnpikePropertyConfig)]
+    values = {k: getattr(args, k) for k in names}
+    try:
+        config = TurnpikePropertyConfig(
+            **{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+        )
+    except ValueError as exc:
+        print(f"agent-envs reproduce turnpike-property: error: {exc}", file=sys.stderr)
+        return 2
+    start = time.perf_counter()
+    reproduce(args.out, config)
+    seconds = time.perf_counter() - start
+    print(f"wrote {args.out}/turnpike_property.png, .csv, .md ({seconds:.0f} s)")
     return 0
