@@ -10,6 +10,7 @@ import pytest
 
 from agent_envs.training.turnpike_property import (
     arc_rates,
+    centre_mode_rate,
     cheap_constant,
     theorem_sides,
     turnpike_curve,
@@ -72,3 +73,16 @@ def test_tiny_run_writes_figure_and_table(tmp_path):
     assert all(float(r["cheap_bound"]) >= float(r["V"]) for r in rows)
     bad = ["reproduce", "turnpike-property", "--out", str(out), "--tau", "0.3", "--horizons", "1"]
     assert main(bad) == 2
+
+
+def test_centre_mode_rate_is_the_scalar_riccati_rate():
+    # gamma = 0.01, tau = 0.05: iterate the scalar Riccati map to its fixed point independently
+    gamma, dt = 0.01, 0.05
+    p = 1.0
+    for _ in range(10_000):
+        p = dt + p - (p * dt) ** 2 / (dt * gamma + dt**2 * p)
+    gain = p * dt / (dt * gamma + dt**2 * p)
+    expected = -2.0 * math.log(1.0 - dt * gain) / dt
+    assert centre_mode_rate(20.0, 10, gamma, dt) == pytest.approx(expected, rel=1e-12)
+    # unequal weights make the weighted centre cheaper to move (g < gamma): a faster decay
+    assert centre_mode_rate(np.linspace(1.0, 10.0, 10), 10, gamma, dt) > expected

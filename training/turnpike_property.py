@@ -10,7 +10,8 @@ at one tau (so m = T / tau grows with T), and the run reports, per setting:
 - D_n = ||E x*^n - x~||^2 + ||u*^n - u~||^2 (sums over agents; E = mean over the K paths)
   for n = 0..m-1, plotted against t_n on a log scale, one line per T;
 - the entry and exit rates: minus the slope of log D_n (least squares in t) from t = 0 to the
-  first n with D_n <= delta, and the slope from the last n with D_n <= delta to t_{m-1};
+  first n with D_n <= delta, and the slope from the last n with D_n <= delta to t_{m-1}; next
+  to the entry rate, the rate the swarm's slow mode predicts (`centre_mode_rate`);
 - the share of the horizon with D_n <= delta (delta = 2e-4, the paper's threshold of
   `eq:tptime`, by default);
 - V against the cheap-control bound of Lemma `lem:cheap` (`eq:cheap`):
@@ -95,6 +96,24 @@ def arc_rates(times: np.ndarray, curve: np.ndarray, delta: float) -> ArcRates:
     entry = -_slope(times[: first + 1], curve[: first + 1])
     exit_ = _slope(times[last:], curve[last:]) if last < curve.size - 1 else float("nan")
     return ArcRates(entry, exit_, inside.size / curve.size, float(np.median(curve[inside])))
+
+
+def centre_mode_rate(weights: Any, n_agents: int, gamma: float, dt: float) -> float:
+    """The decay rate of D predicted by the swarm's slow mode (a derivation, not a fit).
+
+    For p(x_k, x_l) = w_l g(|x_k - x_l|) the weighted centre c = sum_k w_k x_k / W, W = sum_k w_k,
+    is not moved by the interaction (the double sum is antisymmetric), so c^{n+1} = c^n + tau v
+    with v = sum_k w_k u_k / W; the cheapest control giving v is u_k = v W w_k / sum w^2, so near
+    consensus the problem is the scalar LQ problem z+ = z + tau v, cost tau (z^2 + g v^2),
+    g = gamma W^2 / (N sum w^2) (= gamma for the symmetric kernel). Its Riccati fixed point
+    P = (tau + sqrt(tau^2 + 4 g)) / 2 gives the gain K = P / (g + tau P), the factor
+    a = 1 - tau K per step and the rate -2 ln(a) / tau of z^2 (and of D).
+    """
+    w = np.broadcast_to(np.asarray(weights, dtype=float), (n_agents,))
+    g = gamma * np.sum(w) ** 2 / (n_agents * np.sum(w**2))
+    p = (dt + math.sqrt(dt**2 + 4.0 * g)) / 2.0
+    factor = 1.0 - dt * p / (g + dt * p)
+    return -2.0 * math.log(factor) / dt
 
 
 def kernel_bound(params: Any) -> float:
@@ -200,6 +219,7 @@ class TurnpikePropertyConfig:
 def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray) -> list[dict]:
     """Solve every horizon of one setting (warm-started), return one row per T."""
     from agent_envs.baselines.optimal_control import solve_optimal_control
+    from agent_envs.dynamics.swarm import kernel_from_params
 
     rows, previous = [], None
     for horizon in config.horizons:
@@ -228,6 +248,9 @@ def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray
         curve = turnpike_curve(res.mean_positions, res.controls, target)
         rates = arc_rates(res.times[:n_steps], curve, config.delta)
         c0 = cheap_constant(dt, params.gamma, kernel_bound(params))
+        predicted = centre_mode_rate(
+            kernel_from_params(params).weights, params.n_agents, params.gamma, dt
+        )
         start = float(np.sum((x0 - target) ** 2))
         bound = c0 * params.gamma / (2.0 * params.n_agents) * start
         lhs, rhs = theorem_sides(res.positions, res.controls, target, params.gamma, dt, c0)
@@ -243,6 +266,7 @@ def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray
                 "iterations": res.iterations,
                 "rel_grad": res.relative_gradient_norm,
                 **asdict(rates),
+                "predicted_entry_rate": predicted,
                 "min_D": float(np.min(curve)),
                 "cheap_bound": bound,
                 "bound_over_V": bound / res.cost,
@@ -293,8 +317,8 @@ def plot(rows: list[dict], settings: list[Setting], delta: float, path: Path) ->
 
 COLUMNS = (
     "kernel", "epsilon", "sigma", "T", "m", "V", "converged", "iterations", "rel_grad",
-    "entry_rate", "exit_rate", "share_within_delta", "plateau", "min_D", "cheap_bound",
-    "bound_over_V", "thm_lhs", "thm_rhs", "seconds",
+    "entry_rate", "predicted_entry_rate", "exit_rate", "share_within_delta", "plateau", "min_D",
+    "cheap_bound", "bound_over_V", "thm_lhs", "thm_rhs", "seconds",
 )  # fmt: skip
 
 
