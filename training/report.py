@@ -5,10 +5,12 @@
 RESULTS are folders written by `agent-envs evaluate` (or `EvaluationResults.save`). The report
 has a table per policy (mean total cost with a 95% confidence interval from the t-distribution,
 ratio of mean costs to the reference policy -- the turnpike controller by default -- and the
-mean of the per-seed paired ratios with its 95% CI when the seeds match, divergence rate, final
-distance to the target, control energy) and three PNGs: the path-mean agent trajectories per
-policy (one seed), the running cost over time (log scale) and the turnpike distance
-||E x^n - xbar||^2 + ||u^n||^2 over time (log scale), whose interior dip is the turnpike shape.
+mean of the per-seed paired ratios with its 95% CI when the seeds match, the gap to optimal
+(cost - V) / V per seed with its 95% CI when the optimal controller "optimal" was evaluated,
+divergence rate, final distance to the target, control energy) and three PNGs: the path-mean
+agent trajectories per policy (one seed), the running cost over time (log scale) and the
+turnpike distance ||E x^n - xbar||^2 + ||u^n||^2 over time (log scale), whose interior dip is
+the turnpike shape.
 
 Library use (the training comparison adds its learning curves as an extra section):
 
