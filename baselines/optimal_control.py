@@ -25,8 +25,8 @@ is issued and `converged` is False.
 
 torch is needed only here (the `train` extra) and is imported when solving. The solve runs
 torch with `threads` intra-op threads (default 1, restored afterwards): these problems are many
-small batched matrix operations, where extra threads only add synchronisation; on a loaded
-2-core machine we measured a small solve 18x slower with torch's default of 2 threads.
+small batched matrix operations, where extra threads mostly add synchronisation (measured in
+the README, "Solver cost").
 """
 
 from __future__ import annotations
