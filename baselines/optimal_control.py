@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from agent_envs.costs import discrete_cost
+from agent_envs.dynamics.swarm import kernel_from_params
 from agent_envs.envs.episode import DEFAULT_MAX_CONTROL
 from agent_envs.params import SwarmParams, check_int, check_positive
 from agent_envs.simulator import simulate
@@ -164,6 +165,7 @@ class DiscreteCostObjective:
         self.dt = params.horizon / n_steps
         self.penalty = float(penalty)
         self.evaluations = 0
+        self._warned_gradient = False
 
     def cost(self, controls: Any) -> Any:
         """The sample-mean discrete cost as a torch scalar (differentiable in `controls`)."""
@@ -196,6 +198,15 @@ class DiscreteCostObjective:
         value.backward()
         grad = u.grad.detach().cpu().numpy().reshape(-1)
         if not np.all(np.isfinite(grad)):
+            if not self._warned_gradient:
+                self._warned_gradient = True
+                warnings.warn(
+                    f"finite cost {float(value.detach()):.6g} but a non-finite gradient with "
+                    f"phi_method={self.phi_method!r}: the backward pass failed; treated as a "
+                    "diverged step (try phi_method='eigh' or 'expm')",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
             return self.penalty, np.zeros_like(flat)
         return float(value.detach()), grad.astype(float)
 
@@ -265,6 +276,25 @@ def minimize_in_box(
     return BoxMinimization(result, grad_norm, float(relative), float(f_start))
 
 
+def differentiated_phi_method(params: SwarmParams, jacobian: str, phi_method: str | None) -> str:
+    """The phi strategy the differentiated simulations use.
+
+    An explicit `phi_method` is kept. For None/"auto", the dense strategies whose gradients are
+    tested against finite differences: "eigh" when the linearization is symmetric (symmetric
+    kernel; with the exact Jacobian also radial), "expm" otherwise. "auto" would pick Krylov
+    for large batched problems, whose torch backward gave non-finite gradients at N = 100 with
+    20 paths (README, "Solver cost"). The final `simulate` that produces `positions` and `cost`
+    uses the caller's `phi_method`, so the cost contract holds either way.
+    """
+    if phi_method not in (None, "auto"):
+        return phi_method
+    kernel = kernel_from_params(params)
+    symmetric = bool(kernel.symmetric)
+    if jacobian == "exact":
+        symmetric = symmetric and bool(getattr(kernel, "radial", False))
+    return "eigh" if symmetric else "expm"
+
+
 def _initial_controls(initial_controls: Any, shape: tuple[int, ...], bound: float) -> np.ndarray:
     if initial_controls is None:
         return np.zeros(shape)
@@ -305,7 +335,8 @@ def solve_optimal_control(
         params: the model (N, d, kernel, sigma, T, xbar, gamma).
         integrator: "serb" (default), "erb", "em", "ee" or "heun": the scheme of the dynamics.
         jacobian: "frozen" (default) or "exact", for "erb"/"serb".
-        phi_method: as in `simulate` (default "auto").
+        phi_method: as in `simulate` (default "auto" for the returned trajectory; the
+            differentiated simulations use `differentiated_phi_method`).
         n_steps: m >= 1 (tau = T / m).
         n_paths: K >= 1 Brownian paths (sigma = 0 needs only 1).
         seed: int >= 0; the paths are `simulate(..., seed=seed)`'s.
@@ -352,7 +383,7 @@ def solve_optimal_control(
         params,
         integrator,
         jacobian,
-        "auto" if phi_method is None else phi_method,
+        differentiated_phi_method(params, jacobian, phi_method),
         n_steps,
         n_paths,
         int(seed),

@@ -9,7 +9,8 @@ Measured in one run (best of `--repeats`, one BLAS/torch thread unless `--thread
 - forward (numpy):   `simulate(...)` with a fixed control, the core's default path;
 - forward (torch):   the same simulation on torch tensors without autograd;
 - cost + gradient:   `DiscreteCostObjective` (torch forward with autograd + backward), the
-                     solver's one evaluation;
+                     solver's one evaluation (phi strategy `differentiated_phi_method`: eigh
+                     for the symmetric kernel);
 
 their ratios (target: gradient <= 4x one forward), then one full solve from u = 0 to a relative
 projected gradient norm of `--gtol` (default 1e-6): wall time, iterations, evaluations, the
@@ -28,7 +29,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from agent_envs.baselines.optimal_control import DiscreteCostObjective, solve_optimal_control
+from agent_envs.baselines.optimal_control import (
+    DiscreteCostObjective,
+    differentiated_phi_method,
+    solve_optimal_control,
+)
 from agent_envs.costs import discrete_cost
 from agent_envs.params import SwarmParams
 from agent_envs.simulator import simulate
@@ -75,7 +80,7 @@ def main() -> None:
         params,
         args.integrator,
         "frozen",
-        "auto",
+        differentiated_phi_method(params, "frozen", None),
         args.n_steps,
         args.n_paths,
         0,
