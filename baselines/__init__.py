@@ -10,6 +10,10 @@
 - `turnpike_time`, `cheap_control`: the formulas on arrays (`turnpike`).
 - `CheapClosedLoopModel`: the closed loop `eq:dyn_mean` as a drift model for the core's
   integrators (`closed_loop`).
+- `solve_optimal_control`: the optimal open-loop control of `eq:discrete_cost_functional`
+  (L-BFGS-B on autodiff gradients; needs torch, the `train` extra, when called).
+- `OptimalController` (open loop) and `MPCController` (receding horizon): policies that plan
+  with it.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ from agent_envs.baselines.controllers import (
     ZeroController,
 )
 from agent_envs.baselines.feedback import FeedbackController
+from agent_envs.baselines.optimal_control import OptimalControlResult, solve_optimal_control
+from agent_envs.baselines.optimal_controllers import MPCController, OptimalController
 from agent_envs.baselines.turnpike import (
     DEFAULT_BETA,
     DEFAULT_DELTA,
@@ -32,15 +38,17 @@ from agent_envs.baselines.turnpike import (
 )
 
 #: name -> controller class (`make_baseline`, `agent-envs evaluate --policy NAME`)
-BASELINES: dict[str, type[FeedbackController]] = {
+BASELINES: dict[str, type] = {
     "turnpike": TurnpikeController,
     "proportional": ProportionalController,
     "zero": ZeroController,
+    "optimal": OptimalController,
+    "mpc": MPCController,
 }
 
 
-def make_baseline(name: str, env: Any, **kwargs: Any) -> FeedbackController:
-    """Build the baseline registered under `name` ("turnpike", "proportional", "zero") for env."""
+def make_baseline(name: str, env: Any, **kwargs: Any) -> Any:
+    """Build the baseline registered under `name` (a key of `BASELINES`) for env."""
     if name not in BASELINES:
         raise ValueError(f"unknown baseline {name!r}; choose one of {sorted(BASELINES)}")
     return BASELINES[name](env, **kwargs)
@@ -52,11 +60,15 @@ __all__ = [
     "DEFAULT_DELTA",
     "CheapClosedLoopModel",
     "FeedbackController",
+    "MPCController",
+    "OptimalControlResult",
+    "OptimalController",
     "ProportionalController",
     "TurnpikeController",
     "ZeroController",
     "cheap_control",
     "cheap_control_from_model",
     "make_baseline",
+    "solve_optimal_control",
     "turnpike_time",
 ]

@@ -29,7 +29,7 @@ from agent_envs.envs.observation import (
 from agent_envs.params import SwarmParams
 
 
-def _env_attribute(env: Any, name: str) -> Any:
+def env_attribute(env: Any, name: str) -> Any:
     """`name` from a Gym env (via unwrapped), a PettingZoo env, or an SB3 VecEnv (first env)."""
     if env is None:
         raise AttributeError(name)
@@ -86,11 +86,11 @@ class FeedbackController:
         if turnpike_time is not None and not turnpike_time >= 0:
             raise ValueError(f"turnpike_time must be >= 0 or None, got {turnpike_time}")
         self.env = env
-        self.params: SwarmParams = params if params is not None else _env_attribute(env, "params")
+        self.params: SwarmParams = params if params is not None else env_attribute(env, "params")
         self.max_control = float(
-            max_control if max_control is not None else _env_attribute(env, "max_control")
+            max_control if max_control is not None else env_attribute(env, "max_control")
         )
-        self.n_steps = int(n_steps if n_steps is not None else _env_attribute(env, "n_steps"))
+        self.n_steps = int(n_steps if n_steps is not None else env_attribute(env, "n_steps"))
         if not self.max_control > 0:
             raise ValueError(f"max_control must be > 0, got {self.max_control}")
         self.n_agents = self.params.n_agents

@@ -188,7 +188,7 @@ def test_zero_and_proportional():
     )
     assert isinstance(make_baseline("turnpike", env), TurnpikeController)
     with pytest.raises(ValueError, match="unknown baseline"):
-        make_baseline("optimal", env)
+        make_baseline("optimum", env)
 
 
 def test_vecenv_rows_reset_at_different_times():

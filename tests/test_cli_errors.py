@@ -121,6 +121,23 @@ BATTERY: list[tuple[list[str], str]] = [
     (["reproduce", "turnpike", "--out", "{out}", "--n-steps", "0"], "--n-steps"),
     (["reproduce", "turnpike", "--out", "{file}"], "--out"),
     (["reproduce", "turnpike", "--out", "{out}", "--no-progress=yes"], "--no-progress"),
+    # reproduce turnpike-property: --out --n-agents --n-paths --tau --horizons --sigmas --epsilons
+    # --kernels --delta --seed --max-control --gtol --max-iterations --no-progress
+    (["reproduce", "turnpike-property", "--out", "{file}"], "--out"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--n-agents", "1"], "--n-agents"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--n-paths", "0"], "--n-paths"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--tau", "0"], "--tau"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--tau", "0.3"], "tau"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--horizons", "-1"], "--horizons"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--sigmas", "nan"], "--sigmas"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--epsilons", "0"], "--epsilons"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--kernels", "bogus"], "--kernels"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--delta", "-1"], "--delta"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--seed", "-1"], "--seed"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--max-control", "0"], "--max-control"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--gtol", "inf"], "--gtol"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--max-iterations", "0"], "iterations"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--no-progress=1"], "--no-progress"),
     # evaluate: --policy --env-id --env-kwargs --seeds --target --beta --delta --out --report
     # --no-progress
     (["evaluate"], "--out"),
@@ -223,6 +240,8 @@ BATTERY: list[tuple[list[str], str]] = [
     (["train", "--resume", "{badrun}"], "config.json"),
     # compare: one bad value per option
     (["compare", "--out", "{out}", "--preset", "bogus"], "--preset"),
+    (["compare", "--out", "{out}", "--optimum", "optimal,bogus"], "--optimum"),
+    (["compare", "--out", "{out}", "--optimum", "mpc,mpc"], "--optimum"),
     (["compare", "--out", "{file}"], "--out"),
     (["compare", "--out", "{out}", "--learners", "ppo,dqn"], "--learners"),
     (["compare", "--out", "{out}", "--learners", ","], "--learners"),

@@ -451,3 +451,33 @@ def test_ratio_is_not_reported_when_episodes_diverged():
     assert np.isnan(table.loc["quitter", "ratio_to_reference"])
     assert table.loc["quitter", "divergence_rate"] == pytest.approx(1 / 3)
     assert table.loc["steady", "ratio_to_reference"] == pytest.approx(0.5)
+
+
+def test_gap_to_optimal_is_paired_per_seed_and_hidden_for_diverged():
+    import pandas as pd
+
+    from agent_envs.training.report import display_table, summarize
+
+    costs = {"optimal": [1.0, 2.0, 4.0], "mpc": [0.99, 2.0, 3.96], "twice": [2.0, 4.0, 8.0]}
+    rows = [
+        dict(
+            policy=policy,
+            seed=seed,
+            total_cost=cost,
+            diverged=policy == "quitter" and seed == 0,
+            final_distance=0.1,
+            control_energy=1.0,
+        )
+        for policy, values in {**costs, "quitter": [0.5, 0.5, 0.5]}.items()
+        for seed, cost in enumerate(values)
+    ]
+    table = summarize(pd.DataFrame(rows), reference=None).set_index("policy")
+    assert table.loc["optimal", "gap_to_optimal"] == 0.0
+    assert table.loc["twice", "gap_to_optimal"] == pytest.approx(1.0)
+    assert table.loc["twice", "gap_ci_low"] == pytest.approx(1.0)
+    assert table.loc["mpc", "gap_to_optimal"] == pytest.approx(-2 / 300)
+    assert np.isnan(table.loc["quitter", "gap_to_optimal"])
+    shown = display_table(table.reset_index(), None).set_index("policy")
+    assert shown.loc["twice", "gap to optimal [95% CI]"].startswith("+100.00%")
+    without = summarize(pd.DataFrame([r for r in rows if r["policy"] != "optimal"]), None)
+    assert "gap_to_optimal" not in without

@@ -455,8 +455,9 @@ def test_compare_quick_preset_smoke(tmp_path):
     ]
     assert main(argv) == 0
     report = (out / "report" / "report.md").read_text()
-    for name in ("turnpike", "proportional", "zero", "ppo", "sac", "ppo-shared"):
+    for name in ("turnpike", "proportional", "zero", "optimal", "mpc", "ppo", "sac", "ppo-shared"):
         assert f"| {name} |" in report
+    assert "gap to optimal" in report
     assert "Learning curves" in report and "learning_curves.png" in report
     assert "Per-agent costs of ppo-shared" in report
     assert "Evaluated on another env" in report

@@ -192,6 +192,79 @@ def _turnpike_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true")
 
 
+def _turnpike_property_arguments(parser: argparse.ArgumentParser) -> None:
+    from agent_envs.training.experiments.turnpike_property import (
+        DELTA,
+        EPSILONS,
+        HORIZONS,
+        KERNELS,
+        SIGMAS,
+    )
+
+    parser.add_argument("--out", type=Path, default=Path("reproduction_turnpike_property"))
+    parser.add_argument("--n-agents", type=int, default=20, help="N (paper: 100)")
+    parser.add_argument("--n-paths", type=int, default=10, help="K for sigma > 0 (paper: 20)")
+    parser.add_argument("--tau", type=float, default=0.05, help="time step (paper: 0.02)")
+    parser.add_argument("--horizons", type=float, nargs="+", default=list(HORIZONS))
+    parser.add_argument("--sigmas", type=float, nargs="+", default=list(SIGMAS))
+    parser.add_argument("--epsilons", type=float, nargs="+", default=list(EPSILONS))
+    parser.add_argument("--kernels", nargs="+", choices=KERNELS, default=list(KERNELS))
+    parser.add_argument("--delta", type=float, default=DELTA, help="turnpike band (eq:tptime)")
+    parser.add_argument("--seed", type=int, default=0, help="x^0 and the noise")
+    parser.add_argument("--max-control", type=float, default=150.0)
+    parser.add_argument("--gtol", type=float, default=1e-6, help="relative gradient tolerance")
+    parser.add_argument("--max-iterations", type=int, default=500)
+    parser.add_argument("--no-progress", dest="progress", action="store_false")
+
+
+def _run_turnpike_property(args: argparse.Namespace) -> int:
+    import time
+
+    from agent_envs.training.experiments.turnpike_property import (
+        TurnpikePropertyConfig,
+        reproduce,
+    )
+    from agent_envs.training.storage import check_output_dir
+    from agent_envs.validation import (
+        EPSILON_RANGE,
+        HORIZON_RANGE,
+        MAX_CONTROL_RANGE,
+        SIGMA_RANGE,
+        check_positive,
+        check_real,
+    )
+
+    args.n_steps = None
+    _check_sizes(args)
+    if args.n_agents < 2:
+        raise ValueError(f"--n-agents must be an integer >= 2, got {args.n_agents}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
+    for h in args.horizons:
+        check_positive("--horizons", h, HORIZON_RANGE)
+    check_positive("--tau", args.tau, HORIZON_RANGE)
+    for s in args.sigmas:
+        check_real("--sigmas", s, SIGMA_RANGE)
+    for e in args.epsilons:
+        check_positive("--epsilons", e, EPSILON_RANGE)
+    check_positive("--delta", args.delta)
+    check_positive("--max-control", args.max_control, MAX_CONTROL_RANGE)
+    check_positive("--gtol", args.gtol)
+    if not 1 <= args.max_iterations <= 1_000_000:
+        raise ValueError(f"--max-iterations must be in [1, 1000000], got {args.max_iterations}")
+    names = {f.name for f in dataclasses.fields(TurnpikePropertyConfig)}
+    values = {k: v for k, v in vars(args).items() if k in names}
+    config = TurnpikePropertyConfig(
+        **{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+    )  # ValueError naming tau when it does not divide a horizon
+    check_output_dir(args.out)
+    start = time.perf_counter()
+    reproduce(args.out, config)
+    seconds = time.perf_counter() - start
+    print(f"wrote {args.out}/turnpike_property.png, .csv, .md ({seconds:.0f} s)")
+    return 0
+
+
 def _run_turnpike(args: argparse.Namespace) -> int:
     from agent_envs.training.storage import check_output_dir
 
@@ -302,7 +375,8 @@ def _evaluate_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         dest="policies",
         metavar="[NAME=]SPEC",
-        help="a baseline (turnpike | proportional | zero) or a saved SB3 model PATH.zip "
+        help="a baseline (turnpike | proportional | zero | optimal | mpc) or a saved SB3 model "
+        "PATH.zip "
         "(ALGO:PATH to name the algorithm, PATH.zip:STATS.pkl to name its VecNormalize "
         "statistics; statistics are found by themselves only in a run folder of agent-envs "
         "train, checked against its manifest.json, or of rl-zoo3); repeat for several. Default: "
@@ -518,6 +592,11 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         _turnpike_arguments,
         _run_turnpike,
     ),
+    "reproduce-turnpike-property": Subcommand(
+        "thm:turnpike_stochastic measured: optimal solutions for T = 0.5..8, arcs, rates, bounds",
+        _turnpike_property_arguments,
+        _run_turnpike_property,
+    ),
     "evaluate": Subcommand(
         "run policies on an env over fixed seeds, store results",
         _evaluate_arguments,
@@ -536,7 +615,7 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.
-REPRODUCTIONS = ("uncontrolled", "turnpike")
+REPRODUCTIONS = ("uncontrolled", "turnpike", "turnpike-property")
 
 
 def _normalise(argv: list[str]) -> list[str]:

@@ -132,6 +132,10 @@ PRESETS: dict[str, Preset] = {
 MAX_TIMESTEPS_SCALE = 1000.0
 
 
+#: the optimal-control references (`agent_envs.baselines.optimal_controllers`)
+OPTIMUM_POLICIES = ("optimal", "mpc")
+
+
 @dataclass
 class CompareConfig:
     """Options of `agent-envs compare` (one field = one option)."""
@@ -171,6 +175,13 @@ class CompareConfig:
     progress_bar: bool = option_field(True, "progress bars")
     verbose: int = option_field(0, "SB3 verbosity")
     torch_threads: int = option_field(1, "torch threads (1 is fastest for these small networks)")
+    optimum: str = option_field(
+        ",".join(OPTIMUM_POLICIES),
+        "comma-separated optimal-control references evaluated with the baselines (optimal = "
+        "open-loop optimum, the V of the 'gap to optimal' column; mpc = receding horizon); '' "
+        "for none. Seconds per episode at N = 10; at the paper's N = 100 an optimal episode "
+        "takes tens of seconds and mpc far longer",
+    )
 
     def __post_init__(self) -> None:
         self.env_kwargs = parse_env_kwargs(self.env_kwargs)
@@ -186,6 +197,14 @@ class CompareConfig:
             raise ValueError(
                 f"--timesteps-scale must be a number in (0, {MAX_TIMESTEPS_SCALE}], "
                 f"got {self.timesteps_scale!r}"
+            )
+        if not isinstance(self.optimum, str):
+            raise TypeError(f"--optimum must be a comma-separated string, got {self.optimum!r}")
+        unknown = [p for p in self.optimum_policies if p not in OPTIMUM_POLICIES]
+        if unknown or len(set(self.optimum_policies)) != len(self.optimum_policies):
+            raise ValueError(
+                f"--optimum takes distinct names among {', '.join(OPTIMUM_POLICIES)} "
+                f"(or '' for none), comma-separated; got {self.optimum!r}"
             )
         if self.test_episodes is not None and not 2 <= self.test_episodes <= 100_000:
             raise ValueError(
@@ -212,6 +231,11 @@ class CompareConfig:
         if self.eval_env_kwargs:
             env_description(GYM_ENV_ID, {**env_kwargs, **self.eval_env_kwargs}, "--eval-env-kwargs")
         return self
+
+    @property
+    def optimum_policies(self) -> list[str]:
+        """The optimal-control references to evaluate (names in `OPTIMUM_POLICIES`)."""
+        return [p.strip() for p in self.optimum.split(",") if p.strip()]
 
     @property
     def out_dir(self) -> Path:
@@ -498,8 +522,9 @@ def compare(config: CompareConfig) -> dict[str, Any]:
             run_dirs[learner.name] = train_learner(config, learner, runs_dir)
         train_done = time.perf_counter()
 
-        print(f"evaluating {len(BASELINE_POLICIES) + len(run_dirs)} policies on {n_test} seeds")
-        policies: dict[str, Any] = {name: name for name in BASELINE_POLICIES}
+        references = [*BASELINE_POLICIES, *config.optimum_policies]
+        print(f"evaluating {len(references) + len(run_dirs)} policies on {n_test} seeds")
+        policies: dict[str, Any] = {name: name for name in references}
         policies.update({name: str(best_model_path(d)) for name, d in run_dirs.items()})
         results = evaluate_all(policies, env_kwargs, seeds, out / "evaluation", config.progress_bar)
         transfer = None

@@ -350,13 +350,15 @@ def resolve_policy(
     spec: PolicySpec, env: Any, baseline_kwargs: Mapping[str, Any] | None = None
 ) -> tuple[Any, dict]:
     """A PolicyPredictor for `env` from a spec (see the module docstring) and its description."""
-    from agent_envs.baselines import BASELINES, make_baseline
+    from agent_envs.baselines import BASELINES, FeedbackController, make_baseline
 
     if isinstance(spec, (str, os.PathLike)):
         name = os.fspath(spec)
         if name in BASELINES:
             kw = dict(baseline_kwargs or {})
-            if name == "zero":
+            # beta/delta are the turnpike-type controllers' options; zero, optimal and mpc
+            # take none of them
+            if name == "zero" or not issubclass(BASELINES[name], FeedbackController):
                 kw = {}
             return make_baseline(name, env, **kw), {"kind": "baseline", "name": name, **kw}
         return load_sb3_policy(name, env)

@@ -2,13 +2,14 @@
 
     agent-envs report RESULTS... --out DIR
 
-RESULTS are folders written by `agent-envs evaluate` (or `EvaluationResults.save`). The report
-has a table per policy (mean total cost with a 95% confidence interval from the t-distribution,
-ratio of mean costs to the reference policy -- the turnpike controller by default -- and the
-mean of the per-seed paired ratios with its 95% CI when the seeds match, divergence rate, final
-distance to the target, control energy) and three PNGs: the path-mean agent trajectories per
-policy (one seed), the running cost over time (log scale) and the turnpike distance
-||E x^n - xbar||^2 + ||u^n||^2 over time (log scale), whose interior dip is the turnpike shape.
+RESULTS are folders written by `agent-envs evaluate` (or `EvaluationResults.save`). The report has a
+table per policy (mean total cost with a 95% confidence interval from the t-distribution, ratio of
+mean costs to the reference policy -- the turnpike controller by default -- and the mean of the per-
+seed paired ratios with its 95% CI when the seeds match, the gap to optimal (cost - V) / V per seed
+with its 95% CI when the optimal controller "optimal" was evaluated, divergence rate, final distance
+to the target, control energy) and three PNGs: the path-mean agent trajectories per policy (one
+seed), the running cost over time (log scale) and the turnpike distance ||E x^n - xbar||^2 +
+||u^n||^2 over time (log scale), whose interior dip is the turnpike shape.
 
 Library use (the training comparison adds its learning curves as an extra section):
 
@@ -174,6 +175,10 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _pct(v: Any) -> str:
+    return f"{100 * v:+.2f}%" if np.isfinite(v) else "n/a"
+
+
 def display_table(summary: pd.DataFrame, reference: str | None) -> pd.DataFrame:
     """The summary as strings for the report (CI merged into one column)."""
     out = pd.DataFrame({"policy": summary["policy"], "episodes": summary["episodes"]})
@@ -191,6 +196,16 @@ def display_table(summary: pd.DataFrame, reference: str | None) -> pd.DataFrame:
                 summary["paired_ratio"],
                 summary["paired_ratio_ci_low"],
                 summary["paired_ratio_ci_high"],
+                strict=True,
+            )
+        ]
+    if "gap_to_optimal" in summary:
+        out["gap to optimal [95% CI]"] = [
+            f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
+            for m, lo, hi in zip(
+                summary["gap_to_optimal"],
+                summary["gap_ci_low"],
+                summary["gap_ci_high"],
                 strict=True,
             )
         ]
@@ -384,6 +399,13 @@ def build_report(
             f"'ratio to {reference}' divides mean costs; 'paired ratio' averages the per-seed "
             f"ratios (same seeds). "
             if reference
+            else ""
+        )
+        + (
+            "'gap to optimal' is the per-seed (cost - V) / V, V = the cost of the optimal "
+            "open-loop plan (policy 'optimal', solved from each episode's start) on the same "
+            "seed, mean and t-interval; a feedback policy can beat it (negative gap). "
+            if "gap_to_optimal" in summary
             else ""
         )
         + "A diverged episode stops early, so its cost covers only the steps it ran: read the "

@@ -28,6 +28,8 @@ import pandas as pd
 SATURATION_TOL = 1e-6
 #: the policy cost ratios refer to by default
 DEFAULT_REFERENCE = "turnpike"
+#: the policy whose cost is V in the "gap to optimal" column (skipped when not evaluated)
+DEFAULT_OPTIMUM = "optimal"
 
 EPISODE_COLUMNS = (
     "policy",
@@ -256,7 +258,10 @@ def mean_confidence_interval(values: Sequence[float], confidence: float = 0.95):
 
 
 def summarize(
-    episodes: pd.DataFrame, reference: str | None = DEFAULT_REFERENCE, confidence: float = 0.95
+    episodes: pd.DataFrame,
+    reference: str | None = DEFAULT_REFERENCE,
+    confidence: float = 0.95,
+    optimum: str | None = DEFAULT_OPTIMUM,
 ) -> pd.DataFrame:
     """One row per policy: cost statistics, ratio to `reference`, divergence rate, etc.
 
@@ -266,9 +271,14 @@ def summarize(
     divergence_rate, mean_final_distance (non-diverged episodes), mean_control_energy,
     mean_saturated_fraction, mean_turnpike_time.
 
+    With `optimum` (the open-loop optimal controller, "optimal") among the policies: the gap to
+    optimal (cost - V) / V per seed, V = the optimum's cost on the same seed, as gap_to_optimal
+    with its t-CI gap_ci_low/high. V is the optimal open-loop plan's cost on the env's own noise,
+    so a feedback policy (MPC, a learner) can have a negative gap.
+
     A diverged episode ends early with the cost accumulated so far, which would make a diverging
-    policy look cheap: the ratios are NaN (shown as n/a) when the policy or the reference has a
-    diverged episode.
+    policy look cheap: the ratios and gaps are NaN (shown as n/a) when the policy or the
+    reference (optimum) has a diverged episode.
     """
     rows = []
     ref = None
@@ -277,6 +287,12 @@ def summarize(
         ref_rows = episodes[episodes["policy"] == reference]
         ref = ref_rows.set_index("seed")["total_cost"]
         ref_diverged = bool(ref_rows["diverged"].astype(bool).any())
+    best = None
+    if optimum is not None and optimum in set(episodes["policy"]):
+        best_rows = episodes[episodes["policy"] == optimum]
+        best = best_rows.set_index("seed")["total_cost"]
+        if bool(best_rows["diverged"].astype(bool).any()):
+            best = best * float("nan")
     for policy, group in episodes.groupby("policy", sort=False):
         mean, low, high = mean_confidence_interval(group["total_cost"], confidence)
         row: dict[str, Any] = {
@@ -302,6 +318,14 @@ def summarize(
                     "paired_ratio_ci_high",
                 ):
                     row[key] = float("nan")
+        if best is not None:
+            paired = group.set_index("seed")["total_cost"]
+            common = paired.index.intersection(best.index)
+            gaps = ((paired.loc[common] - best.loc[common]) / best.loc[common]).to_numpy(float)
+            if bool(group["diverged"].astype(bool).any()):
+                gaps = gaps * float("nan")
+            gm, gl, gh = mean_confidence_interval(gaps, confidence)
+            row.update(gap_to_optimal=gm, gap_ci_low=gl, gap_ci_high=gh)
         diverged = group["diverged"].astype(bool)
         row["divergence_rate"] = float(diverged.mean())
         row["mean_final_distance"] = float(group.loc[~diverged, "final_distance"].mean())

@@ -1,0 +1,388 @@
+"""The optimal-control solver: gradients, the LQ case vs Riccati, optimality against other
+controls, the cost contract, bad input, non-convergence, and the planning controllers."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import agent_envs  # noqa: F401  (registers the env id)
+from agent_envs.baselines import (
+    BASELINES,
+    MPCController,
+    OptimalController,
+    cheap_control,
+    make_baseline,
+    solve_optimal_control,
+    turnpike_time,
+)
+from agent_envs.baselines.linear_quadratic import (
+    constant_linearization,
+    discrete_linear_dynamics,
+    solve_linear_quadratic,
+)
+from agent_envs.baselines.optimal_control import DiscreteCostObjective
+from agent_envs.costs import discrete_cost
+from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.params import SwarmParams
+from agent_envs.simulator import simulate
+
+torch = pytest.importorskip("torch")
+
+ENV_ID = "agent_envs/Swarm-v0"
+
+
+class ConstantKernel:
+    """p(x, y) = c: the dynamics x' = L x + u are linear (written for numpy and torch)."""
+
+    symmetric = True
+    radial = True
+
+    def __init__(self, c: float) -> None:
+        self.c = c
+
+    def value(self, xk, xl):
+        return 0.0 * (xk - xl).sum(-1) + self.c
+
+    def grad_x(self, xk, xl):
+        return 0.0 * (xl - xk)
+
+    def grad_y(self, xk, xl):
+        return 0.0 * (xl - xk)
+
+
+def sample_cost(params, integrator, controls, seed, x0, n_paths, n_steps):
+    traj = simulate(
+        params,
+        integrator,
+        n_steps=n_steps,
+        n_paths=n_paths,
+        seed=seed,
+        initial_positions=x0,
+        control=controls,
+    )
+    dt = params.horizon / n_steps
+    return float(
+        np.mean(
+            discrete_cost(traj.positions, traj.controls, params.target_vector, params.gamma, dt)
+        )
+    )
+
+
+# ------------------------------------------------------------------------------------------
+# Gradients
+# ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("integrator", ["serb", "em"])
+def test_gradient_matches_central_differences(integrator):
+    # eps = 1, alpha = 0.5: EM is stable at this tau, so the comparison is meaningful for both.
+    params = SwarmParams(n_agents=5, epsilon=1.0, alpha=0.5, sigma=0.1, gamma=0.05)
+    n_steps, x0 = 4, np.linspace(-1.0, 1.0, 5)[:, None]
+    objective = DiscreteCostObjective(params, integrator, "frozen", "auto", n_steps, 3, 7, x0)
+    rng = np.random.default_rng(1)
+    u = rng.normal(scale=2.0, size=n_steps * 5)
+    value, grad = objective(u)
+    assert value == pytest.approx(
+        sample_cost(params, integrator, u.reshape(n_steps, 5, 1), 7, x0, 3, n_steps), rel=1e-12
+    )
+    h = 1e-5
+    for _ in range(4):
+        direction = rng.normal(size=u.size)
+        fd = (objective(u + h * direction)[0] - objective(u - h * direction)[0]) / (2 * h)
+        assert grad @ direction == pytest.approx(fd, rel=1e-7, abs=1e-12)
+
+
+# ------------------------------------------------------------------------------------------
+# LQ case vs the Riccati recursion
+# ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("integrator", ["serb", "em"])
+@pytest.mark.parametrize("sigma", [0.0, 0.05])
+def test_linear_quadratic_case_matches_riccati(integrator, sigma):
+    params = SwarmParams(n_agents=6, kernel=ConstantKernel(3.0), sigma=sigma, gamma=0.01)
+    n_steps, n_paths, seed = 10, 4, 3
+    dt = params.horizon / n_steps
+    x0 = np.linspace(-1.0, 1.0, 6)[:, None]
+    a, b = discrete_linear_dynamics(constant_linearization(params), dt, integrator)
+    free = simulate(
+        params, integrator, n_steps=n_steps, n_paths=n_paths, seed=seed, initial_positions=x0
+    ).positions
+    disturbance = (free[1:] - np.einsum("ij,npjd->npid", a, free[:-1])).mean(axis=1)
+    reference = solve_linear_quadratic(
+        a, b, x0, params.target_vector, params.gamma, dt, n_steps, disturbance
+    )
+    ref_cost = sample_cost(params, integrator, reference.controls, seed, x0, n_paths, n_steps)
+    res = solve_optimal_control(
+        params,
+        integrator,
+        n_steps=n_steps,
+        n_paths=n_paths,
+        seed=seed,
+        initial_positions=x0,
+        max_control=1e3,
+        gtol=1e-9,
+    )
+    assert res.converged
+    assert abs(res.cost - ref_cost) / ref_cost <= 1e-8
+    assert np.max(np.abs(res.controls - reference.controls)) <= 1e-6
+    if sigma == 0.0:
+        assert abs(res.cost - reference.mean_cost) / reference.mean_cost <= 1e-8
+
+
+# ------------------------------------------------------------------------------------------
+# V below the cost of every other control on the same paths
+# ------------------------------------------------------------------------------------------
+
+
+def feedback_controls(params, integrator, n_steps, n_paths, seed, x0, kind, max_control):
+    """The control sequence a feedback baseline applies on the K paths (path means, clipped)."""
+    model = SwarmModel(params)
+    target = params.target_vector
+    tbar = turnpike_time(x0, target, horizon=params.horizon)
+
+    def control(t, x):
+        if kind == "zero" or t >= tbar - 1e-9:
+            return np.zeros(x.shape[1:])
+        u = cheap_control(
+            x.mean(0),
+            model.interaction_drift(x).mean(0),
+            target,
+            cancel_interaction=kind == "turnpike",
+        )
+        return np.clip(u, -max_control, max_control)
+
+    traj = simulate(
+        params,
+        integrator,
+        n_steps=n_steps,
+        n_paths=n_paths,
+        seed=seed,
+        initial_positions=x0,
+        control=control,
+    )
+    return traj.controls[:, 0]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_value_is_below_zero_proportional_and_turnpike(seed):
+    params = SwarmParams(n_agents=8, epsilon=0.05, sigma=0.01)
+    n_steps, n_paths, bound = 12, 5, 150.0
+    x0 = np.random.default_rng(100 + seed).uniform(-1.0, 1.0, size=(8, 1))
+    res = solve_optimal_control(
+        params,
+        "serb",
+        n_steps=n_steps,
+        n_paths=n_paths,
+        seed=seed,
+        initial_positions=x0,
+        max_control=bound,
+    )
+    assert res.converged
+    for kind in ("zero", "proportional", "turnpike"):
+        u = feedback_controls(params, "serb", n_steps, n_paths, seed, x0, kind, bound)
+        other = sample_cost(params, "serb", u, seed, x0, n_paths, n_steps)
+        assert res.cost <= other * (1 + 1e-12), kind
+
+
+# ------------------------------------------------------------------------------------------
+# Contract, bad input, non-convergence
+# ------------------------------------------------------------------------------------------
+
+
+def test_result_cost_is_simulate_plus_costs_and_shapes():
+    params = SwarmParams(n_agents=5, dim=2, epsilon=0.5, sigma=0.01, target=(0.5, -0.2))
+    x0 = np.random.default_rng(0).uniform(-1.0, 1.0, size=(5, 2))
+    res = solve_optimal_control(
+        params, "serb", n_steps=6, n_paths=4, seed=0, initial_positions=x0, max_control=150.0
+    )
+    assert res.controls.shape == (6, 5, 2)
+    assert res.positions.shape == (7, 4, 5, 2)
+    assert np.all(np.abs(res.controls) <= 150.0)
+    traj = simulate(
+        params, "serb", n_steps=6, n_paths=4, seed=0, initial_positions=x0, control=res.controls
+    )
+    np.testing.assert_array_equal(traj.positions, res.positions)
+    expected = np.mean(
+        discrete_cost(
+            traj.positions, traj.controls, params.target_vector, params.gamma, params.horizon / 6
+        )
+    )
+    assert res.cost == expected
+    assert res.cost < res.initial_cost
+    assert res.relative_gradient_norm <= 1e-6
+
+
+def test_box_bound_is_active_when_small():
+    params = SwarmParams(n_agents=4, epsilon=1.0, sigma=0.0, target=2.0)
+    res = solve_optimal_control(
+        params, "serb", n_steps=5, n_paths=1, initial_positions=np.zeros(4), max_control=0.5
+    )
+    assert res.converged
+    assert np.max(np.abs(res.controls)) == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"params": "nope"}, TypeError, "params"),
+        ({"integrator": "rk4"}, ValueError, "integrator"),
+        ({"jacobian": "approx"}, ValueError, "jacobian"),
+        ({"n_steps": 0}, ValueError, "n_steps"),
+        ({"n_paths": 0}, ValueError, "n_paths"),
+        ({"seed": -1}, ValueError, "seed"),
+        ({"seed": np.random.default_rng(0)}, TypeError, "seed"),
+        ({"initial_positions": np.zeros(3)}, ValueError, "initial_positions"),
+        ({"max_control": 0.0}, ValueError, "max_control"),
+        ({"gtol": -1.0}, ValueError, "gtol"),
+        ({"max_iterations": 0}, ValueError, "max_iterations"),
+        ({"initial_controls": np.zeros((2, 4, 1))}, ValueError, "initial_controls"),
+    ],
+)
+def test_bad_input_is_named(kwargs, error, match):
+    call = {"params": SwarmParams(n_agents=4), "n_steps": 3, "n_paths": 1, **kwargs}
+    params = call.pop("params")
+    with pytest.raises(error, match=match):
+        solve_optimal_control(params, **call)
+
+
+def test_non_convergence_warns_and_is_flagged():
+    params = SwarmParams(n_agents=6, epsilon=0.05, sigma=0.01)
+    with pytest.warns(RuntimeWarning, match="did not converge"):
+        res = solve_optimal_control(params, n_steps=8, n_paths=2, max_iterations=1)
+    assert not res.converged
+    assert res.relative_gradient_norm > 1e-6
+    assert res.iterations == 1
+
+
+def test_baselines_import_without_torch_and_solve_names_the_extra():
+    code = (
+        "import sys\n"
+        "class NoTorch:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name.split('.')[0] == 'torch':\n"
+        "            raise ImportError('no torch here')\n"
+        "sys.meta_path.insert(0, NoTorch())\n"
+        "import agent_envs.baselines as b\n"
+        "from agent_envs.params import SwarmParams\n"
+        "try:\n"
+        "    b.solve_optimal_control(SwarmParams(n_agents=3), n_steps=2, n_paths=1)\n"
+        "except ImportError as e:\n"
+        "    print('IMPORTERROR', e)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "IMPORTERROR" in out.stdout and "train" in out.stdout
+
+
+# ------------------------------------------------------------------------------------------
+# Controllers
+# ------------------------------------------------------------------------------------------
+
+
+def run_episode(env, policy, seed):
+    obs, _ = env.reset(seed=seed)
+    total, done = 0.0, False
+    while not done:
+        action, _ = policy.predict(obs)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total -= reward
+        done = terminated or truncated
+    return total
+
+
+def test_registered_as_baselines():
+    assert BASELINES["optimal"] is OptimalController
+    assert BASELINES["mpc"] is MPCController
+
+
+def test_optimal_controller_reaches_the_value_in_a_noise_free_env():
+    kwargs = {"n_agents": 5, "n_steps": 8, "sigma": 0.0, "epsilon": 0.05}
+    env = gym.make(ENV_ID, **kwargs)
+    ctrl = make_baseline("optimal", env, noise_free=True)
+    cost = run_episode(env, ctrl, seed=3)
+    res = ctrl.last_result
+    assert res.converged
+    # float32 observations/actions are the only difference between the plan and the env.
+    assert cost == pytest.approx(res.cost, rel=1e-5)
+    zero = run_episode(env, make_baseline("zero", env), seed=3)
+    assert cost < zero
+
+
+def test_mpc_matches_open_loop_without_noise_and_handles_batches():
+    kwargs = {"n_agents": 4, "n_steps": 6, "sigma": 0.0, "epsilon": 0.05}
+    env = gym.make(ENV_ID, **kwargs)
+    optimal = run_episode(env, OptimalController(env, noise_free=True), seed=1)
+    mpc = MPCController(env, noise_free=True)
+    cost = run_episode(env, mpc, seed=1)
+    assert mpc.solves == 6
+    assert cost == pytest.approx(optimal, rel=1e-4)
+    # a batch of two observations (a VecEnv) gets one plan per row
+    obs = np.stack([env.reset(seed=s)[0] for s in (1, 2)])
+    actions, _ = mpc.predict(obs)
+    assert actions.shape == (2, 4) and actions.dtype == np.float32
+    assert np.all(np.abs(actions) <= 1.0)
+
+
+def test_controllers_reject_per_agent_rows():
+    env = gym.make(ENV_ID, n_agents=4, n_steps=3)
+    ctrl = OptimalController(env, noise_free=True)
+    with pytest.raises(ValueError, match="per-agent"):
+        ctrl.predict(np.zeros(4, np.float32))
+
+
+@pytest.mark.parametrize(
+    "device",
+    [
+        "cpu",
+        pytest.param(
+            "cuda",
+            marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA"),
+        ),
+    ],
+)
+def test_device_gives_the_same_solution(device):
+    params = SwarmParams(n_agents=5, epsilon=0.05, sigma=0.01)
+    common = {"n_steps": 6, "n_paths": 3, "seed": 2}
+    base = solve_optimal_control(params, **common)
+    res = solve_optimal_control(params, device=device, **common)
+    assert res.converged
+    np.testing.assert_allclose(res.controls, base.controls, rtol=1e-6, atol=1e-6)
+    assert res.cost == pytest.approx(base.cost, rel=1e-10)
+
+
+def test_act_on_the_pettingzoo_parallel_env_reaches_the_value():
+    from agent_envs import swarm_v0
+
+    env = swarm_v0.parallel_env(n_agents=4, n_steps=5, sigma=0.0)
+    obs, _ = env.reset(seed=1)
+    ctrl = OptimalController(env, noise_free=True)
+    total = 0.0
+    while env.agents:
+        obs, rewards, _, _, _ = env.step(ctrl.act(obs))
+        total -= sum(rewards.values())
+    assert total == pytest.approx(ctrl.last_result.cost, rel=1e-5)
+
+
+def test_differentiated_phi_method_is_dense_unless_chosen():
+    from agent_envs.baselines.optimal_control import differentiated_phi_method
+
+    assert differentiated_phi_method(SwarmParams(n_agents=4), "frozen", None) == "eigh"
+    assert differentiated_phi_method(SwarmParams(n_agents=4), "exact", "auto") == "eigh"
+    nonsym = SwarmParams(n_agents=4, kernel="nonsymmetric")
+    assert differentiated_phi_method(nonsym, "frozen", None) == "expm"
+    assert differentiated_phi_method(nonsym, "frozen", "krylov") == "krylov"
+
+
+@pytest.mark.slow
+def test_large_batched_solve_converges_with_the_default_phi_method():
+    # N = 100 with 20 paths is where 'auto' picks Krylov, whose torch backward gave NaN
+    # gradients (see differentiated_phi_method); the default must still converge.
+    params = SwarmParams(n_agents=100, epsilon=0.05, sigma=0.01)
+    res = solve_optimal_control(params, n_steps=20, n_paths=20, seed=0)
+    assert res.converged
+    assert res.cost < 0.5 * res.initial_cost

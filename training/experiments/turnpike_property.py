@@ -1,0 +1,359 @@
+"""`agent-envs reproduce turnpike-property`: the turnpike theorem measured on optimal solutions.
+
+Theorem `thm:turnpike_stochastic` says that the optimal solution (x*, u*) of the fully discrete
+problem `eq:discrete_cost_functional` stays close to the static pair (x~, u~) of
+`eq:stationary_solution` (x~_k = xbar, u~_k = 0: consensus at the target, no control) for most
+of the horizon: an entry arc, a long stretch near (x~, u~), an exit arc. The paper proves it
+but never computes x*; here `solve_optimal_control` does, for horizons T in {0.5, 1, 2, 4, 8}
+at one tau (so m = T / tau grows with T), and the run reports, per setting:
+
+- D_n = ||E x*^n - x~||^2 + ||u*^n - u~||^2 (sums over agents; E = mean over the K paths)
+  for n = 0..m-1, plotted against t_n on a log scale, one line per T;
+- the entry and exit rates: minus the slope of log D_n (least squares in t) from t = 0 to the
+  first n with D_n <= delta, and the slope from the last n with D_n <= delta to t_{m-1}; next
+  to the entry rate, the rate the swarm's slow mode predicts (`centre_mode_rate`);
+- the share of the horizon with D_n <= delta (delta = 2e-4, the paper's threshold of
+  `eq:tptime`, by default);
+- V against the cheap-control bound of Lemma `lem:cheap` (`eq:cheap`):
+  V <= C0 E[gamma/(2N) ||x^0 - x~||^2], C0 = 2 tau (1 + gamma beta_p) / (gamma (1 - e^{-2 beta
+  tau})), beta_p = 2((beta + M_p)^2 + M_p^2), M_p = sup p = max_l w_l / alpha^2 (Assumption
+  `ass:bounded`), beta = 12 (the paper's); and the theorem's own inequality with lambda = 1/2:
+  E sum_{n >= s} tau alpha(||x^n - x~|| + ||u^n - u~||) <= C1 E alpha(||x^0 - x~||),
+  alpha(y) = gamma/(2N) y^2, s = floor((1 - lambda) m), C1 = C0^2 / (tau s).
+
+Settings: the symmetric kernel (`eq:symmker`) with eps = 0.05 (stiff, the paper's) and eps = 1,
+and the non-symmetric kernel (`eq:nonsymmker`) with eps_l from eps/5 to 2 eps (eps = 0.05 gives
+the paper's [0.01, 0.1]); sigma in {0, 0.01, 0.1}; SERB with the frozen linearization; x^0
+uniform on [-1, 1] from the seed (the same for every T); xbar = 0.7, gamma = 0.01, |u| <= 150.
+
+Sizes: N = 20 agents, K = 10 paths (1 for sigma = 0), tau = 0.05 by default, so that the whole
+run takes minutes on 2 cores; `--n-agents 100 --n-paths 20 --tau 0.02` is the paper's N, K, tau.
+Each T is warm-started from the previous T's solution followed by zeros.
+
+Outputs in --out: `turnpike_property.png`, `turnpike_property.csv` / `.md` (one row per setting
+and T), `curves.npz` (D_n per run) and `meta.json`. Library use:
+`reproduce(out, TurnpikePropertyConfig(...))`; `add_arguments`/`run` are the thin CLI layer.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: the paper's decay rate of the cheap control and turnpike threshold (Section 5.2)
+BETA = 12.0
+DELTA = 2e-4
+HORIZONS = (0.5, 1.0, 2.0, 4.0, 8.0)
+SIGMAS = (0.0, 0.01, 0.1)
+EPSILONS = (0.05, 1.0)
+KERNELS = ("symmetric", "nonsymmetric")
+
+
+@dataclass(frozen=True)
+class ArcRates:
+    """Fitted exponential rates (per unit time) of D_n, and the time share within delta."""
+
+    entry_rate: float
+    exit_rate: float
+    share_within_delta: float
+    plateau: float
+
+
+def turnpike_curve(mean_positions: np.ndarray, controls: np.ndarray, target: np.ndarray):
+    """D_n = ||E x^n - xbar||^2 + ||u^n||^2 for n = 0..m-1: inputs (m+1, N, d), (m, N, d)."""
+    m = controls.shape[0]
+    state = np.sum((mean_positions[:m] - target) ** 2, axis=(-2, -1))
+    return state + np.sum(controls**2, axis=(-2, -1))
+
+
+def _slope(times: np.ndarray, values: np.ndarray) -> float:
+    if times.size < 2:
+        return float("nan")
+    logs = np.log(np.maximum(values, np.finfo(float).tiny))
+    return float(np.polyfit(times, logs, 1)[0])
+
+
+def arc_rates(times: np.ndarray, curve: np.ndarray, delta: float) -> ArcRates:
+    """Entry/exit rates of log D (module docstring), share of n with D_n <= delta, plateau.
+
+    Without any n within delta, the entry arc runs to the minimum of D and there is no exit arc
+    (NaN); the plateau is the median of D within delta (NaN when none).
+    """
+    inside = np.flatnonzero(curve <= delta)
+    if inside.size == 0:
+        last = int(np.argmin(curve))
+        entry = -_slope(times[: last + 1], curve[: last + 1])
+        return ArcRates(entry, float("nan"), 0.0, float("nan"))
+    first, last = int(inside[0]), int(inside[-1])
+    entry = -_slope(times[: first + 1], curve[: first + 1])
+    exit_ = _slope(times[last:], curve[last:]) if last < curve.size - 1 else float("nan")
+    return ArcRates(entry, exit_, inside.size / curve.size, float(np.median(curve[inside])))
+
+
+def centre_mode_rate(weights: Any, n_agents: int, gamma: float, dt: float) -> float:
+    """The decay rate of D predicted by the swarm's slow mode (a derivation, not a fit).
+
+    For p(x_k, x_l) = w_l g(|x_k - x_l|) the weighted centre c = sum_k w_k x_k / W, W = sum_k w_k,
+    is not moved by the interaction (the double sum is antisymmetric), so c^{n+1} = c^n + tau v
+    with v = sum_k w_k u_k / W; the cheapest control giving v is u_k = v W w_k / sum w^2, so near
+    consensus the problem is the scalar LQ problem z+ = z + tau v, cost tau (z^2 + g v^2),
+    g = gamma W^2 / (N sum w^2) (= gamma for the symmetric kernel). Its Riccati fixed point
+    P = (tau + sqrt(tau^2 + 4 g)) / 2 gives the gain K = P / (g + tau P), the factor
+    a = 1 - tau K per step and the rate -2 ln(a) / tau of z^2 (and of D).
+    """
+    w = np.broadcast_to(np.asarray(weights, dtype=float), (n_agents,))
+    g = gamma * np.sum(w) ** 2 / (n_agents * np.sum(w**2))
+    p = (dt + math.sqrt(dt**2 + 4.0 * g)) / 2.0
+    factor = 1.0 - dt * p / (g + dt * p)
+    return -2.0 * math.log(factor) / dt
+
+
+def kernel_bound(params: Any) -> float:
+    """M_p = sup p for the Cucker-Smale kernels: max_l w_l / alpha^2 (Assumption ass:bounded)."""
+    from agent_envs.dynamics.swarm import kernel_from_params
+
+    kernel = kernel_from_params(params)
+    return float(np.max(kernel.weights)) / kernel.alpha**2
+
+
+def cheap_constant(dt: float, gamma: float, kernel_sup: float, beta: float = BETA) -> float:
+    """C0 of the proof of Lemma lem:cheap.
+
+    C0 = 2 tau (1 + gamma beta_p) / (gamma (1 - e^{-2 beta tau})), beta_p = 2((beta + M_p)^2 +
+    M_p^2), with M_p = `kernel_sup`.
+    """
+    beta_p = 2.0 * ((beta + kernel_sup) ** 2 + kernel_sup**2)
+    return 2.0 * dt * (1.0 + gamma * beta_p) / (gamma * (1.0 - math.exp(-2.0 * beta * dt)))
+
+
+def dissipation(values: np.ndarray, gamma: float, n_agents: int) -> np.ndarray:
+    """alpha(y) = gamma / (2N) y^2 of Lemma lem:diss."""
+    return gamma / (2.0 * n_agents) * values**2
+
+
+def theorem_sides(positions, controls, target, gamma, dt, c0, lam=0.5) -> tuple[float, float]:
+    """(LHS, RHS) of thm:turnpike_stochastic with lambda = `lam` on the K paths (module doc)."""
+    m, n_agents = controls.shape[0], controls.shape[-2]
+    s = max(math.floor((1.0 - lam) * m), 1)
+    dist = np.sqrt(np.sum((positions[:m] - target) ** 2, axis=(-2, -1)))  # (m, K)
+    unorm = np.sqrt(np.sum(controls**2, axis=(-2, -1)))[:, None]  # (m, 1)
+    lhs = float(np.mean(np.sum(dt * dissipation(dist + unorm, gamma, n_agents)[s:], axis=0)))
+    rhs = c0**2 / (dt * s) * float(np.mean(dissipation(dist[0], gamma, n_agents)))
+    return lhs, rhs
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One kernel/stiffness/noise combination."""
+
+    kernel: str
+    epsilon: float
+    sigma: float
+
+    @property
+    def label(self) -> str:
+        return f"{self.kernel} eps={self.epsilon:g} sigma={self.sigma:g}"
+
+    def params(self, n_agents: int, horizon: float) -> Any:
+        from agent_envs.params import SwarmParams
+
+        extra = (
+            {"epsilon_min": self.epsilon / 5.0, "epsilon_max": 2.0 * self.epsilon}
+            if self.kernel == "nonsymmetric"
+            else {"epsilon": self.epsilon}
+        )
+        return SwarmParams(
+            n_agents=n_agents, kernel=self.kernel, sigma=self.sigma, horizon=horizon, **extra
+        )
+
+
+@dataclass(frozen=True)
+class TurnpikePropertyConfig:
+    """Sizes and settings of the experiment (module docstring); validated on construction."""
+
+    n_agents: int = 20
+    n_paths: int = 10
+    tau: float = 0.05
+    horizons: tuple[float, ...] = HORIZONS
+    sigmas: tuple[float, ...] = SIGMAS
+    epsilons: tuple[float, ...] = EPSILONS
+    kernels: tuple[str, ...] = KERNELS
+    delta: float = DELTA
+    seed: int = 0
+    max_control: float = 150.0
+    gtol: float = 1e-6
+    max_iterations: int = 500
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.tau > 0:
+            raise ValueError(f"tau must be > 0, got {self.tau}")
+        for horizon in self.horizons:
+            steps = horizon / self.tau
+            if not (horizon > 0 and abs(steps - round(steps)) <= 1e-9):
+                raise ValueError(
+                    f"tau must divide every horizon (> 0); {horizon} / {self.tau} = {steps:g}"
+                )
+        unknown = sorted(set(self.kernels) - set(KERNELS))
+        if unknown:
+            raise ValueError(f"kernels must be among {KERNELS}, got {unknown}")
+
+    @property
+    def settings(self) -> list[Setting]:
+        return [
+            Setting(kernel, eps, sigma)
+            for kernel in self.kernels
+            for eps in self.epsilons
+            for sigma in self.sigmas
+        ]
+
+
+def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray) -> list[dict]:
+    """Solve every horizon of one setting (warm-started), return one row per T."""
+    from agent_envs.baselines.optimal_control import solve_optimal_control
+    from agent_envs.dynamics.swarm import kernel_from_params
+
+    rows, previous = [], None
+    for horizon in config.horizons:
+        n_steps = round(horizon / config.tau)
+        params = setting.params(config.n_agents, horizon)
+        n_paths = 1 if setting.sigma == 0.0 else config.n_paths
+        warm = None
+        if previous is not None:
+            warm = np.zeros((n_steps, *previous.shape[1:]))
+            warm[: min(n_steps, previous.shape[0])] = previous[:n_steps]
+        res = solve_optimal_control(
+            params,
+            "serb",
+            n_steps=n_steps,
+            n_paths=n_paths,
+            seed=config.seed,
+            initial_positions=x0,
+            max_control=config.max_control,
+            initial_controls=warm,
+            gtol=config.gtol,
+            max_iterations=config.max_iterations,
+        )
+        previous = res.controls
+        target = params.target_vector
+        dt = params.horizon / n_steps
+        curve = turnpike_curve(res.mean_positions, res.controls, target)
+        rates = arc_rates(res.times[:n_steps], curve, config.delta)
+        c0 = cheap_constant(dt, params.gamma, kernel_bound(params))
+        predicted = centre_mode_rate(
+            kernel_from_params(params).weights, params.n_agents, params.gamma, dt
+        )
+        start = float(np.sum((x0 - target) ** 2))
+        bound = c0 * params.gamma / (2.0 * params.n_agents) * start
+        lhs, rhs = theorem_sides(res.positions, res.controls, target, params.gamma, dt, c0)
+        rows.append(
+            {
+                "kernel": setting.kernel,
+                "epsilon": setting.epsilon,
+                "sigma": setting.sigma,
+                "T": horizon,
+                "m": n_steps,
+                "V": res.cost,
+                "converged": res.converged,
+                "iterations": res.iterations,
+                "rel_grad": res.relative_gradient_norm,
+                **asdict(rates),
+                "predicted_entry_rate": predicted,
+                "min_D": float(np.min(curve)),
+                "cheap_bound": bound,
+                "bound_over_V": bound / res.cost,
+                "thm_lhs": lhs,
+                "thm_rhs": rhs,
+                "seconds": res.wall_time,
+                "curve": curve,
+                "times": res.times[:n_steps],
+            }
+        )
+        if config.progress:
+            print(
+                f"  {setting.label:40s} T={horizon:<4g} m={n_steps:<4d} V={res.cost:.5f} "
+                f"it={res.iterations:<4d} conv={res.converged} entry={rates.entry_rate:7.2f} "
+                f"exit={rates.exit_rate:7.2f} share={rates.share_within_delta:.2f} "
+                f"({res.wall_time:.1f} s)",
+                flush=True,
+            )
+    return rows
+
+
+def plot(rows: list[dict], settings: list[Setting], delta: float, path: Path) -> None:
+    """One panel per setting: log D_n against t_n, one line per T, the delta band dashed."""
+    from matplotlib.figure import Figure
+
+    kernels = sorted({(s.kernel, s.epsilon) for s in settings})
+    sigmas = sorted({s.sigma for s in settings})
+    fig = Figure(figsize=(4 * len(kernels), 3 * len(sigmas)))  # no pyplot: no backend switch
+    axes = fig.subplots(len(sigmas), len(kernels), squeeze=False)
+    for i, sigma in enumerate(sigmas):
+        for j, (kernel, eps) in enumerate(kernels):
+            ax = axes[i][j]
+            for row in rows:
+                if (row["kernel"], row["epsilon"], row["sigma"]) == (kernel, eps, sigma):
+                    ax.semilogy(row["times"], row["curve"], label=f"T={row['T']:g}")
+            ax.axhline(delta, color="k", ls="--", lw=0.8)
+            ax.set_title(f"{kernel} eps={eps:g}, sigma={sigma:g}", fontsize=9)
+            ax.set_xlabel("t")
+            if j == 0:
+                ax.set_ylabel("||E x* - x~||^2 + ||u* - u~||^2")
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+COLUMNS = (
+    "kernel", "epsilon", "sigma", "T", "m", "V", "converged", "iterations", "rel_grad",
+    "entry_rate", "predicted_entry_rate", "exit_rate", "share_within_delta", "plateau", "min_D",
+    "cheap_bound", "bound_over_V", "thm_lhs", "thm_rhs", "seconds",
+)  # fmt: skip
+
+
+def write_tables(rows: list[dict], out: Path) -> None:
+    """turnpike_property.csv and .md (COLUMNS), curves.npz."""
+    import csv
+
+    with open(out / "turnpike_property.csv", "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(COLUMNS)
+        for row in rows:
+            writer.writerow([row[c] for c in COLUMNS])
+
+    def fmt(value: Any) -> str:
+        if isinstance(value, float):
+            return f"{value:.4g}"
+        return str(value)
+
+    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    lines += ["| " + " | ".join(fmt(row[c]) for c in COLUMNS) + " |" for row in rows]
+    (out / "turnpike_property.md").write_text("\n".join(lines) + "\n")
+    curves = {
+        f"{r['kernel']}_eps{r['epsilon']:g}_sigma{r['sigma']:g}_T{r['T']:g}": r["curve"]
+        for r in rows
+    }
+    np.savez(out / "curves.npz", **curves)
+
+
+def reproduce(out: Path, config: TurnpikePropertyConfig) -> list[dict]:
+    """Run every setting and horizon, write the figure, tables and meta.json into `out`."""
+    from agent_envs.simulator import uniform_positions
+
+    out.mkdir(parents=True, exist_ok=True)
+    x0 = uniform_positions(np.random.default_rng(config.seed), config.n_agents, 1)
+    start = time.perf_counter()
+    rows: list[dict] = []
+    for setting in config.settings:
+        rows += run_setting(setting, config, x0)
+    write_tables(rows, out)
+    plot(rows, config.settings, config.delta, out / "turnpike_property.png")
+    meta = {**asdict(config), "seconds": time.perf_counter() - start}
+    (out / "meta.json").write_text(json.dumps(meta, indent=2, default=str))
+    return rows
