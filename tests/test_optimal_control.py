@@ -386,3 +386,16 @@ def test_large_batched_solve_converges_with_the_default_phi_method():
     res = solve_optimal_control(params, n_steps=20, n_paths=20, seed=0)
     assert res.converged
     assert res.cost < 0.5 * res.initial_cost
+
+
+def test_optimal_references_run_only_when_asked_for():
+    """`evaluate` without -p and `compare --optimum ''` run the three feedback references only:
+    the optimal-control ones solve an optimization per episode (or step) and must be named."""
+    from agent_envs.training.cli import parse_policy_specs
+    from agent_envs.training.compare import CompareConfig
+    from agent_envs.training.defaults import FEEDBACK_BASELINES
+
+    assert tuple(parse_policy_specs(None)) == FEEDBACK_BASELINES
+    assert parse_policy_specs(["optimal", "mpc"]) == {"optimal": "optimal", "mpc": "mpc"}
+    assert CompareConfig(optimum="").optimum_policies == []
+    assert CompareConfig().optimum_policies == ["optimal", "mpc"]

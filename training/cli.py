@@ -346,11 +346,11 @@ def parse_policy_specs(items: Sequence[str] | None) -> dict[str, str]:
     A SPEC is a baseline name or ``[ALGO:]MODEL.zip[:STATS.pkl]``. None or no items: the three
     reference controllers.
     """
-    from agent_envs.training.defaults import BASELINE_POLICIES
+    from agent_envs.training.defaults import BASELINE_POLICIES, FEEDBACK_BASELINES
     from agent_envs.training.policies import ModelSpec
 
     if not items:
-        return {name: name for name in BASELINE_POLICIES}
+        return {name: name for name in FEEDBACK_BASELINES}
     out: dict[str, str] = {}
     for item in items:
         if "=" in item:

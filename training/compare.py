@@ -37,6 +37,7 @@ from agent_envs.training.config import TrainConfig, option_field
 from agent_envs.training.defaults import (
     BASELINE_POLICIES,
     DEFAULT_TEST_SEED,
+    FEEDBACK_BASELINES,
     GYM_ENV_ID,
     PETTINGZOO_ENV_ID,
     parse_env_kwargs,
@@ -522,7 +523,7 @@ def compare(config: CompareConfig) -> dict[str, Any]:
             run_dirs[learner.name] = train_learner(config, learner, runs_dir)
         train_done = time.perf_counter()
 
-        references = [*BASELINE_POLICIES, *config.optimum_policies]
+        references = [*FEEDBACK_BASELINES, *config.optimum_policies]
         print(f"evaluating {len(references) + len(run_dirs)} policies on {n_test} seeds")
         policies: dict[str, Any] = {name: name for name in references}
         policies.update({name: str(best_model_path(d)) for name, d in run_dirs.items()})

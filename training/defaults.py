@@ -29,6 +29,10 @@ ALGORITHMS: dict[str, str] = {"ppo": "PPO", "sac": "SAC", "td3": "TD3", "a2c": "
 OFF_POLICY = ("sac", "td3")
 #: The reference controllers, by name (`agent_envs.baselines.BASELINES`).
 BASELINE_POLICIES = tuple(BASELINES)
+#: The feedback references evaluated by default (`evaluate`, `compare`, the training
+#: callback); the optimal-control ones ("optimal", "mpc") solve an optimization per episode or
+#: step and are asked for by name (`-p optimal`, `compare --optimum`).
+FEEDBACK_BASELINES = ("turnpike", "proportional", "zero")
 #: First validation seed (evaluation during training): episodes use seeds 1000, 1001, ...
 DEFAULT_EVAL_SEED = 1_000
 #: First held-out test seed of `agent-envs evaluate` and `agent-envs compare`.
@@ -44,6 +48,7 @@ __all__ = [
     "DEFAULT_EVAL_SEED",
     "DEFAULT_TEST_SEED",
     "DEFAULT_TEST_SEEDS",
+    "FEEDBACK_BASELINES",
     "GYM_ENV_ID",
     "OFF_POLICY",
     "PETTINGZOO_ENV_ID",
