@@ -190,6 +190,41 @@ def test_value_is_below_zero_proportional_and_turnpike(seed):
         assert res.cost <= other * (1 + 1e-12), kind
 
 
+@pytest.mark.slow
+def test_value_is_below_a_trained_ppo():
+    """V <= the cost of the control sequence a (briefly) trained PPO applies from x0, on the
+    solver's own paths, for several seeds: the optimum is a lower bound for learners too."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    n, n_steps, n_paths, bound = 8, 12, 5, 150.0
+    kwargs = {"n_agents": n, "n_steps": n_steps, "n_paths": n_paths, "max_control": bound}
+    params = SwarmParams(n_agents=n, epsilon=0.05, sigma=0.01)
+    model = sb3.PPO("MlpPolicy", gym.make(ENV_ID, **kwargs), n_steps=64, batch_size=64, seed=0)
+    model.learn(512)
+    env = gym.make(ENV_ID, **kwargs)
+    for seed in range(3):
+        x0 = np.random.default_rng(200 + seed).uniform(-1.0, 1.0, size=(n, 1))
+        obs, _ = env.reset(seed=seed, options={"initial_positions": x0})
+        controls = []
+        for _ in range(n_steps):
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, _, _, info = env.step(action)
+            controls.append(info["control"])
+        u = np.asarray(controls)  # (n_steps, N, d), the clipped control the env applied
+        res = solve_optimal_control(
+            params,
+            "serb",
+            n_steps=n_steps,
+            n_paths=n_paths,
+            seed=seed,
+            initial_positions=x0,
+            max_control=bound,
+        )
+        assert res.converged
+        other = sample_cost(params, "serb", u, seed, x0, n_paths, n_steps)
+        assert res.cost <= other * (1 + 1e-12), seed
+        assert other > 1.01 * res.cost  # a short-trained PPO is not optimal: the check can fail
+
+
 # ------------------------------------------------------------------------------------------
 # Contract, bad input, non-convergence
 # ------------------------------------------------------------------------------------------
