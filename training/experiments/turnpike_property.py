@@ -46,9 +46,11 @@ from typing import Any
 
 import numpy as np
 
+from agent_envs.baselines import DEFAULT_BETA, DEFAULT_DELTA
+
 #: the paper's decay rate of the cheap control and turnpike threshold (Section 5.2)
-BETA = 12.0
-DELTA = 2e-4
+BETA = DEFAULT_BETA
+DELTA = DEFAULT_DELTA
 HORIZONS = (0.5, 1.0, 2.0, 4.0, 8.0)
 SIGMAS = (0.0, 0.01, 0.1)
 EPSILONS = (0.05, 1.0)
