@@ -35,6 +35,14 @@ import numpy as np
 
 from agent_envs import arrays
 from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
+from agent_envs.dynamics.operators import (
+    AUTO_MATRIX_FREE_MIN_AGENTS,
+    DENSE_MEMORY_BUDGET_BYTES,
+    FrozenLinearizationOperator,
+    check_linear_operator,
+    dense_bytes,
+    grid_applies,
+)
 from agent_envs.params import SwarmParams
 
 
@@ -58,7 +66,7 @@ class Linearization:
     flattened state (..., Nd) (the exact Jacobian).
     """
 
-    matrix: Any
+    matrix: Any  # an array, or a matrix-free operator (`@`, scalar `*`, see dynamics.operators)
     per_coordinate: bool
     symmetric: bool
 
@@ -89,14 +97,60 @@ class SwarmModel:
     `interaction_drift` and `interaction_matrix`. Every method is batched over leading axes.
     The model holds only the dynamics (kernel, noise, N, d): the target and gamma are cost
     parameters and do not enter it.
+
+    `linear_operator` chooses how the drift and the frozen linearization are evaluated:
+    ``"dense"`` forms the (..., N, N) matrix L(x); ``"matrix_free"`` uses
+    `FrozenLinearizationOperator` (kernel sums without P; numpy only, frozen linearization
+    only); ``"auto"`` (default) is matrix-free for numpy states when d = 1 with the
+    Cucker-Smale kernel and N >= `AUTO_MATRIX_FREE_MIN_AGENTS`, or when the dense matrices of a
+    step would exceed `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
     """
 
-    def __init__(self, params: SwarmParams) -> None:
+    def __init__(self, params: SwarmParams, linear_operator: str = "auto") -> None:
         self.params = params
         self.kernel: InteractionKernel = kernel_from_params(params)
         self.n_agents = params.n_agents
         self.dim = params.dim
         self.sigma = params.sigma
+        self.linear_operator = check_linear_operator(linear_operator)
+
+    def matrix_free(self, x: Any, kind: str = "frozen") -> bool:
+        """Whether the drift and the `kind` linearization at x go matrix-free (see class doc).
+
+        Raises ValueError for an exact Jacobian or a torch state on the matrix-free path.
+        """
+        n_paths = int(np.prod(x.shape[:-2], dtype=int))
+        too_big = dense_bytes(self.n_agents, self.dim, n_paths, kind) > DENSE_MEMORY_BUDGET_BYTES
+        if self.linear_operator == "dense":
+            return False
+        if self.linear_operator == "auto":
+            if arrays.is_torch(x):
+                return False
+            fast = grid_applies(self.kernel, self.dim) and (
+                self.n_agents >= AUTO_MATRIX_FREE_MIN_AGENTS
+            )
+            wanted = too_big or (fast and kind == "frozen")
+        else:
+            wanted = True
+        if not wanted:
+            return False
+        if arrays.is_torch(x):
+            raise ValueError(
+                "linear_operator='matrix_free' works on numpy states; use 'dense' or 'auto' "
+                "with torch"
+            )
+        if kind == "exact":
+            raise ValueError(
+                "jacobian='exact' has no matrix-free form (the dense Jacobian of N = "
+                f"{self.n_agents}, d = {self.dim} needs "
+                f"{dense_bytes(self.n_agents, self.dim, n_paths, kind) / 2**30:.1f} GiB); "
+                "use jacobian='frozen' or linear_operator='dense'"
+            )
+        return True
+
+    def frozen_operator(self, x: Any) -> FrozenLinearizationOperator:
+        """L(x) as a matrix-free operator (`agent_envs.dynamics.operators`); x (..., N, d)."""
+        return FrozenLinearizationOperator(self.kernel, self._check_state(x))
 
     def _check_state(self, x: Any) -> Any:
         if not arrays.is_torch(x):
@@ -122,6 +176,8 @@ class SwarmModel:
     def interaction_drift(self, x: Any) -> Any:
         """(1/N) sum_l p(x_k, x_l)(x_l - x_k) = L(x) x; shape (..., N, d)."""
         x = self._check_state(x)
+        if self.matrix_free(x):
+            return self.frozen_operator(x).drift()
         return self.frozen_linearization(x) @ x
 
     def drift(self, t: float, x: Any, u: Any = None) -> Any:
@@ -161,8 +217,12 @@ class SwarmModel:
         if kind not in ("exact", "frozen"):
             raise ValueError(f"jacobian must be 'exact' or 'frozen', got {kind!r}")
         x = self._check_state(x)
-        frozen = self.frozen_linearization(x)
-        f = frozen @ x
+        if self.matrix_free(x, kind):
+            frozen = self.frozen_operator(x)
+            f = frozen.drift()
+        else:
+            frozen = self.frozen_linearization(x)
+            f = frozen @ x
         if u is not None:
             f = f + u
         symmetric = bool(self.kernel.symmetric)

@@ -20,7 +20,8 @@ the rewards of an episode add up to minus the discrete cost functional on the en
 The observation needs the interaction drift L(x^{n+1}) x^{n+1} at the new state, and the next
 integrator step needs L(x^{n+1}) again (every scheme evaluates F(x, u) = L(x) x + u at the start
 of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the identity of the
-(read-only) state array, so the kernel matrix is built once per step instead of twice.
+(read-only) state array, so the kernel matrix is built once per step instead of twice (the
+matrix-free operator of large swarms, `env kwarg linear_operator`, likewise).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from gymnasium import spaces
 
 from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
+from agent_envs.dynamics.operators import FrozenLinearizationOperator, check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.observation import global_observation
 from agent_envs.integrators import (
@@ -103,6 +105,7 @@ ENV_OPTION_NAMES = (
     "n_paths",
     "max_control",
     "divergence_threshold",
+    "linear_operator",
 )
 
 
@@ -137,7 +140,8 @@ class EpisodeConfig:
     Python's standard `TypeError` ("... got an unexpected keyword argument 'x'").
 
     Ranges: 1 <= n_steps <= 1e9; 1 <= n_paths <= 1e6 with n_paths N d <= 1e8;
-    0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it.
+    0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it;
+    linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`).
     """
 
     params: SwarmParams
@@ -148,6 +152,7 @@ class EpisodeConfig:
     n_paths: int = 1
     max_control: float = DEFAULT_MAX_CONTROL
     divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD
+    linear_operator: str = "auto"
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, SwarmParams):
@@ -167,6 +172,7 @@ class EpisodeConfig:
         )
         set_(self, "divergence_threshold", threshold)
         _check_target(self.params, threshold)
+        check_linear_operator(self.linear_operator)
 
     @classmethod
     def from_kwargs(
@@ -203,19 +209,28 @@ class _CachedLinearizationModel(SwarmModel):
     matrix is made read-only too, so a stale or corrupted hit is impossible.
     """
 
-    def __init__(self, params: SwarmParams) -> None:
-        super().__init__(params)
+    def __init__(self, params: SwarmParams, linear_operator: str = "auto") -> None:
+        super().__init__(params, linear_operator)
         self._cached_state: np.ndarray | None = None
-        self._cached_matrix: np.ndarray | None = None
+        self._cached_matrix: Any = None
 
     def frozen_linearization(self, x: np.ndarray) -> np.ndarray:
-        if x is self._cached_state and self._cached_matrix is not None:
+        if x is self._cached_state and isinstance(self._cached_matrix, np.ndarray):
             return self._cached_matrix
         matrix = super().frozen_linearization(x)
         if isinstance(x, np.ndarray) and not x.flags.writeable:
             matrix.flags.writeable = False
             self._cached_state, self._cached_matrix = x, matrix
         return matrix
+
+    def frozen_operator(self, x: np.ndarray) -> FrozenLinearizationOperator:
+        # the matrix-free L(x) (large N), cached like the matrix (it holds no mutable state)
+        if x is self._cached_state and isinstance(self._cached_matrix, FrozenLinearizationOperator):
+            return self._cached_matrix
+        operator = super().frozen_operator(x)
+        if isinstance(x, np.ndarray) and not x.flags.writeable:
+            self._cached_state, self._cached_matrix = x, operator
+        return operator
 
 
 @dataclass(frozen=True)
@@ -257,7 +272,7 @@ class SwarmEpisode:
             config.integrator, jacobian=config.jacobian, phi_method=config.phi_method
         )
         self.params = config.params
-        self.model: SwarmModel = _CachedLinearizationModel(self.params)
+        self.model: SwarmModel = _CachedLinearizationModel(self.params, config.linear_operator)
         self.dt = config.dt
         self.positions: np.ndarray | None = None
         self.step_index = 0
@@ -343,7 +358,7 @@ class SwarmEpisode:
             # target and gamma are cost parameters: a new target keeps the dynamics model
             # (and its kernel); only a change of the dynamics would rebuild it.
             if not same_dynamics(params, self.params):
-                self.model = _CachedLinearizationModel(params)
+                self.model = _CachedLinearizationModel(params, self.config.linear_operator)
             self.params = params
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()

@@ -1,0 +1,189 @@
+"""The frozen linearization L(x) as a matrix-free linear operator, and the choice of path.
+
+    L(x) v = (1/N) (P v - (P 1) * v),      P[k, l] = p(x_k, x_l),
+
+for a block of vectors v (..., N, k), and the drift L(x) x, evaluated by the kernel sums of
+`agent_envs.dynamics.kernel_sums` without forming P: the grid sum for d = 1 and the
+Cucker-Smale kernel (O(N) per product), the chunked pairwise sum otherwise (O(N^2) time,
+O(N * block) memory). The dense (..., N, N) matrix of `SwarmModel.frozen_linearization`
+stays the path for small N and the reference.
+
+`FrozenLinearizationOperator` supports what the exponential integrators do with a matrix:
+``op @ v``, ``c * op`` (a scaled operator sharing the kernel sums), `shape`, `symmetric`, and
+a bound `norm_inf` >= ||c L||_inf used by the Krylov phi-action
+(`agent_envs.integrators.phi_functions.phi_action` accepts it in place of a matrix).
+
+Only the frozen linearization has a matrix-free form here: the exact Jacobian (`eq:jac`) is
+built densely, and asking for it matrix-free raises `ValueError`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from agent_envs.dynamics.kernel_sums import (
+    DEFAULT_TOLERANCE,
+    ChunkedKernelSum,
+    GridKernelSum,
+)
+from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
+
+LINEAR_OPERATORS = ("auto", "dense", "matrix_free")
+# "auto" goes matrix-free from this N on for d = 1 and the Cucker-Smale kernel: the crossover
+# of one SERB step, dense vs matrix-free, measured by benchmarks/bench_large_swarms.py.
+AUTO_MATRIX_FREE_MIN_AGENTS = 500
+# ... and whenever the dense matrices of one step would exceed this many bytes (any d, kernel).
+DENSE_MEMORY_BUDGET_BYTES = 2 * 2**30
+# float64 (N, N) arrays alive at once in a dense frozen step (P, its row sums' temporaries,
+# the Krylov products); the exact Jacobian needs about (2 + 3 d) (N d)^2 floats.
+_DENSE_FROZEN_COPIES = 3
+
+
+def check_linear_operator(value: Any) -> str:
+    """`value` if it is one of `LINEAR_OPERATORS`, else a ValueError naming the parameter."""
+    if not isinstance(value, str) or value not in LINEAR_OPERATORS:
+        raise ValueError(f"linear_operator must be one of {LINEAR_OPERATORS}, got {value!r}")
+    return value
+
+
+def dense_bytes(n_agents: int, dim: int, n_paths: int, kind: str) -> int:
+    """Bytes of the dense matrices one step of `kind` ("frozen" | "exact") keeps alive."""
+    if kind == "frozen":
+        return 8 * _DENSE_FROZEN_COPIES * n_paths * n_agents**2
+    return 8 * (2 + 3 * dim) * n_paths * (n_agents * dim) ** 2
+
+
+def grid_applies(kernel: InteractionKernel, dim: int) -> bool:
+    """Whether the O(N) grid sum applies: d = 1 and a `CuckerSmaleKernel`."""
+    return dim == 1 and isinstance(kernel, CuckerSmaleKernel)
+
+
+def _profiles(alpha: float):
+    a2 = alpha * alpha
+
+    def lorentzian(r: np.ndarray) -> np.ndarray:  # p / w as a function of r = x_k - x_l
+        return 1.0 / (a2 + r * r)
+
+    def attraction(r: np.ndarray) -> np.ndarray:  # (x_l - x_k) p / w
+        return -r / (a2 + r * r)
+
+    return lorentzian, attraction
+
+
+class _PathSums:
+    """Row sums s = P 1, the drift L x and the product P v for one path's positions (N, d)."""
+
+    def __init__(self, kernel: InteractionKernel, x: np.ndarray, tol: float, block: int):
+        n = x.shape[0]
+        self.grid = None
+        if grid_applies(kernel, x.shape[1]) and GridKernelSum.fits(x[:, 0], kernel.alpha, tol):
+            self.grid = GridKernelSum(
+                x[:, 0], _profiles(kernel.alpha), kernel.weights, kernel.alpha, tol
+            )
+            sums, attraction = self.grid(np.ones((n, 1)))
+            self.row_sums = sums[:, 0]
+            self.drift = attraction / n
+        else:
+            self.chunked = ChunkedKernelSum(kernel, x, block)
+            self.row_sums, px = self.chunked.row_sums_and_product(x)
+            self.drift = (px - self.row_sums[:, None] * x) / n
+
+    def product(self, v: np.ndarray) -> np.ndarray:
+        """P v for v (N, k)."""
+        if self.grid is not None:
+            return self.grid(v, profiles=1)[0]
+        return self.chunked(v)
+
+
+class FrozenLinearizationOperator:
+    """c L(x) for positions x (..., N, d) (numpy), applied without forming P.
+
+    Args:
+        kernel: the interaction kernel.
+        x: positions (..., N, d); one set of kernel sums per leading index (path).
+        tol: relative accuracy of the grid sums (d = 1, Cucker-Smale).
+        block: rows per block of the chunked sums (0: chosen from N).
+    """
+
+    def __init__(
+        self,
+        kernel: InteractionKernel,
+        x: np.ndarray,
+        tol: float = DEFAULT_TOLERANCE,
+        block: int = 0,
+    ) -> None:
+        x = np.asarray(x, dtype=float)
+        if x.ndim < 2:
+            raise ValueError(f"positions must have shape (..., N, d), got {x.shape}")
+        self.batch_shape = tuple(x.shape[:-2])
+        self.n_agents = x.shape[-2]
+        flat = x.reshape(-1, *x.shape[-2:])
+        self._paths = [_PathSums(kernel, xi, tol, block) for xi in flat]
+        self.symmetric = bool(kernel.symmetric)
+        self.scale = 1.0
+        self._max_row_sum = max(float(np.max(ps.row_sums)) for ps in self._paths)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (*self.batch_shape, self.n_agents, self.n_agents)
+
+    @property
+    def dtype(self) -> np.dtype:
+        return np.dtype(float)
+
+    @property
+    def norm_inf(self) -> float:
+        """||c L||_inf <= 2 |c| max_k s_k / N (the entries of P are >= 0)."""
+        return 2.0 * abs(self.scale) * self._max_row_sum / self.n_agents
+
+    def drift(self) -> np.ndarray:
+        """L(x) x, shape (..., N, d) (without the scale c)."""
+        out = np.stack([ps.drift for ps in self._paths])
+        return out.reshape(*self.batch_shape, *out.shape[-2:])
+
+    def matvec(self, v: Any) -> np.ndarray:
+        """c L(x) v for v (..., N, k) broadcasting against the operator's batch shape."""
+        v = np.asarray(v, dtype=float)
+        if v.ndim < 2 or v.shape[-2] != self.n_agents:
+            raise ValueError(f"v must have shape (..., {self.n_agents}, k), got {v.shape}")
+        batch = np.broadcast_shapes(self.batch_shape, v.shape[:-2])
+        if batch != self.batch_shape:
+            raise ValueError(f"v's batch shape {v.shape[:-2]} does not fit {self.batch_shape}")
+        vb = np.broadcast_to(v, (*batch, *v.shape[-2:])).reshape(-1, *v.shape[-2:])
+        factor = self.scale / self.n_agents
+        out = np.empty_like(vb)
+        for i, (ps, vi) in enumerate(zip(self._paths, vb, strict=True)):
+            out[i] = factor * (ps.product(vi) - ps.row_sums[:, None] * vi)
+        return out.reshape(*batch, *v.shape[-2:])
+
+    def __matmul__(self, v: Any) -> np.ndarray:
+        return self.matvec(v)
+
+    def scaled(self, c: float) -> FrozenLinearizationOperator:
+        """c times this operator (shares the kernel sums)."""
+        new = object.__new__(FrozenLinearizationOperator)
+        new.__dict__.update(self.__dict__)
+        new.scale = self.scale * float(c)
+        return new
+
+    def __mul__(self, c: float) -> FrozenLinearizationOperator:
+        if not np.isscalar(c):
+            return NotImplemented
+        return self.scaled(c)
+
+    __rmul__ = __mul__
+
+    def dense(self) -> np.ndarray:
+        """c L(x) as a dense (..., N, N) array, column by column (for tests and small N)."""
+        eye = np.broadcast_to(
+            np.eye(self.n_agents), (*self.batch_shape, self.n_agents, self.n_agents)
+        )
+        return self.matvec(eye)
+
+    def __repr__(self) -> str:
+        return (
+            f"FrozenLinearizationOperator(N={self.n_agents}, batch={self.batch_shape}, "
+            f"scale={self.scale:g})"
+        )
