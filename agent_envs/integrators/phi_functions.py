@@ -374,6 +374,8 @@ def _krylov(a: Any, v: Any, order: int, symmetric: bool, rtol: float, max_dim: i
 
 
 _MAX_SUBSTEPS = 64
+# an operator this small whose Krylov space did not converge is made dense instead
+_OPERATOR_DENSE_FALLBACK_MAX = 256
 
 
 def _substepped_operator_action(
@@ -493,6 +495,9 @@ def _operator_action(
     if v.ndim < 2 or v.shape[-2] != op.shape[-1]:
         raise ValueError(f"shapes do not fit: A {tuple(op.shape)}, V {tuple(v.shape)}")
     result = _krylov(op, v, order, symmetric, rtol, max_dim)
+    if result is None and op.shape[-1] <= _OPERATOR_DENSE_FALLBACK_MAX and hasattr(op, "dense"):
+        # a small operator whose Krylov space ran out: its dense matrix is cheap
+        return phi_action(op.dense(), v, order, method="auto", symmetric=symmetric)
     if result is None:
         result = _substepped_operator_action(op, v, order, symmetric, rtol, max_dim)
     return result
