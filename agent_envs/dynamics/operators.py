@@ -155,7 +155,9 @@ class FrozenLinearizationOperator:
         factor = self.scale / self.n_agents
         out = np.empty_like(vb)
         for i, (ps, vi) in enumerate(zip(self._paths, vb, strict=True)):
-            out[i] = factor * (ps.product(vi) - ps.row_sums[:, None] * vi)
+            prod = ps.product(vi)  # a fresh (N, k) array: updated in place
+            prod -= ps.row_sums[:, None] * vi
+            np.multiply(prod, factor, out=out[i])
         return out.reshape(*batch, *v.shape[-2:])
 
     def __matmul__(self, v: Any) -> np.ndarray:
