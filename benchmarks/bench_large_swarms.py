@@ -1,0 +1,196 @@
+"""Benchmark of large swarms: one SERB step, matrix-free vs dense, N = 10^3 .. 10^6.
+
+Run:  python benchmarks/bench_large_swarms.py              (about 3 minutes on 2 cores)
+      python benchmarks/bench_large_swarms.py --quick      (N <= 10^5, d = 2 at N = 2000)
+
+BLAS is pinned to one thread (OPENBLAS_NUM_THREADS overrides it). Every ratio is between two
+timings of the same run. Tables:
+
+1. One SERB step (frozen L, d = 1, eps = 0.05, alpha = 0.1, sigma = 0.01, tau = 0.02, 1 path):
+   the median over the first `--steps` steps from x uniform on [-1, 1] ("spread"), and one
+   step from x uniform on [-alpha/2, alpha/2] ("clustered": L(x) at its stiffest, the Krylov
+   space largest), with the number of operator products of the step. The dense path where it
+   fits (`--dense-max`), and the ratio dense / matrix-free. A size whose predicted time
+   (the previous size's, scaled linearly) exceeds `--budget` seconds is skipped, and said so.
+   Then the log-log slope of the spread step time from 10^4 to 10^6.
+2. The crossover of "auto": the same spread step, dense vs matrix-free, N = 100 .. 1000.
+3. d = 2 at N = 10^4: one SERB step, chunked matrix-free vs dense.
+4. Why the grid sum and not a non-uniform FFT: the grid kernel sum at N = 10^6 (build and one
+   product) next to one finufft type-1 + type-2 pair on the same points (tolerance 1e-12, 512
+   modes, 1 thread), which a Fourier-based sum would need per product on top of its near-field
+   correction. Skipped when finufft is not installed (``pip install finufft``).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+from agent_envs import SwarmModel, SwarmParams, make_integrator
+from agent_envs.dynamics import operators
+from agent_envs.dynamics.kernel_sums import GridKernelSum
+
+ALPHA, EPS, SIGMA, TAU = 0.1, 0.05, 0.01, 0.02
+
+
+class _ProductCounter:
+    """Counts `FrozenLinearizationOperator.matvec` calls (Krylov products and the noise term)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._orig = operators.FrozenLinearizationOperator.matvec
+
+    def __enter__(self):
+        counter = self
+
+        def matvec(op, v):
+            counter.count += 1
+            return counter._orig(op, v)
+
+        operators.FrozenLinearizationOperator.matvec = matvec
+        return self
+
+    def __exit__(self, *exc):
+        operators.FrozenLinearizationOperator.matvec = self._orig
+
+
+def _steps(n: int, dim: int, mode: str, x0: np.ndarray, n_steps: int, seed: int = 0):
+    """Seconds of each of `n_steps` SERB steps from x0, and the operator products of each."""
+    params = SwarmParams(n_agents=n, dim=dim, alpha=ALPHA, epsilon=EPS, sigma=SIGMA)
+    model = SwarmModel(params, mode)
+    serb = make_integrator("serb")
+    rng = np.random.default_rng(seed)
+    x = x0.copy()
+    times, products = [], []
+    for k in range(n_steps):
+        dw = math.sqrt(TAU) * rng.standard_normal(x.shape)
+        with _ProductCounter() as counter:
+            start = time.perf_counter()
+            x = serb.step(model, x, None, k * TAU, TAU, dw)
+            times.append(time.perf_counter() - start)
+        products.append(counter.count)
+    return times, products
+
+
+def _spread(n: int, dim: int = 1, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, (1, n, dim))
+
+
+def _clustered(n: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-ALPHA / 2, ALPHA / 2, (1, n, 1))
+
+
+def bench_scaling(sizes, steps: int, dense_max: int, budget: float) -> None:
+    print("\n## 1. One SERB step, d = 1, eps = 0.05, 1 path")
+    print(
+        "| N | matrix-free spread [s] | products | clustered [s] | products | dense spread [s] "
+        "| dense / matrix-free |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    measured: dict[int, float] = {}
+    last = None
+    for n in sizes:
+        if last is not None:
+            predicted = measured[last] * n / last * (steps + 1)
+            if predicted > budget:
+                print(
+                    f"| {n:.0e} | skipped: predicted {predicted:.0f} s > budget {budget:.0f} s "
+                    "| | | | | |"
+                )
+                continue
+        t_free, p_free = _steps(n, 1, "matrix_free", _spread(n), steps)
+        t_clu, p_clu = _steps(n, 1, "matrix_free", _clustered(n), 1)
+        measured[n] = float(np.median(t_free))
+        last = n
+        dense = ratio = "-"
+        if n <= dense_max:
+            t_dense, _ = _steps(n, 1, "dense", _spread(n), steps)
+            dense = f"{np.median(t_dense):.4f}"
+            ratio = f"{np.median(t_dense) / measured[n]:.1f}"
+        print(
+            f"| {n:.0e} | {measured[n]:.4f} | {int(np.median(p_free))} | {t_clu[0]:.4f} "
+            f"| {p_clu[0]} | {dense} | {ratio} |"
+        )
+    if 10**4 in measured and 10**6 in measured:
+        slope = math.log(measured[10**6] / measured[10**4]) / math.log(100.0)
+        print(f"\nlog-log slope of the spread step time, N = 1e4 -> 1e6: {slope:.2f}")
+    else:
+        print("\nlog-log slope 1e4 -> 1e6: not measured (10^4 or 10^6 not run or skipped)")
+
+
+def bench_crossover(sizes, steps: int) -> None:
+    print("\n## 2. Crossover of linear_operator='auto' (spread step, d = 1, 1 path)")
+    print("| N | dense [ms] | matrix-free [ms] | dense / matrix-free |")
+    print("|---|---|---|---|")
+    for n in sizes:
+        t_dense = np.median(_steps(n, 1, "dense", _spread(n), steps)[0][1:])
+        t_free = np.median(_steps(n, 1, "matrix_free", _spread(n), steps)[0][1:])
+        print(f"| {n} | {1e3 * t_dense:.2f} | {1e3 * t_free:.2f} | {t_dense / t_free:.2f} |")
+    print(f"(auto: matrix-free from N = {operators.AUTO_MATRIX_FREE_MIN_AGENTS} for d = 1)")
+
+
+def bench_two_dimensions(n: int) -> None:
+    print(f"\n## 3. d = 2, N = {n}: one SERB step from x uniform on [-1, 1]^2, 1 path")
+    t_free, p_free = _steps(n, 2, "matrix_free", _spread(n, 2), 1)
+    t_dense, _ = _steps(n, 2, "dense", _spread(n, 2), 1)
+    print("| chunked matrix-free [s] | products | dense [s] | chunked / dense |")
+    print("|---|---|---|---|")
+    print(f"| {t_free[0]:.3f} | {p_free[0]} | {t_dense[0]:.3f} | {t_free[0] / t_dense[0]:.2f} |")
+
+
+def bench_finufft(n: int) -> None:
+    print(f"\n## 4. Grid kernel sum vs finufft transforms, N = {n}, 1 thread")
+    try:
+        import finufft
+    except ImportError:
+        print("finufft not installed: skipped (pip install finufft)")
+        return
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1.0, 1.0, n)
+    v = rng.standard_normal((n, 1))
+    start = time.perf_counter()
+    grid = GridKernelSum(x, [lambda r: 1.0 / (ALPHA**2 + r * r)], 1.0 / EPS, ALPHA)
+    build = time.perf_counter() - start
+    grid(v)
+    start = time.perf_counter()
+    for _ in range(3):
+        grid(v)
+    product = (time.perf_counter() - start) / 3
+    theta = (x * (np.pi / 2.0)).astype(float)  # points scaled into [-pi, pi)
+    c = v[:, 0].astype(complex)
+    opts = dict(eps=1e-12, nthreads=1)
+    finufft.nufft1d1(theta, c, 512, **opts)
+    start = time.perf_counter()
+    for _ in range(3):
+        modes = finufft.nufft1d1(theta, c, 512, **opts)
+        finufft.nufft1d2(theta, modes, **opts)
+    pair = (time.perf_counter() - start) / 3
+    print("| grid build [s] | grid product [s] | finufft type 1 + type 2 [s] | finufft / grid |")
+    print("|---|---|---|---|")
+    print(f"| {build:.3f} | {product:.4f} | {pair:.4f} | {pair / product:.1f} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="N <= 1e5, d = 2 at N = 2000")
+    parser.add_argument("--steps", type=int, default=3, help="steps timed per size (median)")
+    parser.add_argument("--dense-max", type=int, default=10**4, help="largest dense N")
+    parser.add_argument("--budget", type=float, default=120.0, help="seconds per size")
+    args = parser.parse_args()
+    sizes = [10**3, 10**4, 10**5] if args.quick else [10**3, 10**4, 10**5, 10**6]
+    print(f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}, cores={os.cpu_count()}")
+    bench_scaling(sizes, args.steps, args.dense_max, args.budget)
+    bench_crossover([100, 200, 300, 500, 1000], 4)
+    bench_two_dimensions(2000 if args.quick else 10**4)
+    bench_finufft(10**5 if args.quick else 10**6)
+
+
+if __name__ == "__main__":
+    main()
