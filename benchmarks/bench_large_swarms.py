@@ -41,11 +41,11 @@ ALPHA, EPS, SIGMA, TAU = 0.1, 0.05, 0.01, 0.02
 
 
 class _ProductCounter:
-    """Counts `FrozenLinearizationOperator.matvec` calls (Krylov products and the noise term)."""
+    """Counts `LinearizationOperator.matvec` calls (Krylov products and the noise term)."""
 
     def __init__(self) -> None:
         self.count = 0
-        self._orig = operators.FrozenLinearizationOperator.matvec
+        self._orig = operators.LinearizationOperator.matvec
 
     def __enter__(self):
         counter = self
@@ -54,11 +54,11 @@ class _ProductCounter:
             counter.count += 1
             return counter._orig(op, v)
 
-        operators.FrozenLinearizationOperator.matvec = matvec
+        operators.LinearizationOperator.matvec = matvec
         return self
 
     def __exit__(self, *exc):
-        operators.FrozenLinearizationOperator.matvec = self._orig
+        operators.LinearizationOperator.matvec = self._orig
 
 
 def _steps(n: int, dim: int, mode: str, x0: np.ndarray, n_steps: int, seed: int = 0):

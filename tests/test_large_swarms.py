@@ -15,7 +15,7 @@ from agent_envs import SwarmModel, SwarmParams, make_integrator, simulate
 from agent_envs.dynamics import kernel_sums, operators
 from agent_envs.dynamics.kernel_sums import ChunkedKernelSum, GridKernelSum, lagrange_weights
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
-from agent_envs.dynamics.operators import FrozenLinearizationOperator
+from agent_envs.dynamics.operators import LinearizationOperator
 from agent_envs.integrators import phi_functions
 from agent_envs.integrators.phi_functions import phi_action
 
@@ -114,7 +114,7 @@ def test_matvec_and_drift_match_the_dense_linearization(kernel, dim):
     x = _state(n, dim, paths=2)
     v = np.random.default_rng(3).standard_normal((2, n, 3))
     matrix = dense.frozen_linearization(x)
-    op = free.frozen_operator(x)
+    op = free.linearization_operator(x)
     assert op.shape == matrix.shape and op.symmetric == (kernel == "symmetric")
     assert _rel(op @ v, matrix @ v) <= 1e-10
     assert _rel(free.interaction_drift(x), dense.interaction_drift(x)) <= 1e-10
@@ -123,8 +123,20 @@ def test_matvec_and_drift_match_the_dense_linearization(kernel, dim):
     np.testing.assert_allclose(op.dense()[0], matrix[0], atol=1e-10 * np.abs(matrix).max(), rtol=0)
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_exact_jacobian_operator_matches_the_dense_jacobian(kernel):
+    params = _params(kernel)
+    x = _state()
+    v = np.random.default_rng(3).standard_normal((1, N, 3))
+    jac = SwarmModel(params, "dense").jacobian(x)
+    op = SwarmModel(params, "matrix_free").linearization_operator(x, "exact")
+    assert op.symmetric == (kernel == "symmetric")
+    assert _rel(op @ v, jac @ v) <= 1e-10
+    assert op.norm_inf >= np.max(np.sum(np.abs(jac), axis=-1)) * (1 - 1e-12)
+
+
 def test_operator_rejects_a_misshapen_vector():
-    op = FrozenLinearizationOperator(CuckerSmaleKernel(0.1, 20.0), _state(50))
+    op = LinearizationOperator(CuckerSmaleKernel(0.1, 20.0), _state(50))
     with pytest.raises(ValueError, match="v must have shape"):
         op @ np.ones((50,))
     with pytest.raises(ValueError, match="batch shape"):
@@ -138,7 +150,7 @@ def test_phi_action_on_the_operator_matches_the_dense_matrix(kernel, order):
     x = _state(600)
     v = np.random.default_rng(4).standard_normal((1, 600, 2))
     matrix = 0.02 * SwarmModel(params, "dense").frozen_linearization(x)
-    op = 0.02 * SwarmModel(params, "matrix_free").frozen_operator(x)
+    op = 0.02 * SwarmModel(params, "matrix_free").linearization_operator(x)
     sym = kernel == "symmetric"
     expected = phi_action(matrix, v, order, method="expm")
     assert _rel(phi_action(op, v, order, symmetric=sym), expected) <= 1e-9
@@ -151,7 +163,7 @@ def test_phi_action_on_the_operator_matches_the_dense_matrix(kernel, order):
 
 def test_lanczos_sums_its_basis_for_large_n_like_the_stacked_product(monkeypatch):
     x = _state(600)
-    op = 0.02 * SwarmModel(_params("symmetric", 600), "matrix_free").frozen_operator(x)
+    op = 0.02 * SwarmModel(_params("symmetric", 600), "matrix_free").linearization_operator(x)
     v = np.random.default_rng(4).standard_normal((1, 600, 2))
     stacked = phi_action(op, v, 1, symmetric=True)
     monkeypatch.setattr(phi_functions, "_ACCUMULATE_BASIS_MIN_N", 0)
@@ -163,7 +175,8 @@ def test_lanczos_sums_its_basis_for_large_n_like_the_stacked_product(monkeypatch
 # ------------------------------------------------------------------ integrator steps
 @pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("name", ["serb", "erb"])
-def test_one_step_matches_the_dense_path(kernel, name):
+@pytest.mark.parametrize("jacobian", ["frozen", "exact"])
+def test_one_step_matches_the_dense_path(kernel, name, jacobian):
     params = _params(kernel, sigma=0.1)
     dense, free = SwarmModel(params, "dense"), SwarmModel(params, "matrix_free")
     x = _state()
@@ -171,7 +184,7 @@ def test_one_step_matches_the_dense_path(kernel, name):
     dw = np.sqrt(0.02) * rng.standard_normal(x.shape)
     u = rng.standard_normal(x.shape)
     du = rng.standard_normal(x.shape)
-    scheme = make_integrator(name)
+    scheme = make_integrator(name, jacobian=jacobian)
     a = scheme.step(dense, x, u, 0.0, 0.02, dw, du_dt=du)
     b = scheme.step(free, x, u, 0.0, 0.02, dw, du_dt=du)
     assert _rel(b - x, a - x) <= 1e-9
@@ -186,8 +199,11 @@ def _integrate(scheme, model, x0, m, dw, horizon):
     return x
 
 
-@pytest.mark.parametrize(("name", "expected"), [("ee", 1.0), ("erb", 1.0), ("heun", 2.0)])
-def test_deterministic_order_on_the_matrix_free_path(name, expected):
+@pytest.mark.parametrize(
+    ("name", "jacobian", "expected"),
+    [("ee", "frozen", 1.0), ("erb", "frozen", 1.0), ("heun", "frozen", 2.0), ("erb", "exact", 2.0)],
+)
+def test_deterministic_order_on_the_matrix_free_path(name, jacobian, expected):
     params = SwarmParams(
         n_agents=40,
         alpha=0.5,
@@ -200,7 +216,7 @@ def test_deterministic_order_on_the_matrix_free_path(name, expected):
     )  # the non-stiff setting of tests/test_integrators.py, where the orders are visible
     model = SwarmModel(params, "matrix_free")
     x0 = np.linspace(-1, 1, 40)[None, :, None]
-    scheme = make_integrator(name)
+    scheme = make_integrator(name, jacobian=jacobian)
     dw = np.zeros((1, 512, 40, 1))
     ref = _integrate(make_integrator("heun"), SwarmModel(params, "dense"), x0, 512, dw, 0.5)
     steps = [16, 32, 64]
@@ -244,7 +260,7 @@ def test_auto_goes_matrix_free_above_the_measured_size_in_one_dimension():
     assert not SwarmModel(_params("symmetric", small)).matrix_free(x_small)
     large = SwarmModel(_params("symmetric", operators.AUTO_MATRIX_FREE_MIN_AGENTS))
     assert large.matrix_free(x_large)
-    assert not large.matrix_free(x_large, "exact")  # the exact Jacobian stays dense if it fits
+    assert large.matrix_free(x_large, "exact")  # d = 1: the exact Jacobian too
     assert not SwarmModel(_params("symmetric", 2000, 2)).matrix_free(_state(2000, 2))
 
 
@@ -257,7 +273,7 @@ def test_auto_goes_matrix_free_when_dense_would_not_fit_the_budget(monkeypatch):
         operators.dense_bytes(300, 2, 1, "frozen") - 1,
     )
     assert model.matrix_free(x)
-    with pytest.raises(ValueError, match="jacobian='exact' has no matrix-free form"):
+    with pytest.raises(ValueError, match="matrix-free form only for d = 1"):
         model.matrix_free(x, "exact")
 
 
@@ -269,8 +285,12 @@ def test_bad_linear_operator_values_are_named():
         simulate(params, n_steps=1, n_paths=1, linear_operator=1)
     with pytest.raises(ValueError, match="linear_operator applies to the default"):
         simulate(params, n_steps=1, model=SwarmModel(params), linear_operator="dense")
-    with pytest.raises(ValueError, match="no matrix-free form"):
-        simulate(params, jacobian="exact", n_steps=1, linear_operator="matrix_free")
+    with pytest.raises(ValueError, match="matrix-free form only for d = 1"):
+        simulate(
+            _params("symmetric", 10, 2), jacobian="exact", n_steps=1, linear_operator="matrix_free"
+        )
+    with pytest.raises(ValueError, match="kind must be"):
+        LinearizationOperator(CuckerSmaleKernel(0.1, 20.0), _state(10), "jacobian")
     with pytest.raises(ValueError, match="linear_operator must be one of"):
         gym.make("agent_envs/Swarm-v0", n_agents=10, linear_operator="fast")
 

@@ -159,15 +159,16 @@ class GridKernelSum:
         """Whether the grid for these points stays within `MAX_GRID_POINTS`."""
         return cls.grid_points(points, length_scale, tol) <= MAX_GRID_POINTS
 
-    def __call__(self, v: np.ndarray, profiles: int | None = None) -> list[np.ndarray]:
+    def __call__(self, v: np.ndarray, select: Sequence[int] | None = None) -> list[np.ndarray]:
         """[sum_l w_l g_a(x_k - x_l) v_l for each profile g_a], each (N, k), for v (N, k).
 
-        `profiles`: only the first this many profiles (default all).
+        `select`: the indices of the profiles wanted (default all).
         """
         q = self._spread @ (self._weights * v)  # (G, k)
         q_hat = scipy.fft.rfft(q, n=self._size, axis=0)
         out = []
-        for spectrum in self._spectra[:profiles]:
+        spectra = self._spectra if select is None else [self._spectra[i] for i in select]
+        for spectrum in spectra:
             phi = scipy.fft.irfft(q_hat * spectrum[:, None], n=self._size, axis=0)
             out.append(self._interp @ phi[: self.n_grid])
         return out

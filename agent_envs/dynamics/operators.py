@@ -8,7 +8,7 @@ Cucker-Smale kernel (O(N) per product), the chunked pairwise sum otherwise (O(N^
 O(N * block) memory). The dense (..., N, N) matrix of `SwarmModel.frozen_linearization`
 stays the path for small N and the reference.
 
-`FrozenLinearizationOperator` supports what the exponential integrators do with a matrix:
+`LinearizationOperator` supports what the exponential integrators do with a matrix:
 ``op @ v``, ``c * op`` (a scaled operator sharing the kernel sums), `shape`, `symmetric`, and
 a bound `norm_inf` >= ||c L||_inf used by the Krylov phi-action
 (`agent_envs.integrators.phi_functions.phi_action` accepts it in place of a matrix).
@@ -61,48 +61,71 @@ def grid_applies(kernel: InteractionKernel, dim: int) -> bool:
 
 
 def _profiles(alpha: float):
+    """g(r), r = x_k - x_l, with p(x_k, x_l) = w_l g(r) and its relatives (d = 1)."""
     a2 = alpha * alpha
 
-    def lorentzian(r: np.ndarray) -> np.ndarray:  # p / w as a function of r = x_k - x_l
+    def lorentzian(r: np.ndarray) -> np.ndarray:  # p / w
         return 1.0 / (a2 + r * r)
 
     def attraction(r: np.ndarray) -> np.ndarray:  # (x_l - x_k) p / w
         return -r / (a2 + r * r)
 
-    return lorentzian, attraction
+    def jacobian(r: np.ndarray) -> np.ndarray:  # (p + (x_l - x_k) dp/dy) / w
+        d = a2 + r * r
+        return (a2 - r * r) / (d * d)
+
+    return lorentzian, attraction, jacobian
 
 
 class _PathSums:
-    """Row sums s = P 1, the drift L x and the product P v for one path's positions (N, d)."""
+    """Kernel sums of one path's positions x (N, d) for the `kind` linearization A.
 
-    def __init__(self, kernel: InteractionKernel, x: np.ndarray, tol: float, block: int):
+    A v = (1/N)(G v - (G 1) * v) with G = P for the frozen L(x), and, for the exact Jacobian in
+    d = 1 (`eq:jac`: J_kl = (1/N) w_l (alpha^2 - r^2)/(alpha^2 + r^2)^2 for l != k, and
+    J_kk = -(1/N) sum_{l != k} of the same), G[k, l] = w_l (alpha^2 - r_kl^2)/(alpha^2 + r_kl^2)^2.
+    Keeps the row sums G 1, the drift L(x) x and the row sums of P (|G| <= P entrywise, so
+    2 max(P 1)/N bounds ||A||_inf for both kinds).
+    """
+
+    def __init__(self, kernel: InteractionKernel, x: np.ndarray, kind: str, tol: float, block: int):
         n = x.shape[0]
         self.grid = None
+        self._profile = 0 if kind == "frozen" else 2
         if grid_applies(kernel, x.shape[1]) and GridKernelSum.fits(x[:, 0], kernel.alpha, tol):
+            # the exact Jacobian's profile has double poles: one digit finer for the same tol
+            grid_tol = tol if kind == "frozen" else tol / 10
             self.grid = GridKernelSum(
-                x[:, 0], _profiles(kernel.alpha), kernel.weights, kernel.alpha, tol
+                x[:, 0], _profiles(kernel.alpha), kernel.weights, kernel.alpha, grid_tol
             )
-            sums, attraction = self.grid(np.ones((n, 1)))
-            self.row_sums = sums[:, 0]
-            self.drift = attraction / n
+            sums = self.grid(np.ones((n, 1)), select=(0, 1, self._profile))
+            self.p_row_sums = sums[0][:, 0]
+            self.drift = sums[1] / n
+            self.row_sums = sums[2][:, 0]
+        elif kind == "exact":
+            raise ValueError(
+                "the matrix-free exact Jacobian needs d = 1, the Cucker-Smale kernel and a "
+                "swarm narrow enough for the grid sum; use jacobian='frozen'"
+            )
         else:
             self.chunked = ChunkedKernelSum(kernel, x, block)
             self.row_sums, px = self.chunked.row_sums_and_product(x)
+            self.p_row_sums = self.row_sums
             self.drift = (px - self.row_sums[:, None] * x) / n
 
     def product(self, v: np.ndarray) -> np.ndarray:
-        """P v for v (N, k)."""
+        """G v for v (N, k)."""
         if self.grid is not None:
-            return self.grid(v, profiles=1)[0]
+            return self.grid(v, select=(self._profile,))[0]
         return self.chunked(v)
 
 
-class FrozenLinearizationOperator:
-    """c L(x) for positions x (..., N, d) (numpy), applied without forming P.
+class LinearizationOperator:
+    """c A for positions x (..., N, d) (numpy), A = L(x) or the exact Jacobian, without P.
 
     Args:
         kernel: the interaction kernel.
         x: positions (..., N, d); one set of kernel sums per leading index (path).
+        kind: "frozen" (L(x), any d and kernel) or "exact" (dF/dx; d = 1, Cucker-Smale).
         tol: relative accuracy of the grid sums (d = 1, Cucker-Smale).
         block: rows per block of the chunked sums (0: chosen from N).
     """
@@ -111,19 +134,23 @@ class FrozenLinearizationOperator:
         self,
         kernel: InteractionKernel,
         x: np.ndarray,
+        kind: str = "frozen",
         tol: float = DEFAULT_TOLERANCE,
         block: int = 0,
     ) -> None:
+        if kind not in ("frozen", "exact"):
+            raise ValueError(f"kind must be 'frozen' or 'exact', got {kind!r}")
         x = np.asarray(x, dtype=float)
         if x.ndim < 2:
             raise ValueError(f"positions must have shape (..., N, d), got {x.shape}")
         self.batch_shape = tuple(x.shape[:-2])
         self.n_agents = x.shape[-2]
         flat = x.reshape(-1, *x.shape[-2:])
-        self._paths = [_PathSums(kernel, xi, tol, block) for xi in flat]
-        self.symmetric = bool(kernel.symmetric)
+        self._paths = [_PathSums(kernel, xi, kind, tol, block) for xi in flat]
+        self.kind = kind
+        self.symmetric = bool(kernel.symmetric)  # the exact J too: d = 1, a radial kernel
         self.scale = 1.0
-        self._max_row_sum = max(float(np.max(ps.row_sums)) for ps in self._paths)
+        self._max_row_sum = max(float(np.max(ps.p_row_sums)) for ps in self._paths)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -135,7 +162,7 @@ class FrozenLinearizationOperator:
 
     @property
     def norm_inf(self) -> float:
-        """||c L||_inf <= 2 |c| max_k s_k / N (the entries of P are >= 0)."""
+        """||c A||_inf <= 2 |c| max_k (P 1)_k / N (P >= 0, and |G| <= P entrywise)."""
         return 2.0 * abs(self.scale) * self._max_row_sum / self.n_agents
 
     def drift(self) -> np.ndarray:
@@ -163,14 +190,14 @@ class FrozenLinearizationOperator:
     def __matmul__(self, v: Any) -> np.ndarray:
         return self.matvec(v)
 
-    def scaled(self, c: float) -> FrozenLinearizationOperator:
+    def scaled(self, c: float) -> LinearizationOperator:
         """c times this operator (shares the kernel sums)."""
-        new = object.__new__(FrozenLinearizationOperator)
+        new = object.__new__(LinearizationOperator)
         new.__dict__.update(self.__dict__)
         new.scale = self.scale * float(c)
         return new
 
-    def __mul__(self, c: float) -> FrozenLinearizationOperator:
+    def __mul__(self, c: float) -> LinearizationOperator:
         if not np.isscalar(c):
             return NotImplemented
         return self.scaled(c)
@@ -186,6 +213,6 @@ class FrozenLinearizationOperator:
 
     def __repr__(self) -> str:
         return (
-            f"FrozenLinearizationOperator(N={self.n_agents}, batch={self.batch_shape}, "
+            f"LinearizationOperator(N={self.n_agents}, batch={self.batch_shape}, "
             f"scale={self.scale:g})"
         )

@@ -38,7 +38,7 @@ from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
 from agent_envs.dynamics.operators import (
     AUTO_MATRIX_FREE_MIN_AGENTS,
     DENSE_MEMORY_BUDGET_BYTES,
-    FrozenLinearizationOperator,
+    LinearizationOperator,
     check_linear_operator,
     dense_bytes,
     grid_applies,
@@ -98,12 +98,13 @@ class SwarmModel:
     The model holds only the dynamics (kernel, noise, N, d): the target and gamma are cost
     parameters and do not enter it.
 
-    `linear_operator` chooses how the drift and the frozen linearization are evaluated:
-    ``"dense"`` forms the (..., N, N) matrix L(x); ``"matrix_free"`` uses
-    `FrozenLinearizationOperator` (kernel sums without P; numpy only, frozen linearization
-    only); ``"auto"`` (default) is matrix-free for numpy states when d = 1 with the
-    Cucker-Smale kernel and N >= `AUTO_MATRIX_FREE_MIN_AGENTS`, or when the dense matrices of a
-    step would exceed `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
+    `linear_operator` chooses how the drift and the linearizations are evaluated:
+    ``"dense"`` forms the (..., N, N) matrix L(x) (and the (..., Nd, Nd) exact Jacobian);
+    ``"matrix_free"`` uses `LinearizationOperator` (kernel sums without P; numpy only; the
+    exact Jacobian only for d = 1 with the Cucker-Smale kernel); ``"auto"`` (default) is
+    matrix-free for numpy states when d = 1 with the Cucker-Smale kernel and
+    N >= `AUTO_MATRIX_FREE_MIN_AGENTS`, or when the dense matrices of a step would exceed
+    `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
     """
 
     def __init__(self, params: SwarmParams, linear_operator: str = "auto") -> None:
@@ -117,19 +118,21 @@ class SwarmModel:
     def matrix_free(self, x: Any, kind: str = "frozen") -> bool:
         """Whether the drift and the `kind` linearization at x go matrix-free (see class doc).
 
-        Raises ValueError for an exact Jacobian or a torch state on the matrix-free path.
+        Raises ValueError where the matrix-free path is needed (forced, or the dense matrices
+        over budget) but does not exist: torch states, the exact Jacobian for d > 1 or
+        another kernel.
         """
         n_paths = int(np.prod(x.shape[:-2], dtype=int))
-        too_big = dense_bytes(self.n_agents, self.dim, n_paths, kind) > DENSE_MEMORY_BUDGET_BYTES
+        needed = dense_bytes(self.n_agents, self.dim, n_paths, kind)
+        grid = grid_applies(self.kernel, self.dim)
         if self.linear_operator == "dense":
             return False
         if self.linear_operator == "auto":
             if arrays.is_torch(x):
                 return False
-            fast = grid_applies(self.kernel, self.dim) and (
-                self.n_agents >= AUTO_MATRIX_FREE_MIN_AGENTS
+            wanted = needed > DENSE_MEMORY_BUDGET_BYTES or (
+                grid and self.n_agents >= AUTO_MATRIX_FREE_MIN_AGENTS
             )
-            wanted = too_big or (fast and kind == "frozen")
         else:
             wanted = True
         if not wanted:
@@ -139,18 +142,18 @@ class SwarmModel:
                 "linear_operator='matrix_free' works on numpy states; use 'dense' or 'auto' "
                 "with torch"
             )
-        if kind == "exact":
+        if kind == "exact" and not grid:
             raise ValueError(
-                "jacobian='exact' has no matrix-free form (the dense Jacobian of N = "
-                f"{self.n_agents}, d = {self.dim} needs "
-                f"{dense_bytes(self.n_agents, self.dim, n_paths, kind) / 2**30:.1f} GiB); "
-                "use jacobian='frozen' or linear_operator='dense'"
+                "jacobian='exact' has a matrix-free form only for d = 1 and the Cucker-Smale "
+                f"kernel (the dense Jacobian of N = {self.n_agents}, d = {self.dim} needs "
+                f"{needed / 2**30:.1f} GiB); use jacobian='frozen' or linear_operator='dense'"
             )
         return True
 
-    def frozen_operator(self, x: Any) -> FrozenLinearizationOperator:
-        """L(x) as a matrix-free operator (`agent_envs.dynamics.operators`); x (..., N, d)."""
-        return FrozenLinearizationOperator(self.kernel, self._check_state(x))
+    def linearization_operator(self, x: Any, kind: str = "frozen") -> LinearizationOperator:
+        """L(x) (``"frozen"``) or the exact Jacobian (``"exact"``, d = 1) as a matrix-free
+        operator (`agent_envs.dynamics.operators`); x (..., N, d), numpy."""
+        return LinearizationOperator(self.kernel, self._check_state(x), kind)
 
     def _check_state(self, x: Any) -> Any:
         if not arrays.is_torch(x):
@@ -177,7 +180,7 @@ class SwarmModel:
         """(1/N) sum_l p(x_k, x_l)(x_l - x_k) = L(x) x; shape (..., N, d)."""
         x = self._check_state(x)
         if self.matrix_free(x):
-            return self.frozen_operator(x).drift()
+            return self.linearization_operator(x).drift()
         return self.frozen_linearization(x) @ x
 
     def drift(self, t: float, x: Any, u: Any = None) -> Any:
@@ -218,11 +221,14 @@ class SwarmModel:
             raise ValueError(f"jacobian must be 'exact' or 'frozen', got {kind!r}")
         x = self._check_state(x)
         if self.matrix_free(x, kind):
-            frozen = self.frozen_operator(x)
-            f = frozen.drift()
-        else:
-            frozen = self.frozen_linearization(x)
-            f = frozen @ x
+            operator = self.linearization_operator(x, kind)
+            f = operator.drift()
+            if u is not None:
+                f = f + u
+            # in d = 1 the exact Jacobian is symmetric like L(x) for a radial kernel
+            return f, Linearization(operator, True, operator.symmetric)
+        frozen = self.frozen_linearization(x)
+        f = frozen @ x
         if u is not None:
             f = f + u
         symmetric = bool(self.kernel.symmetric)

@@ -35,7 +35,7 @@ from gymnasium import spaces
 
 from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
-from agent_envs.dynamics.operators import FrozenLinearizationOperator, check_linear_operator
+from agent_envs.dynamics.operators import LinearizationOperator, check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.observation import global_observation
 from agent_envs.integrators import (
@@ -223,11 +223,12 @@ class _CachedLinearizationModel(SwarmModel):
             self._cached_state, self._cached_matrix = x, matrix
         return matrix
 
-    def frozen_operator(self, x: np.ndarray) -> FrozenLinearizationOperator:
+    def linearization_operator(self, x: np.ndarray, kind: str = "frozen") -> LinearizationOperator:
         # the matrix-free L(x) (large N), cached like the matrix (it holds no mutable state)
-        if x is self._cached_state and isinstance(self._cached_matrix, FrozenLinearizationOperator):
-            return self._cached_matrix
-        operator = super().frozen_operator(x)
+        cached = self._cached_matrix
+        if x is self._cached_state and getattr(cached, "kind", None) == kind:
+            return cached
+        operator = super().linearization_operator(x, kind)
         if isinstance(x, np.ndarray) and not x.flags.writeable:
             self._cached_state, self._cached_matrix = x, operator
         return operator

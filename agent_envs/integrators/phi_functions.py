@@ -154,7 +154,7 @@ class _RowOperator:
 
     An operator is any object with `shape` (..., n, n), ``matvec(V)`` for V (..., n, k) and a
     bound `norm_inf` >= ||A||_inf (e.g. `agent_envs.dynamics.operators.
-    FrozenLinearizationOperator`); the recurrences act on rows W (..., k, n), so
+    LinearizationOperator`); the recurrences act on rows W (..., k, n), so
     ``apply(W) = (A W^T)^T``.
     """
 
@@ -442,7 +442,7 @@ def phi_action(
 
     numpy or torch arrays (see `agent_envs.arrays`); on torch every strategy is differentiable.
     A may also be a matrix-free operator (an object with `matvec`, `shape`, `norm_inf`,
-    `scaled`, e.g. `agent_envs.dynamics.operators.FrozenLinearizationOperator`): then the Krylov
+    `scaled`, e.g. `agent_envs.dynamics.operators.LinearizationOperator`): then the Krylov
     method is the only one ("auto" chooses it), and if its space does not converge within
     `max_krylov_dim` the action is taken in substeps (`_substepped_operator_action`).
 
