@@ -97,10 +97,11 @@ class _PathSums:
             self.grid = GridKernelSum(
                 x[:, 0], _profiles(kernel.alpha), kernel.weights, kernel.alpha, grid_tol
             )
-            sums = self.grid(np.ones((n, 1)), select=(0, 1, self._profile))
+            select = (0, 1) if kind == "frozen" else (0, 1, self._profile)
+            sums = self.grid(np.ones((n, 1)), select=select)
             self.p_row_sums = sums[0][:, 0]
             self.drift = sums[1] / n
-            self.row_sums = sums[2][:, 0]
+            self.row_sums = sums[-1][:, 0] if kind == "exact" else self.p_row_sums
         elif kind == "exact":
             raise ValueError(
                 "the matrix-free exact Jacobian needs d = 1, the Cucker-Smale kernel and a "
