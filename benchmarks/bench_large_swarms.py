@@ -95,6 +95,7 @@ def bench_scaling(sizes, steps: int, dense_max: int, budget: float) -> None:
     )
     print("|---|---|---|---|---|---|---|")
     measured: dict[int, float] = {}
+    clustered: dict[int, float] = {}
     last = None
     for n in sizes:
         if last is not None:
@@ -108,6 +109,7 @@ def bench_scaling(sizes, steps: int, dense_max: int, budget: float) -> None:
         t_free, p_free = _steps(n, 1, "matrix_free", _spread(n), steps)
         t_clu, p_clu = _steps(n, 1, "matrix_free", _clustered(n), 1)
         measured[n] = float(np.median(t_free))
+        clustered[n] = t_clu[0]
         last = n
         dense = ratio = "-"
         if n <= dense_max:
@@ -119,8 +121,9 @@ def bench_scaling(sizes, steps: int, dense_max: int, budget: float) -> None:
             f"| {p_clu[0]} | {dense} | {ratio} |"
         )
     if 10**4 in measured and 10**6 in measured:
-        slope = math.log(measured[10**6] / measured[10**4]) / math.log(100.0)
-        print(f"\nlog-log slope of the spread step time, N = 1e4 -> 1e6: {slope:.2f}")
+        for name, times in (("spread", measured), ("clustered", clustered)):
+            slope = math.log(times[10**6] / times[10**4]) / math.log(100.0)
+            print(f"\nlog-log slope of the {name} step time, N = 1e4 -> 1e6: {slope:.2f}")
     else:
         print("\nlog-log slope 1e4 -> 1e6: not measured (10^4 or 10^6 not run or skipped)")
 
