@@ -135,6 +135,25 @@ def test_exact_jacobian_operator_matches_the_dense_jacobian(kernel):
     assert op.norm_inf >= np.max(np.sum(np.abs(jac), axis=-1)) * (1 - 1e-12)
 
 
+def test_a_non_finite_state_gives_non_finite_sums_not_an_error():
+    model = SwarmModel(_params("symmetric", 600), "matrix_free")
+    x = _state(600, paths=2)
+    x[1, 5, 0] = np.nan
+    drift = model.interaction_drift(x)
+    assert np.all(np.isfinite(drift[0])) and not np.all(np.isfinite(drift[1]))
+    assert not np.all(np.isfinite(model.linearization_operator(x) @ np.ones((2, 600, 1))))
+
+
+def test_a_swarm_too_wide_for_the_grid_falls_back_to_the_chunked_sum(monkeypatch):
+    monkeypatch.setattr(operators, "_WARN_CHUNKED_MIN_AGENTS", 100)
+    monkeypatch.setattr(kernel_sums, "MAX_GRID_POINTS", 1000)
+    params = _params("nonsymmetric", 300)
+    x = _state(300) * 10.0  # spans ~20 = 6400 grid points of alpha / 32
+    with pytest.warns(RuntimeWarning, match="chunked"):
+        drift = SwarmModel(params, "matrix_free").interaction_drift(x)
+    assert _rel(drift, SwarmModel(params, "dense").interaction_drift(x)) <= 1e-12
+
+
 def test_operator_rejects_a_misshapen_vector():
     op = LinearizationOperator(CuckerSmaleKernel(0.1, 20.0), _state(50))
     with pytest.raises(ValueError, match="v must have shape"):

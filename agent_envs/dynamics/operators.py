@@ -19,6 +19,7 @@ built densely, and asking for it matrix-free raises `ValueError`.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -39,6 +40,9 @@ DENSE_MEMORY_BUDGET_BYTES = 2 * 2**30
 # float64 (N, N) arrays alive at once in a dense frozen step (P, its row sums' temporaries,
 # the Krylov products); the exact Jacobian needs about (2 + 3 d) (N d)^2 floats.
 _DENSE_FROZEN_COPIES = 3
+# From this N on, a d = 1 Cucker-Smale swarm too wide for the grid warns that it falls back to
+# the O(N^2) chunked sum (seconds per product there).
+_WARN_CHUNKED_MIN_AGENTS = 20_000
 
 
 def check_linear_operator(value: Any) -> str:
@@ -90,8 +94,14 @@ class _PathSums:
     def __init__(self, kernel: InteractionKernel, x: np.ndarray, kind: str, tol: float, block: int):
         n = x.shape[0]
         self.grid = None
+        self.chunked = None
         self._profile = 0 if kind == "frozen" else 2
-        if grid_applies(kernel, x.shape[1]) and GridKernelSum.fits(x[:, 0], kernel.alpha, tol):
+        if not np.all(np.isfinite(x)):
+            # a non-finite state (a diverging path): NaN sums, as the dense matrix would give,
+            # so the caller's divergence check sees them
+            self.row_sums = self.p_row_sums = np.full(n, np.nan)
+            self.drift = np.full(x.shape, np.nan)
+        elif grid_applies(kernel, x.shape[1]) and GridKernelSum.fits(x[:, 0], kernel.alpha, tol):
             # the exact Jacobian's profile has double poles: one digit finer for the same tol
             grid_tol = tol if kind == "frozen" else tol / 10
             self.grid = GridKernelSum(
@@ -108,6 +118,13 @@ class _PathSums:
                 "swarm narrow enough for the grid sum; use jacobian='frozen'"
             )
         else:
+            if grid_applies(kernel, x.shape[1]) and n >= _WARN_CHUNKED_MIN_AGENTS:
+                warnings.warn(
+                    f"the swarm spans {float(np.ptp(x)):g}, too wide for the grid sum at "
+                    f"alpha = {kernel.alpha:g}; using the O(N^2) chunked sum for N = {n}",
+                    RuntimeWarning,
+                    stacklevel=4,
+                )
             self.chunked = ChunkedKernelSum(kernel, x, block)
             self.row_sums, px = self.chunked.row_sums_and_product(x)
             self.p_row_sums = self.row_sums
@@ -117,7 +134,9 @@ class _PathSums:
         """G v for v (N, k)."""
         if self.grid is not None:
             return self.grid(v, select=(self._profile,))[0]
-        return self.chunked(v)
+        if self.chunked is not None:
+            return self.chunked(v)
+        return np.full(v.shape, np.nan)
 
 
 class LinearizationOperator:
@@ -152,6 +171,8 @@ class LinearizationOperator:
         self.symmetric = bool(kernel.symmetric)  # the exact J too: d = 1, a radial kernel
         self.scale = 1.0
         self._max_row_sum = max(float(np.max(ps.p_row_sums)) for ps in self._paths)
+        if not np.isfinite(self._max_row_sum):
+            self._max_row_sum = np.inf
 
     @property
     def shape(self) -> tuple[int, ...]:
