@@ -1,6 +1,6 @@
 """Benchmark of large swarms: one SERB step, matrix-free vs dense, N = 10^3 .. 10^6.
 
-Run:  python benchmarks/bench_large_swarms.py              (about 3 minutes on 2 cores)
+Run:  python benchmarks/bench_large_swarms.py              (about 4 minutes on 2 cores)
       python benchmarks/bench_large_swarms.py --quick      (N <= 10^5, d = 2 at N = 2000)
 
 BLAS is pinned to one thread (OPENBLAS_NUM_THREADS overrides it). Every ratio is between two
@@ -19,6 +19,13 @@ timings of the same run. Tables:
    product) next to one finufft type-1 + type-2 pair on the same points (tolerance 1e-12, 512
    modes, 1 thread), which a Fourier-based sum would need per product on top of its near-field
    correction. Skipped when finufft is not installed (``pip install finufft``).
+5. Mean-field check: for N = 10^3 .. `--mean-field-max`, SERB (m = 50, T = 1, sigma = 0.01)
+   from N points drawn uniform on [-1, 1] (a new sample per N): the Wasserstein-1 distance of
+   the empirical distribution at t = 0, T/2 and T to that of the largest N, and the log-log
+   slopes against N; `--figure PATH` saves the plot. eps = 10 here, not 0.05: at eps = 0.05
+   the swarm collapses within a few steps and SERB's e^{tau L} (||tau L|| ~ 40 at consensus)
+   damps the noise to ~1e-18, so every later distribution is a point mass whose W1 is just
+   the distance of the means; eps = 10 keeps a spread-out density up to T.
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ from agent_envs.dynamics import operators
 from agent_envs.dynamics.kernel_sums import GridKernelSum
 
 ALPHA, EPS, SIGMA, TAU = 0.1, 0.05, 0.01, 0.02
+MEAN_FIELD_EPS = 10.0
 
 
 class _ProductCounter:
@@ -180,12 +188,71 @@ def bench_finufft(n: int) -> None:
     print(f"| {build:.3f} | {product:.4f} | {pair:.4f} | {pair / product:.1f} |")
 
 
+def bench_mean_field(sizes, figure: str | None) -> None:
+    from scipy.stats import wasserstein_distance
+
+    from agent_envs import simulate
+
+    print(f"\n## 5. Mean-field check: W1 to the empirical distribution of N = {sizes[-1]:.0e}")
+    starts = {}
+    for n in sizes:
+        params = SwarmParams(n_agents=n, alpha=ALPHA, epsilon=MEAN_FIELD_EPS, sigma=SIGMA)
+        start = time.perf_counter()
+        traj = simulate(params, "serb", n_steps=50, n_paths=1, seed=n)
+        wall = time.perf_counter() - start
+        assert not traj.diverged
+        starts[n] = {t: traj.positions[k, 0, :, 0] for t, k in (("0", 0), ("T/2", 25), ("T", -1))}
+        print(f"(N = {n:.0e}: 50 SERB steps in {wall:.1f} s)")
+    ref = sizes[-1]
+    print("| N | W1 at t = 0 | W1 at T/2 | W1 at T | std of x(T/2) | std of x(T) |")
+    print("|---|---|---|---|---|---|")
+    w = {t: {} for t in ("0", "T/2", "T")}
+    for n in sizes[:-1]:
+        for t in w:
+            w[t][n] = wasserstein_distance(starts[n][t], starts[ref][t])
+        print(
+            f"| {n:.0e} | {w['0'][n]:.2e} | {w['T/2'][n]:.2e} | {w['T'][n]:.2e} "
+            f"| {np.std(starts[n]['T/2']):.3f} | {np.std(starts[n]['T']):.3f} |"
+        )
+    print(
+        f"| {ref:.0e} (reference) | 0 | 0 | 0 | {np.std(starts[ref]['T/2']):.3f} "
+        f"| {np.std(starts[ref]['T']):.3f} |"
+    )
+    if len(sizes) >= 3:
+        ns = np.array(sizes[:-1], dtype=float)
+        for t in w:
+            slope = np.polyfit(np.log(ns), np.log([w[t][int(n)] for n in ns]), 1)[0]
+            print(f"log-log slope of W1 at t = {t} against N: {slope:.2f}")
+        print("(independent samples: about -0.5)")
+    if figure:
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(8, 3.2))
+        ax_cdf, ax_w = fig.subplots(1, 2)
+        for n in sizes:
+            xs = np.sort(starts[n]["T"])
+            ax_cdf.plot(xs, np.linspace(0, 1, xs.size), label=f"N = {n:.0e}")
+        ax_cdf.set(xlabel="x at T", ylabel="empirical CDF", title="SERB, eps = 10, m = 50, T = 1")
+        ax_cdf.legend(fontsize=7)
+        ns = sizes[:-1]
+        for t in w:
+            ax_w.loglog(ns, [w[t][n] for n in ns], "o-", label=f"W1 at t = {t}")
+        ax_w.loglog(ns, [w["0"][ns[0]] * (n / ns[0]) ** -0.5 for n in ns], "k--", label="N^-1/2")
+        ax_w.set(xlabel="N", ylabel=f"W1 to N = {ref:.0e}")
+        ax_w.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(figure, dpi=110)
+        print(f"figure: {figure}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="N <= 1e5, d = 2 at N = 2000")
     parser.add_argument("--steps", type=int, default=3, help="steps timed per size (median)")
     parser.add_argument("--dense-max", type=int, default=10**4, help="largest dense N")
     parser.add_argument("--budget", type=float, default=120.0, help="seconds per size")
+    parser.add_argument("--mean-field-max", type=int, default=10**6, help="largest N of table 5")
+    parser.add_argument("--figure", default=None, help="save the mean-field plot there")
     args = parser.parse_args()
     sizes = [10**3, 10**4, 10**5] if args.quick else [10**3, 10**4, 10**5, 10**6]
     print(f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}, cores={os.cpu_count()}")
@@ -193,6 +260,8 @@ def main() -> None:
     bench_crossover([100, 200, 300, 500, 1000], 4)
     bench_two_dimensions(2000 if args.quick else 10**4)
     bench_finufft(10**5 if args.quick else 10**6)
+    top = min(args.mean_field_max, 10**4 if args.quick else args.mean_field_max)
+    bench_mean_field([n for n in (10**3, 10**4, 10**5, 10**6) if n <= top], args.figure)
 
 
 if __name__ == "__main__":

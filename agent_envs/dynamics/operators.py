@@ -1,4 +1,4 @@
-"""The frozen linearization L(x) as a matrix-free linear operator, and the choice of path.
+"""The linearizations of the drift as matrix-free linear operators, and the choice of path.
 
     L(x) v = (1/N) (P v - (P 1) * v),      P[k, l] = p(x_k, x_l),
 
@@ -8,13 +8,15 @@ Cucker-Smale kernel (O(N) per product), the chunked pairwise sum otherwise (O(N^
 O(N * block) memory). The dense (..., N, N) matrix of `SwarmModel.frozen_linearization`
 stays the path for small N and the reference.
 
+In d = 1 the exact Jacobian (`eq:jac`) has the same structure, J v = (1/N)(G v - (G 1) * v),
+with G[k, l] = w_l (alpha^2 - r^2)/(alpha^2 + r^2)^2 for the Cucker-Smale kernel, another
+translation-invariant profile for the grid sum; for d > 1 (d x d blocks) or other kernels it
+has no matrix-free form here, and asking for one raises `ValueError`.
+
 `LinearizationOperator` supports what the exponential integrators do with a matrix:
 ``op @ v``, ``c * op`` (a scaled operator sharing the kernel sums), `shape`, `symmetric`, and
-a bound `norm_inf` >= ||c L||_inf used by the Krylov phi-action
+a bound `norm_inf` >= ||c A||_inf used by the Krylov phi-action
 (`agent_envs.integrators.phi_functions.phi_action` accepts it in place of a matrix).
-
-Only the frozen linearization has a matrix-free form here: the exact Jacobian (`eq:jac`) is
-built densely, and asking for it matrix-free raises `ValueError`.
 """
 
 from __future__ import annotations
@@ -37,9 +39,9 @@ LINEAR_OPERATORS = ("auto", "dense", "matrix_free")
 AUTO_MATRIX_FREE_MIN_AGENTS = 500
 # ... and whenever the dense matrices of one step would exceed this many bytes (any d, kernel).
 DENSE_MEMORY_BUDGET_BYTES = 2 * 2**30
-# float64 (N, N) arrays alive at once in a dense frozen step (P, its row sums' temporaries,
-# the Krylov products); the exact Jacobian needs about (2 + 3 d) (N d)^2 floats.
-_DENSE_FROZEN_COPIES = 3
+# float64 (N, N) arrays alive at once in a dense frozen step: P and L, plus the (N, N, d)
+# difference temporaries of `kernel.value` for d > 1 (2 + d in all); the exact Jacobian
+# needs about (2 + 3 d) (N d)^2 floats.
 # From this N on, a d = 1 Cucker-Smale swarm too wide for the grid warns that it falls back to
 # the O(N^2) chunked sum (seconds per product there).
 _WARN_CHUNKED_MIN_AGENTS = 20_000
@@ -55,7 +57,7 @@ def check_linear_operator(value: Any) -> str:
 def dense_bytes(n_agents: int, dim: int, n_paths: int, kind: str) -> int:
     """Bytes of the dense matrices one step of `kind` ("frozen" | "exact") keeps alive."""
     if kind == "frozen":
-        return 8 * _DENSE_FROZEN_COPIES * n_paths * n_agents**2
+        return 8 * (2 + dim) * n_paths * n_agents**2
     return 8 * (2 + 3 * dim) * n_paths * (n_agents * dim) ** 2
 
 
