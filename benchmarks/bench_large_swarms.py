@@ -1,7 +1,8 @@
 """Benchmark of large swarms: one SERB step, matrix-free vs dense, N = 10^3 .. 10^6.
 
 Run:  python benchmarks/bench_large_swarms.py              (about 4 minutes on 2 cores)
-      python benchmarks/bench_large_swarms.py --quick      (N <= 10^5, d = 2 at N = 2000)
+      python benchmarks/bench_large_swarms.py --quick      (N <= 10^5, d = 2 at N = 2000,
+                                                            mean field up to 10^4)
 
 BLAS is pinned to one thread (OPENBLAS_NUM_THREADS overrides it). Every ratio is between two
 timings of the same run. Tables:
@@ -14,7 +15,8 @@ timings of the same run. Tables:
    (the previous size's, scaled linearly) exceeds `--budget` seconds is skipped, and said so.
    Then the log-log slope of the spread step time from 10^4 to 10^6.
 2. The crossover of "auto": the same spread step, dense vs matrix-free, N = 100 .. 1000.
-3. d = 2 at N = 10^4: one SERB step, chunked matrix-free vs dense.
+3. d = 2, N = 2000 .. 10^5: one SERB step, the 2-D grid sum vs the chunked sum (N <= 2 10^4)
+   vs dense (N <= `--dense-max`).
 4. Why the grid sum and not a non-uniform FFT: the grid kernel sum at N = 10^6 (build and one
    product) next to one finufft type-1 + type-2 pair on the same points (tolerance 1e-12, 512
    modes, 1 thread), which a Fourier-based sum would need per product on top of its near-field
@@ -144,16 +146,36 @@ def bench_crossover(sizes, steps: int) -> None:
         t_dense = np.median(_steps(n, 1, "dense", _spread(n), steps)[0][1:])
         t_free = np.median(_steps(n, 1, "matrix_free", _spread(n), steps)[0][1:])
         print(f"| {n} | {1e3 * t_dense:.2f} | {1e3 * t_free:.2f} | {t_dense / t_free:.2f} |")
-    print(f"(auto: matrix-free from N = {operators.AUTO_MATRIX_FREE_MIN_AGENTS} for d = 1)")
+    print(f"(auto: matrix-free from N = {operators.AUTO_MATRIX_FREE_MIN_AGENTS[1]} for d = 1)")
 
 
-def bench_two_dimensions(n: int) -> None:
-    print(f"\n## 3. d = 2, N = {n}: one SERB step from x uniform on [-1, 1]^2, 1 path")
-    t_free, p_free = _steps(n, 2, "matrix_free", _spread(n, 2), 1)
-    t_dense, _ = _steps(n, 2, "dense", _spread(n, 2), 1)
-    print("| chunked matrix-free [s] | products | dense [s] | chunked / dense |")
-    print("|---|---|---|---|")
-    print(f"| {t_free[0]:.3f} | {p_free[0]} | {t_dense[0]:.3f} | {t_free[0] / t_dense[0]:.2f} |")
+def bench_two_dimensions(sizes, dense_max: int, chunked_max: int) -> None:
+    print("\n## 3. d = 2: one SERB step from x uniform on [-1, 1]^2, 1 path")
+    print("| N | grid [s] | products | chunked [s] | dense [s] | chunked / grid | dense / grid |")
+    print("|---|---|---|---|---|---|---|")
+    saved = operators.GRID_MIN_AGENTS[2]
+    for n in sizes:
+        try:
+            operators.GRID_MIN_AGENTS[2] = 0
+            t_grid, p_grid = _steps(n, 2, "matrix_free", _spread(n, 2), 1)
+            chunked = dense = ratio_c = ratio_d = "-"
+            if n <= chunked_max:
+                operators.GRID_MIN_AGENTS[2] = 10**12
+                t_chunked = _steps(n, 2, "matrix_free", _spread(n, 2), 1)[0][0]
+                chunked, ratio_c = f"{t_chunked:.3f}", f"{t_chunked / t_grid[0]:.2f}"
+        finally:
+            operators.GRID_MIN_AGENTS[2] = saved
+        if n <= dense_max:
+            t_dense = _steps(n, 2, "dense", _spread(n, 2), 1)[0][0]
+            dense, ratio_d = f"{t_dense:.3f}", f"{t_dense / t_grid[0]:.2f}"
+        print(
+            f"| {n:.0e} | {t_grid[0]:.3f} | {p_grid[0]} | {chunked} | {dense} | {ratio_c} "
+            f"| {ratio_d} |"
+        )
+    print(
+        f"(auto: matrix-free from N = {operators.AUTO_MATRIX_FREE_MIN_AGENTS[2]}, the grid from "
+        f"N = {saved}, chunked below)"
+    )
 
 
 def bench_finufft(n: int) -> None:
@@ -258,7 +280,10 @@ def main() -> None:
     print(f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}, cores={os.cpu_count()}")
     bench_scaling(sizes, args.steps, args.dense_max, args.budget)
     bench_crossover([100, 200, 300, 500, 1000], 4)
-    bench_two_dimensions(2000 if args.quick else 10**4)
+    if args.quick:
+        bench_two_dimensions([2000], 2000, 2000)
+    else:
+        bench_two_dimensions([2000, 5000, 10**4, 10**5], args.dense_max, 20_000)
     bench_finufft(10**5 if args.quick else 10**6)
     top = min(args.mean_field_max, 10**4 if args.quick else args.mean_field_max)
     bench_mean_field([n for n in (10**3, 10**4, 10**5, 10**6) if n <= top], args.figure)

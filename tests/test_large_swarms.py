@@ -62,6 +62,23 @@ def test_grid_sum_matches_the_exact_sums_at_the_default_tolerance(weights):
         assert _rel(fast, exact) <= kernel_sums.DEFAULT_TOLERANCE
 
 
+@pytest.mark.parametrize("weights", ["scalar", "per_source"])
+def test_two_dimensional_grid_sum_matches_the_exact_sum(weights):
+    rng = np.random.default_rng(1)
+    alpha, n = 0.1, 1500
+    x = rng.uniform(-1, 1, (n, 2)) * np.array([1.0, 0.5])  # a different span per axis
+    v = rng.standard_normal((n, 3))
+    w = 20.0 if weights == "scalar" else 1.0 / np.linspace(0.05, 0.5, n)
+
+    def profile(r):
+        return 1 / (alpha**2 + np.sum(r * r, axis=-1))
+
+    grid = GridKernelSum(x, [profile], w, alpha)
+    assert grid.shape[0] > grid.shape[1]
+    exact = (w * profile(x[:, None, :] - x[None, :, :])) @ v
+    assert _rel(grid(v)[0], exact) <= kernel_sums.DEFAULT_TOLERANCE
+
+
 def test_grid_resolution_table_is_ordered_and_validated():
     with pytest.raises(ValueError, match="tol"):
         kernel_sums.grid_resolution(0.0)
@@ -106,21 +123,26 @@ def test_chunked_sum_is_the_dense_product(dim, kind):
 
 # ------------------------------------------------------------------ the operator
 @pytest.mark.parametrize("kernel", KERNELS)
-@pytest.mark.parametrize("dim", [1, 2])
-def test_matvec_and_drift_match_the_dense_linearization(kernel, dim):
-    n = N if dim == 1 else 500  # d = 2 is the O(N^2) chunked sum
+@pytest.mark.parametrize(("dim", "sums"), [(1, "grid"), (2, "grid"), (2, "chunked")])
+def test_matvec_and_drift_match_the_dense_linearization(kernel, dim, sums, monkeypatch):
+    n = N if dim == 1 else 800
+    if sums == "grid":  # the 2-D grid serves N >= GRID_MIN_AGENTS[2]: lowered for the test
+        monkeypatch.setitem(operators.GRID_MIN_AGENTS, 2, 0)
     params = _params(kernel, n, dim)
     dense, free = SwarmModel(params, "dense"), SwarmModel(params, "matrix_free")
     x = _state(n, dim, paths=2)
     v = np.random.default_rng(3).standard_normal((2, n, 3))
     matrix = dense.frozen_linearization(x)
     op = free.linearization_operator(x)
+    assert all((ps.grid is not None) == (sums == "grid") for ps in op._paths)
     assert op.shape == matrix.shape and op.symmetric == (kernel == "symmetric")
     assert _rel(op @ v, matrix @ v) <= 1e-10
     assert _rel(free.interaction_drift(x), dense.interaction_drift(x)) <= 1e-10
     assert _rel((0.02 * op) @ v, 0.02 * (matrix @ v)) <= 1e-10
     assert op.norm_inf >= np.max(np.sum(np.abs(matrix), axis=-1)) * (1 - 1e-12)
-    np.testing.assert_allclose(op.dense()[0], matrix[0], atol=1e-10 * np.abs(matrix).max(), rtol=0)
+    if dim == 1 or sums == "chunked":  # (N columns through the 2-D FFT would take minutes)
+        dense_op = op.dense()[0]
+        np.testing.assert_allclose(dense_op, matrix[0], atol=1e-10 * np.abs(matrix).max(), rtol=0)
 
 
 @pytest.mark.parametrize("kernel", KERNELS)
@@ -210,6 +232,18 @@ def test_one_step_matches_the_dense_path(kernel, name, jacobian):
     assert np.max(np.abs(b - a)) <= 1e-9
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_one_two_dimensional_serb_step_on_the_grid_matches_the_dense_path(kernel, monkeypatch):
+    monkeypatch.setitem(operators.GRID_MIN_AGENTS, 2, 0)
+    params = _params(kernel, 800, 2, sigma=0.1)
+    x = _state(800, 2)
+    dw = np.sqrt(0.02) * np.random.default_rng(6).standard_normal(x.shape)
+    scheme = make_integrator("serb")
+    a = scheme.step(SwarmModel(params, "dense"), x, None, 0.0, 0.02, dw)
+    b = scheme.step(SwarmModel(params, "matrix_free"), x, None, 0.0, 0.02, dw)
+    assert _rel(b - x, a - x) <= 1e-9
+
+
 # The integrators' key checks (tests/test_integrators.py) on the matrix-free path.
 def _integrate(scheme, model, x0, m, dw, horizon):
     x = x0.copy()
@@ -273,14 +307,19 @@ def test_simulate_agrees_with_the_dense_path_over_several_steps():
 
 
 # ------------------------------------------------------------------ choosing the path
-def test_auto_goes_matrix_free_above_the_measured_size_in_one_dimension():
-    small = operators.AUTO_MATRIX_FREE_MIN_AGENTS - 1
-    x_small, x_large = _state(small), _state(operators.AUTO_MATRIX_FREE_MIN_AGENTS)
-    assert not SwarmModel(_params("symmetric", small)).matrix_free(x_small)
-    large = SwarmModel(_params("symmetric", operators.AUTO_MATRIX_FREE_MIN_AGENTS))
+@pytest.mark.parametrize("dim", [1, 2])
+def test_auto_goes_matrix_free_above_the_measured_size(dim):
+    size = operators.AUTO_MATRIX_FREE_MIN_AGENTS[dim]
+    x_small, x_large = _state(size - 1, dim), _state(size, dim)
+    assert not SwarmModel(_params("symmetric", size - 1, dim)).matrix_free(x_small)
+    large = SwarmModel(_params("symmetric", size, dim))
     assert large.matrix_free(x_large)
-    assert large.matrix_free(x_large, "exact")  # d = 1: the exact Jacobian too
-    assert not SwarmModel(_params("symmetric", 2000, 2)).matrix_free(_state(2000, 2))
+    if dim == 1:
+        assert large.matrix_free(x_large, "exact")  # d = 1: the exact Jacobian too
+    else:
+        with pytest.raises(ValueError, match="matrix-free form only for d = 1"):
+            large.matrix_free(x_large, "exact")
+    assert not SwarmModel(_params("symmetric", size, 3)).matrix_free(_state(size, 3))
 
 
 def test_auto_goes_matrix_free_when_dense_would_not_fit_the_budget(monkeypatch):
@@ -319,7 +358,7 @@ def test_matrix_free_refuses_torch_states():
     model = SwarmModel(_params("symmetric", 10), "matrix_free")
     with pytest.raises(ValueError, match="numpy states"):
         model.drift(0.0, torch.zeros(1, 10, 1, dtype=torch.float64))
-    auto = SwarmModel(_params("symmetric", 2 * operators.AUTO_MATRIX_FREE_MIN_AGENTS))
+    auto = SwarmModel(_params("symmetric", 2 * operators.AUTO_MATRIX_FREE_MIN_AGENTS[1]))
     assert not auto.matrix_free(torch.zeros(1, auto.n_agents, 1, dtype=torch.float64))
 
 

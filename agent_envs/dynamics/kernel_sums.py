@@ -93,11 +93,16 @@ def lagrange_weights(u: np.ndarray, p: int) -> np.ndarray:
 
 
 class GridKernelSum:
-    """sum_l w_l g_a(x_k - x_l) v_l for d = 1 and several profiles g_a (module docstring).
+    """sum_l w_l g_a(x_k - x_l) v_l on a uniform grid, several profiles g_a (module docstring).
+
+    In d dimensions the interpolation is the tensor product of the 1-D one (p^d grid points
+    per agent) and the Toeplitz product a d-dimensional FFT; the grid has
+    prod_c (32 span_c / alpha + p) points, so it is meant for d <= 2 (`fits`).
 
     Args:
-        points: the agents' positions (N,).
-        profiles: functions g(r) on arrays of offsets r = x_k - x_l.
+        points: the agents' positions, (N,) (then the profiles get r of shape (...)) or (N, d)
+            (then the profiles get r of shape (..., d)).
+        profiles: functions g(r) of the offsets r = x_k - x_l.
         weights: w_l, a float or an (N,) array.
         length_scale: alpha (the half-width of the strip where the profiles are analytic).
         tol: the relative accuracy (see `grid_resolution`).
@@ -112,47 +117,77 @@ class GridKernelSum:
         tol: float = DEFAULT_TOLERANCE,
     ) -> None:
         x = np.asarray(points, dtype=float)
-        if x.ndim != 1:
-            raise ValueError(f"points must have shape (N,), got {x.shape}")
+        if x.ndim not in (1, 2):
+            raise ValueError(f"points must have shape (N,) or (N, d), got {x.shape}")
+        scalar_offsets = x.ndim == 1
+        x = x[:, None] if scalar_offsets else x
+        n, dim = x.shape
         c, p = grid_resolution(tol)
         h = length_scale / c
-        lo = float(x.min())
-        n_grid = self.grid_points(x, length_scale, tol)
+        shape = self.grid_shape(x, length_scale, tol)
+        n_grid = math.prod(shape)
         if n_grid > MAX_GRID_POINTS:
             raise ValueError(
-                f"the swarm spans {float(x.max()) - lo:g} = {n_grid} grid points of "
+                f"the swarm spans {np.ptp(x, axis=0)} = {n_grid} grid points of "
                 f"alpha/{c:g} (more than {MAX_GRID_POINTS}); use the chunked kernel sum"
             )
-        origin = lo - (p // 2) * h
-        t = (x - origin) / h
-        start = np.floor(t).astype(np.int64) - (p // 2 - 1)
-        weights_lagrange = lagrange_weights(t - start, p)
-        cols = (start[:, None] + np.arange(p)[None, :]).ravel()
+        # per axis: the first stencil index and the p Lagrange weights of every agent
+        data = np.ones((n, 1))
+        cols = np.zeros((n, 1), dtype=np.int64)
+        for axis in range(dim):
+            t = (x[:, axis] - (float(x[:, axis].min()) - (p // 2) * h)) / h
+            start = np.floor(t).astype(np.int64) - (p // 2 - 1)
+            idx = start[:, None] + np.arange(p)[None, :]  # (N, p)
+            w = lagrange_weights(t - start, p)
+            if dim == 1:
+                data, cols = w, idx
+            else:  # row-major flat index over the grid, p^(axis+1) stencil points per agent
+                data = (data[:, :, None] * w[:, None, :]).reshape(n, -1)
+                cols = (cols[:, :, None] * shape[axis] + idx[:, None, :]).reshape(n, -1)
+        stencil = data.shape[1]
         self._interp = scipy.sparse.csr_matrix(
-            (weights_lagrange.ravel(), cols, np.arange(0, x.size * p + 1, p)),
-            shape=(x.size, n_grid),
+            (data.ravel(), cols.ravel(), np.arange(0, n * stencil + 1, stencil)),
+            shape=(n, n_grid),
         )
         self._spread = self._interp.T  # CSC: its product with a dense block needs no copy
         self._weights = weights if np.ndim(weights) == 0 else np.asarray(weights)[:, None]
-        size = scipy.fft.next_fast_len(2 * n_grid - 1, real=True)
-        offsets = np.arange(-(n_grid - 1), n_grid, dtype=float) * h  # (i - j) h
-        # circular layout of c_m = g(m h), m = i - j: index m mod size
-        self._spectra = []
-        for g in profiles:
-            col = np.zeros(size)
-            vals = g(offsets)
-            col[:n_grid] = vals[n_grid - 1 :]
-            col[size - (n_grid - 1) :] = vals[: n_grid - 1]
-            self._spectra.append(scipy.fft.rfft(col))
-        self._size = size
+        sizes = tuple(scipy.fft.next_fast_len(2 * g - 1, real=True) for g in shape)
+        # circular layout of c_m = g(m h), m = i - j per axis: index m mod size (the entries
+        # between G and size - G + 1 are never read by the cropped product: left at 0)
+        axes_offsets = []
+        for g, size in zip(shape, sizes, strict=True):
+            m = np.arange(size)
+            m = np.where(m < g, m, m - size)
+            axes_offsets.append(np.where(np.abs(m) < g, m, 0) * h)
+        mesh = np.stack(np.meshgrid(*axes_offsets, indexing="ij"), axis=-1)  # (*sizes, d)
+        valid = np.ones(sizes, dtype=bool)
+        for axis, (g, size) in enumerate(zip(shape, sizes, strict=True)):
+            m = np.arange(size)
+            ok = (m < g) | (m > size - g)
+            valid &= ok.reshape([-1 if a == axis else 1 for a in range(dim)])
+        r = mesh[..., 0] if scalar_offsets else mesh
+        self._spectra = [scipy.fft.rfftn(np.where(valid, g(r), 0.0), s=sizes) for g in profiles]
+        self._sizes = sizes
+        self.shape = shape
         self.n_grid = n_grid
 
     @staticmethod
-    def grid_points(points: np.ndarray, length_scale: float, tol: float = DEFAULT_TOLERANCE):
-        """The number of grid points G the grid for these points needs."""
+    def grid_shape(
+        points: np.ndarray, length_scale: float, tol: float = DEFAULT_TOLERANCE
+    ) -> tuple[int, ...]:
+        """The grid points per axis the grid for these points (N,) or (N, d) needs."""
         c, p = grid_resolution(tol)
-        span = float(np.max(points)) - float(np.min(points))
-        return math.ceil(span * c / length_scale) + p + 2
+        x = np.asarray(points, dtype=float)
+        x = x[:, None] if x.ndim == 1 else x
+        spans = np.max(x, axis=0) - np.min(x, axis=0)
+        return tuple(math.ceil(float(span) * c / length_scale) + p + 2 for span in spans)
+
+    @classmethod
+    def grid_points(
+        cls, points: np.ndarray, length_scale: float, tol: float = DEFAULT_TOLERANCE
+    ) -> int:
+        """The number of grid points G the grid for these points needs."""
+        return math.prod(cls.grid_shape(points, length_scale, tol))
 
     @classmethod
     def fits(cls, points: np.ndarray, length_scale: float, tol: float = DEFAULT_TOLERANCE):
@@ -164,13 +199,16 @@ class GridKernelSum:
 
         `select`: the indices of the profiles wanted (default all).
         """
-        q = self._spread @ (self._weights * v)  # (G, k)
-        q_hat = scipy.fft.rfft(q, n=self._size, axis=0)
+        k = v.shape[1]
+        q = (self._spread @ (self._weights * v)).reshape(*self.shape, k)  # (*grid, k)
+        axes = tuple(range(len(self.shape)))
+        q_hat = scipy.fft.rfftn(q, s=self._sizes, axes=axes)
+        crop = tuple(slice(0, g) for g in self.shape)
         out = []
         spectra = self._spectra if select is None else [self._spectra[i] for i in select]
         for spectrum in spectra:
-            phi = scipy.fft.irfft(q_hat * spectrum[:, None], n=self._size, axis=0)
-            out.append(self._interp @ phi[: self.n_grid])
+            phi = scipy.fft.irfftn(q_hat * spectrum[..., None], s=self._sizes, axes=axes)
+            out.append(self._interp @ phi[crop].reshape(self.n_grid, k))
         return out
 
 

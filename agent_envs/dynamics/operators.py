@@ -34,9 +34,14 @@ from agent_envs.dynamics.kernel_sums import (
 from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
 
 LINEAR_OPERATORS = ("auto", "dense", "matrix_free")
-# "auto" goes matrix-free from this N on for d = 1 and the Cucker-Smale kernel: the crossover
-# of one SERB step, dense vs matrix-free, measured by benchmarks/bench_large_swarms.py.
-AUTO_MATRIX_FREE_MIN_AGENTS = 500
+# "auto" goes matrix-free from this N on for the Cucker-Smale kernel in d = 1, 2: the crossover
+# of one SERB step, dense vs matrix-free, measured by benchmarks/bench_large_swarms.py
+# (tables 2 and 3).
+AUTO_MATRIX_FREE_MIN_AGENTS = {1: 500, 2: 2000}
+# The grid sum replaces the chunked one from this N on (d = 2: below it the O(N^2) chunked
+# product is cheaper than the grid's 2-D FFTs; measured 0.07 s vs 0.10 s at N = 5000, 0.32 s
+# vs 0.11 s at N = 10^4, for x uniform on [-1, 1]^2, alpha = 0.1).
+GRID_MIN_AGENTS = {1: 0, 2: 6000}
 # ... and whenever the dense matrices of one step would exceed this many bytes (any d, kernel).
 DENSE_MEMORY_BUDGET_BYTES = 2 * 2**30
 # float64 (N, N) arrays alive at once in a dense frozen step: P and L, plus the (N, N, d)
@@ -62,8 +67,22 @@ def dense_bytes(n_agents: int, dim: int, n_paths: int, kind: str) -> int:
 
 
 def grid_applies(kernel: InteractionKernel, dim: int) -> bool:
-    """Whether the O(N) grid sum applies: d = 1 and a `CuckerSmaleKernel`."""
+    """Whether the grid sum applies: d <= 2 and a `CuckerSmaleKernel`."""
+    return dim in GRID_MIN_AGENTS and isinstance(kernel, CuckerSmaleKernel)
+
+
+def exact_applies(kernel: InteractionKernel, dim: int) -> bool:
+    """Whether the exact Jacobian has a matrix-free form: d = 1 and a `CuckerSmaleKernel`."""
     return dim == 1 and isinstance(kernel, CuckerSmaleKernel)
+
+
+def _lorentzian_2d(alpha: float):
+    a2 = alpha * alpha
+
+    def lorentzian(r: np.ndarray) -> np.ndarray:  # p / w for r (..., 2)
+        return 1.0 / (a2 + r[..., 0] * r[..., 0] + r[..., 1] * r[..., 1])
+
+    return lorentzian
 
 
 def _profiles(alpha: float):
@@ -97,13 +116,16 @@ class _PathSums:
         n = x.shape[0]
         self.grid = None
         self.chunked = None
+        self.grid_1d = x.shape[1] == 1
         self._profile = 0 if kind == "frozen" else 2
-        if not np.all(np.isfinite(x)):
+        finite = bool(np.all(np.isfinite(x)))
+        use_grid = finite and self._use_grid(kernel, x, tol)
+        if not finite:
             # a non-finite state (a diverging path): NaN sums, as the dense matrix would give,
             # so the caller's divergence check sees them
             self.row_sums = self.p_row_sums = np.full(n, np.nan)
             self.drift = np.full(x.shape, np.nan)
-        elif grid_applies(kernel, x.shape[1]) and GridKernelSum.fits(x[:, 0], kernel.alpha, tol):
+        elif use_grid and self.grid_1d:
             # the exact Jacobian's profile has double poles: one digit finer for the same tol
             grid_tol = tol if kind == "frozen" else tol / 10
             self.grid = GridKernelSum(
@@ -120,22 +142,38 @@ class _PathSums:
                 "swarm narrow enough for the grid sum; use jacobian='frozen'"
             )
         else:
-            if grid_applies(kernel, x.shape[1]) and n >= _WARN_CHUNKED_MIN_AGENTS:
-                warnings.warn(
-                    f"the swarm spans {float(np.ptp(x)):g}, too wide for the grid sum at "
-                    f"alpha = {kernel.alpha:g}; using the O(N^2) chunked sum for N = {n}",
-                    RuntimeWarning,
-                    stacklevel=4,
+            if use_grid:  # d = 2: P 1 and P x from one product
+                self.grid = GridKernelSum(
+                    x, [_lorentzian_2d(kernel.alpha)], kernel.weights, kernel.alpha, tol
                 )
-            self.chunked = ChunkedKernelSum(kernel, x, block)
-            self.row_sums, px = self.chunked.row_sums_and_product(x)
+                both = self.grid(np.concatenate([np.ones((n, 1)), x], axis=1))[0]
+                self.row_sums, px = both[:, 0], both[:, 1:]
+            else:
+                self.chunked = ChunkedKernelSum(kernel, x, block)
+                self.row_sums, px = self.chunked.row_sums_and_product(x)
             self.p_row_sums = self.row_sums
             self.drift = (px - self.row_sums[:, None] * x) / n
+
+    @staticmethod
+    def _use_grid(kernel: InteractionKernel, x: np.ndarray, tol: float) -> bool:
+        n, dim = x.shape
+        if not grid_applies(kernel, dim) or n < GRID_MIN_AGENTS[dim]:
+            return False
+        if GridKernelSum.fits(x, kernel.alpha, tol):
+            return True
+        if n >= _WARN_CHUNKED_MIN_AGENTS:
+            warnings.warn(
+                f"the swarm spans {np.ptp(x, axis=0)}, too wide for the grid sum at "
+                f"alpha = {kernel.alpha:g}; using the O(N^2) chunked sum for N = {n}",
+                RuntimeWarning,
+                stacklevel=6,
+            )
+        return False
 
     def product(self, v: np.ndarray) -> np.ndarray:
         """G v for v (N, k)."""
         if self.grid is not None:
-            return self.grid(v, select=(self._profile,))[0]
+            return self.grid(v, select=(self._profile if self.grid_1d else 0,))[0]
         if self.chunked is not None:
             return self.chunked(v)
         return np.full(v.shape, np.nan)

@@ -41,6 +41,7 @@ from agent_envs.dynamics.operators import (
     LinearizationOperator,
     check_linear_operator,
     dense_bytes,
+    exact_applies,
     grid_applies,
 )
 from agent_envs.params import SwarmParams
@@ -102,9 +103,9 @@ class SwarmModel:
     ``"dense"`` forms the (..., N, N) matrix L(x) (and the (..., Nd, Nd) exact Jacobian);
     ``"matrix_free"`` uses `LinearizationOperator` (kernel sums without P; numpy only; the
     exact Jacobian only for d = 1 with the Cucker-Smale kernel); ``"auto"`` (default) is
-    matrix-free for numpy states when d = 1 with the Cucker-Smale kernel and
-    N >= `AUTO_MATRIX_FREE_MIN_AGENTS`, or when the dense matrices of a step would exceed
-    `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
+    matrix-free for numpy states with the Cucker-Smale kernel when d = 1 and N >= 500 or
+    d = 2 and N >= 2000 (`AUTO_MATRIX_FREE_MIN_AGENTS`), or when the dense matrices of a step
+    would exceed `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
     """
 
     def __init__(self, params: SwarmParams, linear_operator: str = "auto") -> None:
@@ -124,14 +125,14 @@ class SwarmModel:
         """
         n_paths = int(np.prod(x.shape[:-2], dtype=int))
         needed = dense_bytes(self.n_agents, self.dim, n_paths, kind)
-        grid = grid_applies(self.kernel, self.dim)
         if self.linear_operator == "dense":
             return False
         if self.linear_operator == "auto":
             if arrays.is_torch(x):
                 return False
             wanted = needed > DENSE_MEMORY_BUDGET_BYTES or (
-                grid and self.n_agents >= AUTO_MATRIX_FREE_MIN_AGENTS
+                grid_applies(self.kernel, self.dim)
+                and self.n_agents >= AUTO_MATRIX_FREE_MIN_AGENTS[self.dim]
             )
         else:
             wanted = True
@@ -142,7 +143,7 @@ class SwarmModel:
                 "linear_operator='matrix_free' works on numpy states; use 'dense' or 'auto' "
                 "with torch"
             )
-        if kind == "exact" and not grid:
+        if kind == "exact" and not exact_applies(self.kernel, self.dim):
             raise ValueError(
                 "jacobian='exact' has a matrix-free form only for d = 1 and the Cucker-Smale "
                 f"kernel (the dense Jacobian of N = {self.n_agents}, d = {self.dim} needs "
