@@ -4,9 +4,10 @@ Two evaluators of the same sums, for one configuration x (N, d) and blocks of ve
 
 - `ChunkedKernelSum`: the exact pairwise reduction, a block of `block` rows of P at a time,
   for every dimension d and every kernel object (`kernel.value` on a slice of the pairs).
-  O(N^2) time, O(N * block) memory. The reference for the fast method and the path for d >= 2.
-- `GridKernelSum` (d = 1, kernels of the form p(x_k, x_l) = w_l g(x_k - x_l)): the
-  kernel-independent interpolation on a uniform grid. With the local p-point Lagrange
+  O(N^2) time, O(N * block) memory. The reference for the grid sum, and the path for d >= 3,
+  for other kernels and for d = 2 below a few thousand agents.
+- `GridKernelSum` (d <= 2, kernels of the form p(x_k, x_l) = w_l g(x_k - x_l)): the
+  kernel-independent interpolation on a uniform grid. In d = 1, with the local p-point Lagrange
   interpolation weights l_i(x) on the grid g_i = g_0 + i h,
 
       g(x_k - x_l) ~ sum_i sum_j l_i(x_k) l_j(x_l) g((i - j) h),
@@ -15,12 +16,15 @@ Two evaluators of the same sums, for one configuration x (N, d) and blocks of ve
   matrix, p nonzeros a row) and C[i, j] = g((i - j) h) a Toeplitz matrix applied by FFT.
   For the Cucker-Smale profiles g(r) = 1/(alpha^2 + r^2) and r/(alpha^2 + r^2), analytic in
   the strip |Im r| < alpha, the error of the p-point interpolation with h = alpha / c falls
-  like c^-p; `grid_resolution(tol)` gives (c, p) measured to reach `tol` relative to
-  sum_l |w_l v_l| max|g| (tests/test_kernel_sums.py checks it against the exact sums).
+  geometrically in p once c is of the order of p (see `grid_resolution`); `grid_resolution(tol)`
+  gives the (c, p) measured to reach `tol` as relative error of the sums
+  (tests/test_large_swarms.py checks the default against the exact sums).
   O(N p + G log G) per product with G = (max x - min x) / h + p grid points: linear in N
   whatever the clustering of the agents (no near field), so the fast path for large N.
   The grid grows with the spread of the swarm in units of alpha; `GridKernelSum.fits`
-  says when it stays below `MAX_GRID_POINTS` (otherwise use the chunked sum).
+  says when it stays below `MAX_GRID_POINTS` (otherwise use the chunked sum). In d = 2 the
+  interpolation is the tensor product (p^2 weights per agent) and the Toeplitz product a 2-D
+  FFT of the G_1 x G_2 grid, the same accuracy for the same (c, p).
 
 Why not a non-uniform FFT (e.g. finufft) on the Lorentzian's Fourier transform
 (pi/alpha) e^{-alpha |omega|}: the kernel decays only like 1/r^2, so a periodized Fourier
@@ -63,7 +67,7 @@ def grid_resolution(tol: float) -> tuple[float, int]:
 
 
 # (tolerance, c, p): the cheapest measured (c, p) whose error is below the tolerance, from the
-# loosest tolerance to the tightest (tests/test_kernel_sums.py checks the default).
+# loosest tolerance to the tightest (tests/test_large_swarms.py checks the default).
 _RESOLUTIONS: list[tuple[float, float, int]] = [
     (1e-6, 16.0, 6),
     (1e-8, 16.0, 8),
