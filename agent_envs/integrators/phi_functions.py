@@ -18,7 +18,9 @@
   span{v, Av, ..., A^{m-1} v}, H_m = Q_m^T A Q_m. Symmetric A: Lanczos (three-term recurrence,
   H_m tridiagonal, stopped by Saad's a posteriori error estimate); otherwise Arnoldi with
   classical Gram-Schmidt run twice, stopped when two successive approximations agree to
-  `rtol`. O(m n^2) for a dense A, so the method of choice for large n and for batches. If it
+  `rtol`. O(m n^2) for a dense A, so the method of choice for large n and for batches; A may
+  also be a matrix-free operator (`agent_envs.dynamics.operators.LinearizationOperator`,
+  anything with `matvec`, `shape`, `norm_inf`, `scaled`), then only products are used. If it
   has not converged at `max_krylov_dim`, a `RuntimeWarning` is issued and the dense method is
   used. On torch it is differentiated through its final basis.
 
