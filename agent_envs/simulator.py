@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from agent_envs import arrays
+from agent_envs.dynamics.operators import check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
 from agent_envs.integrators import DEFAULT_JACOBIAN, Integrator, make_integrator
 from agent_envs.integrators.base import DriftModel
@@ -215,6 +216,7 @@ def simulate(
     increments: Any = None,
     backend: str | None = None,
     device: Any = None,
+    linear_operator: str | None = None,
 ) -> Trajectory:
     """Integrate the swarm SDE on [0, T] with m = `n_steps` steps for `n_paths` Brownian paths.
 
@@ -242,6 +244,10 @@ def simulate(
         backend: "numpy", "torch" or None (torch when a torch tensor is passed in or `device`
             is given, numpy otherwise).
         device: a torch device ("cpu", "cuda", ...) for the torch backend.
+        linear_operator: "auto" (default), "dense" or "matrix_free": how the drift and the
+            frozen linearization are evaluated (see `SwarmModel`; matrix-free = kernel sums
+            without the N x N matrix, numpy only, the choice for large N). Only with the
+            default model.
 
     Bad arguments raise `TypeError`/`ValueError` naming them and their accepted ranges (see
     `agent_envs.validation`). Controls are checked for a real dtype and finiteness; a control
@@ -275,8 +281,15 @@ def simulate(
     n, d = params.n_agents, params.dim
     control = _validate_control_array(control, n_steps, n, d, "control")
     control_rate = _validate_control_array(control_rate, n_steps, n, d, "control_rate")
+    if linear_operator is not None:
+        check_linear_operator(linear_operator)
+        if model is not None:
+            raise ValueError(
+                "linear_operator applies to the default SwarmModel; with model= given, build "
+                "the model with its own linear_operator"
+            )
     if model is None:
-        model = SwarmModel(params)
+        model = SwarmModel(params, "auto" if linear_operator is None else linear_operator)
     init_rng, noise_rng = _generators(seed)
     if initial_positions is None:
         x0 = uniform_positions(init_rng, n, d)

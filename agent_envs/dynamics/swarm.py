@@ -35,6 +35,15 @@ import numpy as np
 
 from agent_envs import arrays
 from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
+from agent_envs.dynamics.operators import (
+    AUTO_MATRIX_FREE_MIN_AGENTS,
+    DENSE_MEMORY_BUDGET_BYTES,
+    LinearizationOperator,
+    check_linear_operator,
+    dense_bytes,
+    exact_applies,
+    grid_applies,
+)
 from agent_envs.params import SwarmParams
 
 
@@ -58,7 +67,7 @@ class Linearization:
     flattened state (..., Nd) (the exact Jacobian).
     """
 
-    matrix: Any
+    matrix: Any  # an array, or a matrix-free operator (`@`, scalar `*`, see dynamics.operators)
     per_coordinate: bool
     symmetric: bool
 
@@ -89,14 +98,63 @@ class SwarmModel:
     `interaction_drift` and `interaction_matrix`. Every method is batched over leading axes.
     The model holds only the dynamics (kernel, noise, N, d): the target and gamma are cost
     parameters and do not enter it.
+
+    `linear_operator` chooses how the drift and the linearizations are evaluated:
+    ``"dense"`` forms the (..., N, N) matrix L(x) (and the (..., Nd, Nd) exact Jacobian);
+    ``"matrix_free"`` uses `LinearizationOperator` (kernel sums without P; numpy only; the
+    exact Jacobian only for d = 1 with the Cucker-Smale kernel); ``"auto"`` (default) is
+    matrix-free for numpy states with the Cucker-Smale kernel when d = 1 and N >= 500 or
+    d = 2 and N >= 2000 (`AUTO_MATRIX_FREE_MIN_AGENTS`), or when the dense matrices of a step
+    would exceed `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
     """
 
-    def __init__(self, params: SwarmParams) -> None:
+    def __init__(self, params: SwarmParams, linear_operator: str = "auto") -> None:
         self.params = params
         self.kernel: InteractionKernel = kernel_from_params(params)
         self.n_agents = params.n_agents
         self.dim = params.dim
         self.sigma = params.sigma
+        self.linear_operator = check_linear_operator(linear_operator)
+
+    def matrix_free(self, x: Any, kind: str = "frozen") -> bool:
+        """Whether the drift and the `kind` linearization at x go matrix-free (see class doc).
+
+        Raises ValueError where the matrix-free path is needed (forced, or the dense matrices
+        over budget) but does not exist: torch states, the exact Jacobian for d > 1 or
+        another kernel.
+        """
+        n_paths = int(np.prod(x.shape[:-2], dtype=int))
+        needed = dense_bytes(self.n_agents, self.dim, n_paths, kind)
+        if self.linear_operator == "dense":
+            return False
+        if self.linear_operator == "auto":
+            if arrays.is_torch(x):
+                return False
+            wanted = needed > DENSE_MEMORY_BUDGET_BYTES or (
+                grid_applies(self.kernel, self.dim)
+                and self.n_agents >= AUTO_MATRIX_FREE_MIN_AGENTS[self.dim]
+            )
+        else:
+            wanted = True
+        if not wanted:
+            return False
+        if arrays.is_torch(x):
+            raise ValueError(
+                "linear_operator='matrix_free' works on numpy states; use 'dense' or 'auto' "
+                "with torch"
+            )
+        if kind == "exact" and not exact_applies(self.kernel, self.dim):
+            raise ValueError(
+                "jacobian='exact' has a matrix-free form only for d = 1 and the Cucker-Smale "
+                f"kernel (the dense Jacobian of N = {self.n_agents}, d = {self.dim} needs "
+                f"{needed / 2**30:.1f} GiB); use jacobian='frozen' or linear_operator='dense'"
+            )
+        return True
+
+    def linearization_operator(self, x: Any, kind: str = "frozen") -> LinearizationOperator:
+        """L(x) (``"frozen"``) or the exact Jacobian (``"exact"``, d = 1) as a matrix-free
+        operator (`agent_envs.dynamics.operators`); x (..., N, d), numpy."""
+        return LinearizationOperator(self.kernel, self._check_state(x), kind)
 
     def _check_state(self, x: Any) -> Any:
         if not arrays.is_torch(x):
@@ -126,6 +184,8 @@ class SwarmModel:
     def interaction_drift(self, x: Any) -> Any:
         """(1/N) sum_l p(x_k, x_l)(x_l - x_k) = L(x) x; shape (..., N, d)."""
         x = self._check_state(x)
+        if self.matrix_free(x):
+            return self.linearization_operator(x).drift()
         return self.frozen_linearization(x) @ x
 
     def drift(self, t: float, x: Any, u: Any = None) -> Any:
@@ -165,6 +225,13 @@ class SwarmModel:
         if kind not in ("exact", "frozen"):
             raise ValueError(f"jacobian must be 'exact' or 'frozen', got {kind!r}")
         x = self._check_state(x)
+        if self.matrix_free(x, kind):
+            operator = self.linearization_operator(x, kind)
+            f = operator.drift()
+            if u is not None:
+                f = f + u
+            # in d = 1 the exact Jacobian is symmetric like L(x) for a radial kernel
+            return f, Linearization(operator, True, operator.symmetric)
         frozen = self.frozen_linearization(x)
         f = frozen @ x
         if u is not None:

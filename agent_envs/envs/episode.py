@@ -20,7 +20,8 @@ the rewards of an episode add up to minus the discrete cost functional on the en
 The observation needs the interaction drift L(x^{n+1}) x^{n+1} at the new state, and the next
 integrator step needs L(x^{n+1}) again (every scheme evaluates F(x, u) = L(x) x + u at the start
 of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the identity of the
-(read-only) state array, so the kernel matrix is built once per step instead of twice.
+(read-only) state array, so the kernel matrix is built once per step instead of twice (the
+matrix-free operator of large swarms, `env kwarg linear_operator`, likewise).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from gymnasium import spaces
 
 from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
+from agent_envs.dynamics.operators import LinearizationOperator, check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.observation import global_observation
 from agent_envs.integrators import (
@@ -104,6 +106,7 @@ ENV_OPTION_NAMES = (
     "n_paths",
     "max_control",
     "divergence_threshold",
+    "linear_operator",
 )
 
 
@@ -138,7 +141,8 @@ class EpisodeConfig:
     Python's standard `TypeError` ("... got an unexpected keyword argument 'x'").
 
     Ranges: 1 <= n_steps <= 1e9; 1 <= n_paths <= 1e6 with n_paths N d <= 1e8;
-    0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it.
+    0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it;
+    linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`).
     """
 
     params: SwarmParams
@@ -149,6 +153,7 @@ class EpisodeConfig:
     n_paths: int = 1
     max_control: float = DEFAULT_MAX_CONTROL
     divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD
+    linear_operator: str = "auto"
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, SwarmParams):
@@ -168,6 +173,7 @@ class EpisodeConfig:
         )
         set_(self, "divergence_threshold", threshold)
         _check_target(self.params, threshold)
+        check_linear_operator(self.linear_operator)
 
     @classmethod
     def from_kwargs(
@@ -207,14 +213,21 @@ class _CachedLinearizationModel(SwarmModel):
     writes into one.
     """
 
-    def __init__(self, params: SwarmParams, cache_tensors: bool = False) -> None:
-        super().__init__(params)
+    def __init__(
+        self, params: SwarmParams, linear_operator: str = "auto", cache_tensors: bool = False
+    ) -> None:
+        super().__init__(params, linear_operator)
         self._cache_tensors = cache_tensors
         self._cached_state: Any = None
         self._cached_matrix: Any = None
 
     def frozen_linearization(self, x: Any) -> Any:
-        if x is self._cached_state and self._cached_matrix is not None:
+        cached = self._cached_matrix
+        if (
+            x is self._cached_state
+            and cached is not None
+            and not isinstance(cached, LinearizationOperator)
+        ):
             return self._cached_matrix
         matrix = super().frozen_linearization(x)
         if isinstance(x, np.ndarray) and not x.flags.writeable:
@@ -223,6 +236,16 @@ class _CachedLinearizationModel(SwarmModel):
         elif self._cache_tensors and arrays.is_torch(x):
             self._cached_state, self._cached_matrix = x, matrix
         return matrix
+
+    def linearization_operator(self, x: np.ndarray, kind: str = "frozen") -> LinearizationOperator:
+        # the matrix-free L(x) (large N), cached like the matrix (it holds no mutable state)
+        cached = self._cached_matrix
+        if x is self._cached_state and getattr(cached, "kind", None) == kind:
+            return cached
+        operator = super().linearization_operator(x, kind)
+        if isinstance(x, np.ndarray) and not x.flags.writeable:
+            self._cached_state, self._cached_matrix = x, operator
+        return operator
 
 
 def start_positions(
@@ -359,7 +382,7 @@ class SwarmEpisode:
             config.integrator, jacobian=config.jacobian, phi_method=config.phi_method
         )
         self.params = config.params
-        self.model: SwarmModel = _CachedLinearizationModel(self.params)
+        self.model: SwarmModel = _CachedLinearizationModel(self.params, config.linear_operator)
         self.dt = config.dt
         self.positions: np.ndarray | None = None
         self.step_index = 0
@@ -429,7 +452,7 @@ class SwarmEpisode:
             # target and gamma are cost parameters: a new target keeps the dynamics model
             # (and its kernel); only a change of the dynamics would rebuild it.
             if not same_dynamics(params, self.params):
-                self.model = _CachedLinearizationModel(params)
+                self.model = _CachedLinearizationModel(params, self.config.linear_operator)
             self.params = params
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()

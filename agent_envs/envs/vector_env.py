@@ -208,7 +208,9 @@ class SwarmVectorEnv(VectorEnv):
 
         params = self.config.params
         n, d = params.n_agents, params.dim
-        self.model = _CachedLinearizationModel(params, cache_tensors=True)
+        self.model = _CachedLinearizationModel(
+            params, self.config.linear_operator, cache_tensors=True
+        )
         self.phi_method = single_env_phi_method(self.config)
         self.integrator: Integrator = make_integrator(
             self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
