@@ -256,12 +256,15 @@ def trial_dirname(trial: Any) -> str:
 # ---------------------------------------------------------------------------------------- Ray
 
 
-def start_ray(config: SweepConfig) -> None:
-    """`ray.init`: join `config.address`, or start a local instance with `config.num_cpus`."""
+def start_ray(config: SweepConfig) -> bool:
+    """`ray.init`: join `config.address`, or start a local instance with `config.num_cpus`.
+
+    Returns False when Ray was already initialized in this process (nothing started).
+    """
     import ray
 
     if ray.is_initialized():
-        return
+        return False
     env = {"env_vars": {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}}
     if config.address:
         ray.init(address=config.address, runtime_env=env, log_to_driver=False)
@@ -272,6 +275,7 @@ def start_ray(config: SweepConfig) -> None:
             runtime_env=env,
             log_to_driver=False,
         )
+    return True
 
 
 def run_tuner(config: SweepConfig, trials: list[Trial], out: Path):
@@ -291,7 +295,9 @@ def run_tuner(config: SweepConfig, trials: list[Trial], out: Path):
                 "trial": tune.grid_search([t.to_dict() for t in trials]),
                 "out": str(out),
             },
-            tune_config=tune.TuneConfig(trial_dirname_creator=trial_dirname),
+            tune_config=tune.TuneConfig(
+                trial_name_creator=trial_dirname, trial_dirname_creator=trial_dirname
+            ),
             run_config=tune.RunConfig(
                 name=TUNE_NAME,
                 storage_path=str(out),
@@ -375,10 +381,16 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
         f"{len(trials) - n_learn} reference trials; output {out}",
         flush=True,
     )
-    start_ray(config)
+    started_ray = start_ray(config)
     ray_started = time.perf_counter()
-    grid = run_tuner(config, trials, out)
-    tune_done = time.perf_counter()
+    try:
+        grid = run_tuner(config, trials, out)
+        tune_done = time.perf_counter()
+    finally:
+        if started_ray:
+            import ray
+
+            ray.shutdown()
     missing = [t.trial_id for t in trials if not _finished_evaluation(evaluation_dir(t, out), t)]
     if grid.num_errors or missing:
         errors = [str(r.error).splitlines()[0] for r in grid if r.error is not None][:3]

@@ -1,0 +1,293 @@
+"""`agent-envs sweep`: the grid without Ray, the across-seed statistics on hand-computable
+examples, and (slow) the smoke sweep on a local Ray instance."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from agent_envs.training.config import TrainConfig
+from agent_envs.training.seed_statistics import (
+    PolicyScores,
+    across_seed_table,
+    improvement_interval,
+    iqm,
+    iqm_interval,
+    probability_of_improvement,
+    scores_from_costs,
+)
+from agent_envs.training.sweep_grid import (
+    LEARNER,
+    PRESETS,
+    REFERENCE,
+    GridOptions,
+    Trial,
+    expand_grid,
+    training_vec_env_choices,
+)
+
+# ------------------------------------------------------------------------------- the grid
+
+
+def test_smoke_grid_is_two_learner_trials_and_the_three_references():
+    trials = expand_grid(PRESETS["smoke"], runs_dir="/x/runs")
+    learners = [t for t in trials if t.kind == LEARNER]
+    references = [t for t in trials if t.kind == REFERENCE]
+    assert [(t.policy, t.seed) for t in learners] == [("ppo", 0), ("ppo", 1)]
+    assert sorted(t.policy for t in references) == ["proportional", "turnpike", "zero"]
+    assert {t.trial_id for t in trials} == {
+        "main__ppo__0",
+        "main__ppo__1",
+        "main__turnpike",
+        "main__proportional",
+        "main__zero",
+    }
+    for t in learners:
+        config = TrainConfig.from_dict(t.train).validate()
+        assert config.run_name == t.trial_id and config.out == "/x/runs"
+        assert config.env_kwargs == {"n_agents": 5, "n_steps": 5} == t.eval_env_kwargs
+        assert config.timesteps == 256 and config.seed == t.seed
+        assert not config.progress_bar
+    assert all(t.test_seeds == (10000, 10001, 10002, 10003, 10004) for t in trials)
+
+
+def test_trial_round_trips_through_json():
+    for trial in expand_grid(PRESETS["smoke"]):
+        assert Trial.from_dict(json.loads(json.dumps(trial.to_dict()))) == trial
+
+
+def test_grid_options_change_seeds_budget_and_test_episodes():
+    options = GridOptions(seeds=(3, 4, 5), timesteps_scale=0.5, test_episodes=3)
+    trials = expand_grid(PRESETS["smoke"], options)
+    learners = [t for t in trials if t.kind == LEARNER]
+    assert [t.seed for t in learners] == [3, 4, 5]
+    assert {t.train["timesteps"] for t in learners} == {128}
+    assert all(len(t.test_seeds) == 3 for t in trials)
+
+
+@pytest.mark.parametrize(
+    ("options", "flag"),
+    [
+        (GridOptions(learners=("dqn",)), "--learners"),
+        (GridOptions(settings=("nope",)), "--settings"),
+        (GridOptions(seeds=(0, 0)), "--seeds"),
+        (GridOptions(seeds=(-1,)), "--seeds"),
+        (GridOptions(timesteps_scale=0.0), "--timesteps-scale"),
+        (GridOptions(test_episodes=1), "--test-episodes"),
+        (GridOptions(vec_env="threads"), "--vec-env"),
+    ],
+)
+def test_bad_grid_options_name_the_option(options, flag):
+    with pytest.raises(ValueError, match=flag):
+        expand_grid(PRESETS["smoke"], options)
+
+
+def test_paper_preset_definition():
+    preset = PRESETS["paper"]
+    assert preset.env_kwargs == {
+        "n_agents": 100,
+        "n_steps": 50,
+        "epsilon": 0.05,
+        "alpha": 0.1,
+        "sigma": 0.01,
+        "horizon": 1.0,
+        "target": 0.7,
+        "integrator": "serb",
+        "n_paths": 20,
+    }
+    assert preset.references == ("optimal", "mpc", "turnpike", "proportional", "zero")
+    assert len(preset.seeds) >= 3
+    if preset.vec_env not in training_vec_env_choices():
+        with pytest.raises(ValueError, match="--vec-env"):
+            expand_grid(preset)
+    trials = expand_grid(preset, GridOptions(vec_env="dummy"))
+    learners = [t for t in trials if t.kind == LEARNER]
+    main = {(t.policy, t.seed) for t in learners if t.setting == "main"}
+    assert main == {(a, s) for a in ("ppo", "sac", "td3", "ppo-shared") for s in preset.seeds}
+    by_setting = {t.setting: t for t in learners}
+    assert by_setting["eps1"].train["env_kwargs"]["epsilon"] == 1.0
+    em = by_setting["em-to-serb"]
+    assert em.train["env_kwargs"]["integrator"] == "em"
+    assert em.eval_env_kwargs["integrator"] == "serb"
+    shared = next(t for t in learners if t.policy == "ppo-shared")
+    assert shared.train["env_id"] == "agent_envs.swarm_v0" and shared.train["algo"] == "ppo"
+    # train-on-EM is evaluated on the main env: the main setting's reference trials serve both
+    references = [t for t in trials if t.kind == REFERENCE]
+    for ref in references:
+        if ref.setting == "main":
+            assert ref.settings == ("main", "em-to-serb")
+    from agent_envs.baselines import BASELINES
+
+    wanted = [r for r in preset.references if r in BASELINES]
+    assert sorted(t.policy for t in references if t.setting == "main") == sorted(wanted)
+
+
+@pytest.mark.parametrize(("algo", "learner"), [("ppo", "ppo"), ("sac", "sac"), ("td3", "td3")])
+def test_paper_hyperparameters_are_rl_zoo3_pendulum_entries(algo, learner):
+    """Every key of rl-zoo3's tuned Pendulum-v1 entry is in the preset with the zoo's value,
+    except the budget, the buffer size (the whole budget) and the zoo-only keys."""
+    yaml = pytest.importorskip("yaml")
+    rl_zoo3 = pytest.importorskip("rl_zoo3")
+    path = Path(rl_zoo3.__file__).parent / "hyperparams" / f"{algo}.yml"
+    zoo = yaml.safe_load(path.read_text())["Pendulum-v1"]
+    preset = {lr.name: lr for lr in PRESETS["paper"].learners}[learner]
+    for key, value in zoo.items():
+        if key in ("n_timesteps", "policy", "n_envs", "buffer_size"):
+            continue
+        if key == "policy_kwargs":
+            value = eval(value, {"dict": dict})  # the zoo writes "dict(net_arch=[400, 300])"
+        assert preset.hyperparams[key] == value, key
+    if "n_envs" in zoo:
+        assert preset.n_envs == zoo["n_envs"]
+    if "buffer_size" in preset.hyperparams:
+        assert preset.hyperparams["buffer_size"] >= preset.timesteps
+
+
+# ---------------------------------------------------------------------------- statistics
+
+
+def test_iqm_hand_computed():
+    """Costs 1..7 and an outlier 100 over 2 seeds x 4 episodes: the IQM drops the lowest two
+    and highest two of the 8 values, mean(3, 4, 5, 6) = 4.5; the mean is 16."""
+    costs = np.array([[1.0, 2.0, 3.0, 4.0], [5.0, 6.0, 7.0, 100.0]])
+    scores = scores_from_costs(costs)
+    assert iqm(scores) == pytest.approx(-4.5)
+    table = across_seed_table({"p": PolicyScores(costs, np.zeros_like(costs, bool))}, [])
+    assert table.loc[0, "iqm_cost"] == pytest.approx(4.5)
+    assert table.loc[0, "mean_cost"] == pytest.approx(16.0)
+
+
+def test_iqm_agrees_with_rliable():
+    from rliable import metrics
+
+    scores = np.random.default_rng(1).normal(size=(3, 7))
+    assert iqm(scores) == pytest.approx(float(metrics.aggregate_iqm(scores)))
+
+
+def test_diverged_episode_counts_as_the_worst():
+    costs = np.array([[1.0, 2.0, 3.0, 0.5]])
+    diverged = np.array([[False, False, False, True]])  # stopped early: its cost looks cheap
+    scores = scores_from_costs(costs, diverged)
+    assert scores[0, 3] == -np.inf
+    # trimmed: the IQM of (-inf, -3, -2, -1) keeps (-3, -2)
+    assert iqm(scores) == pytest.approx(-2.5)
+
+
+def test_probability_of_improvement_hand_computed():
+    """Episode 1: learner seeds cost 1 and 2 vs the reference's 2: a win and a tie (0.75).
+    Episode 2: 3 and 5 vs 4: a win and a loss (0.5). Mean 0.625."""
+    learner = scores_from_costs(np.array([[1.0, 3.0], [2.0, 5.0]]))
+    reference = scores_from_costs(np.array([[2.0, 4.0]]))
+    assert probability_of_improvement(learner, reference) == pytest.approx(0.625)
+    p, low, high = improvement_interval(learner, reference, np.random.default_rng(0), 2000)
+    assert p == pytest.approx(0.625)
+    # resampling the learner's 2 seeds per episode: each episode's value is in {0.5, 0.75, 1}
+    # and {0, 0.5, 1}; the extremes are reachable
+    assert low == pytest.approx(0.25) and high == pytest.approx(1.0)
+
+
+def test_stratified_bootstrap_resamples_runs_within_tasks():
+    """Seeds that agree on every episode leave nothing to resample within an episode: the
+    stratified interval has zero width (an i.i.d. bootstrap over all cells would not)."""
+    scores = np.array([[1.0, 2.0, 3.0, 4.0], [1.0, 2.0, 3.0, 4.0]])
+    point, low, high = iqm_interval(scores, np.random.default_rng(0), 1000)
+    assert point == low == high == pytest.approx(2.5)
+
+
+def test_bootstrap_interval_contains_the_point_and_is_reproducible():
+    scores = np.random.default_rng(2).normal(size=(4, 10))
+    a = iqm_interval(scores, np.random.default_rng(5), 2000)
+    b = iqm_interval(scores, np.random.default_rng(5), 2000)
+    assert a == b
+    assert a[1] < a[0] < a[2]
+
+
+def test_one_run_has_a_zero_width_interval():
+    scores = np.array([[1.0, 5.0, 2.0]])
+    assert iqm_interval(scores, np.random.default_rng(0)) == (iqm(scores),) * 3
+
+
+def test_probability_of_improvement_needs_the_same_tasks():
+    with pytest.raises(ValueError, match="same tasks"):
+        probability_of_improvement(np.zeros((2, 3)), np.zeros((1, 4)))
+
+
+# ------------------------------------------------------------------------------------ CLI
+
+
+def test_sweep_dry_run_lists_the_trials(capsys):
+    from agent_envs.training.cli import main
+
+    assert main(["sweep", "--preset", "smoke", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "main__ppo__0: train ppo" in out and "main__zero: evaluate zero" in out
+
+
+def test_sweep_bad_seeds_is_a_clean_error(capsys):
+    from agent_envs.training.cli import main
+
+    assert main(["sweep", "--preset", "smoke", "--dry-run", "--seeds", "a,b"]) == 2
+    assert "--seeds" in capsys.readouterr().err
+
+
+def test_resume_needs_a_started_sweep_and_a_second_start_needs_resume(tmp_path):
+    from agent_envs.training.sweep import SweepConfig, _load_or_save_grid
+
+    out = tmp_path / "sw"
+    with pytest.raises(ValueError, match="--resume"):
+        _load_or_save_grid(SweepConfig(preset="smoke", out=str(out), resume=True), out)
+    _, trials = _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
+    assert (out / "sweep.json").is_file() and len(trials) == 5
+    with pytest.raises(ValueError, match="--resume"):
+        _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
+    # the resumed grid is the saved one, whatever grid options come with --resume
+    resumed, again = _load_or_save_grid(
+        SweepConfig(preset="smoke", out=str(out), resume=True, seeds="7"), out
+    )
+    assert again == trials and resumed.seeds is None
+
+
+# ------------------------------------------------------------------------- smoke (slow)
+
+
+@pytest.mark.slow
+def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
+    pytest.importorskip("ray")
+    from agent_envs.training.cli import main
+    from agent_envs.training.results import EvaluationResults
+
+    out = tmp_path / "sweep"
+    args = ["sweep", "--preset", "smoke", "--out", str(out), "--num-cpus", "2"]
+    assert main(args) == 0
+    report = (out / "report" / "report.md").read_text()
+    for heading in ("Results per policy", "Across training seeds", "Learning curves"):
+        assert heading in report
+    assert "ppo (seed 0)" in report and "ppo (seed 1)" in report
+    assert (out / "report" / "learning_curves_main.png").stat().st_size > 0
+    costs = []
+    for seed in (0, 1):
+        run = out / "runs" / f"main__ppo__{seed}"
+        for name in ("config.json", "learning_curve.csv", "summary.json", "sweep_trial.log"):
+            assert (run / name).is_file(), name
+        assert any((run / "tb").rglob("events.out.tfevents.*"))
+        assert json.loads((run / "summary.json").read_text())["timesteps"] >= 256
+        episodes = EvaluationResults.load(run / "test_evaluation").episodes
+        assert list(episodes["seed"]) == list(range(10000, 10005))
+        costs.append(episodes["total_cost"].to_numpy())
+    # the report's IQM is the IQM of the two runs' test costs
+    stats = pd.read_csv(out / "report" / "across_seeds.csv").set_index("policy")
+    assert stats.loc["ppo", "runs"] == 2 and stats.loc["ppo", "episodes"] == 10
+    assert stats.loc["ppo", "iqm_cost"] == pytest.approx(-iqm(-np.stack(costs)))
+    assert set(stats.index) == {"ppo", "turnpike", "proportional", "zero"}
+    assert not any(Path.cwd().glob("ray_results"))
+
+    # resuming a finished sweep trains nothing again and rewrites the report
+    before = json.loads((out / "runs" / "main__ppo__0" / "summary.json").read_text())
+    assert main([*args, "--resume"]) == 0
+    after = json.loads((out / "runs" / "main__ppo__0" / "summary.json").read_text())
+    assert after == before
+    assert sorted(p.name for p in (out / "runs").iterdir()) == ["main__ppo__0", "main__ppo__1"]
