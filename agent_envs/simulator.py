@@ -18,7 +18,18 @@ import numpy as np
 
 from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
 from agent_envs.integrators import DEFAULT_JACOBIAN, Integrator, make_integrator
-from agent_envs.params import SwarmParams, check_int, check_positive
+from agent_envs.params import SwarmParams
+from agent_envs.validation import (
+    DIVERGENCE_THRESHOLD_RANGE,
+    MAX_BATCH_SIZE,
+    MAX_PATHS,
+    MAX_STEPS,
+    check_int,
+    check_positive,
+    check_seed,
+    check_size,
+    real_array,
+)
 
 #: A state is flagged as diverged when it is non-finite or max |x| exceeds this.
 DEFAULT_DIVERGENCE_THRESHOLD = 1e4
@@ -27,15 +38,17 @@ ControlSpec = None | np.ndarray | Callable[[float, np.ndarray], np.ndarray]
 
 
 def as_positions(positions: Any, n_agents: int, dim: int, name: str = "initial_positions"):
-    """Validate positions of shape (N,) (only for d = 1) or (N, d); return (N, d) floats."""
-    arr = np.asarray(positions, dtype=float)
+    """Validate positions of shape (N,) (only for d = 1) or (N, d); return (N, d) floats.
+
+    Entries must be finite real numbers (`agent_envs.validation.real_array`: strings, bools and
+    complex numbers raise `TypeError` naming `name`).
+    """
+    arr = real_array(name, positions)
     if arr.ndim == 1 and dim == 1:
         arr = arr[:, None]
     if arr.shape != (n_agents, dim):
         allowed = f"({n_agents},) or ({n_agents}, 1)" if dim == 1 else f"({n_agents}, {dim})"
-        raise ValueError(f"{name} must have shape {allowed}, got {np.shape(positions)}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite")
+        raise ValueError(f"{name} must have shape {allowed}, got {arr.shape}")
     return arr
 
 
@@ -80,7 +93,7 @@ def _control_at(control: ControlSpec, n: int, t: float, x: np.ndarray, name: str
     if control is None:
         return None
     if callable(control):
-        u = np.asarray(control(t, x), dtype=float)
+        u = real_array(f"{name} at step {n}", control(t, x))
     else:
         u = control[n]
     try:
@@ -98,7 +111,7 @@ def _control_at(control: ControlSpec, n: int, t: float, x: np.ndarray, name: str
 def _validate_control_array(control: Any, n_steps: int, n_agents: int, dim: int, name: str):
     if control is None or callable(control):
         return control
-    arr = np.asarray(control, dtype=float)
+    arr = real_array(name, control)
     if dim == 1 and arr.ndim == 2:
         arr = arr[..., None]
     if arr.ndim not in (3, 4) or arr.shape[0] != n_steps or arr.shape[-2:] != (n_agents, dim):
@@ -146,10 +159,7 @@ def _generators(seed: int | np.random.Generator | None):
     if isinstance(seed, np.random.Generator):
         init_rng, noise_rng = seed.spawn(2)
     else:
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))):
-            raise TypeError(f"seed must be an int, a numpy Generator or None, got {seed!r}")
-        if seed is not None and seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed}")
+        seed = check_seed(seed)  # or a numpy Generator, handled above
         init_ss, noise_ss = np.random.SeedSequence(seed).spawn(2)
         init_rng, noise_rng = np.random.default_rng(init_ss), np.random.default_rng(noise_ss)
     return init_rng, noise_rng
@@ -176,21 +186,31 @@ def simulate(
         integrator: a registry name ("em", "ee", "heun", "erb", "serb") or an Integrator.
         jacobian: "frozen" (default, L(x)) or "exact" (dF/dx), for "erb"/"serb"; with an
             integrator instance, leave it None (the instance's own choice is used).
-        n_steps: m >= 1; tau = T / m.
-        n_paths: number of Brownian paths simulated together (all from the same start).
+        n_steps: 1 <= m <= 1e9; tau = T / m.
+        n_paths: 1 <= n_paths <= 1e6 (n_paths N d <= 1e8), the number of Brownian paths
+            simulated together (all from the same start).
         seed: int, `numpy.random.Generator` or None.
-        initial_positions: (N,) or (N, d); default uniform on [-1, 1]^d drawn from the seed.
+        initial_positions: (N,) or (N, d), finite, inside `divergence_threshold`; default
+            uniform on [-1, 1]^d drawn from the seed.
         control: None, an array (n_steps, N, d) or (n_steps, n_paths, N, d), or a callable
             ``control(t, x) -> u`` with x of shape (n_paths, N, d) and u broadcastable to it.
         control_rate: du/dt in the same forms, for the phi2 term of `eq:serbaut` (optional).
         phi_method: "auto" (default), "expm", "eigh" or "krylov" (see `phi_action`).
-        divergence_threshold: max |x| beyond which a path counts as diverged.
+        divergence_threshold: R in [1, 1e6], max |x| beyond which a path counts as diverged.
+
+    Bad arguments raise `TypeError`/`ValueError` naming them and their accepted ranges (see
+    `agent_envs.validation`). Controls are checked for a real dtype and finiteness; a control
+    so large that the state leaves R is reported by `diverged`, not rejected.
     """
     if not isinstance(params, SwarmParams):
         raise TypeError(f"params must be a SwarmParams, got {type(params).__name__}")
-    n_steps = check_int("n_steps", n_steps, 1)
-    n_paths = check_int("n_paths", n_paths, 1)
-    divergence_threshold = check_positive("divergence_threshold", divergence_threshold)
+    n_steps = check_int("n_steps", n_steps, 1, MAX_STEPS)
+    n_paths = check_int("n_paths", n_paths, 1, MAX_PATHS)
+    state_size = params.n_agents * params.dim
+    check_size("n_paths", n_paths, n_paths * state_size, MAX_BATCH_SIZE, "n_paths * N * d")
+    divergence_threshold = check_positive(
+        "divergence_threshold", divergence_threshold, DIVERGENCE_THRESHOLD_RANGE
+    )
     if isinstance(integrator, Integrator):
         scheme = integrator
         for name, given in (("jacobian", jacobian), ("phi_method", phi_method)):
@@ -214,6 +234,11 @@ def simulate(
         x0 = uniform_positions(init_rng, n, d)
     else:
         x0 = as_positions(initial_positions, n, d)
+        if np.any(diverged_paths(x0, divergence_threshold)):
+            raise ValueError(
+                "initial_positions must lie inside the divergence threshold "
+                f"(|x| <= {divergence_threshold:g})"
+            )
 
     dt = params.horizon / n_steps
     times = np.linspace(0.0, params.horizon, n_steps + 1)

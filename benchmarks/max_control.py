@@ -21,26 +21,20 @@ SERB (the paper's) and EM; n_paths = 1 (the env's default) and 20 (the paper's).
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
 from agent_envs import SwarmModel, SwarmParams, simulate
+from agent_envs.baselines import DEFAULT_BETA, DEFAULT_DELTA, turnpike_time
 from agent_envs.envs.episode import DEFAULT_MAX_CONTROL
 
-BETA = 12.0
-DELTA = 2e-4
+BETA = DEFAULT_BETA
+DELTA = DEFAULT_DELTA
 SETTINGS = (
     ("symmetric", 0.7),
     ("symmetric", -1.7),
     ("nonsymmetric", 2.3),
 )
-
-
-def turnpike_time(x0: np.ndarray, target: float, beta: float, delta: float, horizon: float):
-    """eq:tptime, clamped to [0, T]: ln(delta / ||x0 - xbar||^2) / (-2 beta)."""
-    dist2 = float(np.sum((x0 - target) ** 2))
-    return min(max(math.log(delta / dist2) / (-2.0 * beta), 0.0), horizon)
 
 
 def peak_control(

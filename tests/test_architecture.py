@@ -72,7 +72,7 @@ def test_import_contract(tmp_path):
         timeout=120,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "1 kept, 0 broken" in proc.stdout
+    assert "2 kept, 0 broken" in proc.stdout
 
 
 def test_core_imports_no_torch_and_steps_the_env():
@@ -122,3 +122,21 @@ def test_bare_layer_imports_are_banned():
     )
     assert proc.returncode == 1
     assert proc.stdout.count("TID251") == 2, proc.stdout
+
+
+def test_cli_builds_light_subcommands_without_torch():
+    """The CLI imports a subcommand's modules only when it is chosen: the reproduction of the
+    uncontrolled runs and `evaluate --help` need neither torch nor SB3."""
+    code = (
+        "import sys\n"
+        "from agent_envs.training import cli\n"
+        "for name in ('reproduce-uncontrolled', 'evaluate', 'report'):\n"
+        "    cli.build_parser(name)\n"
+        "import agent_envs.training.experiments.uncontrolled\n"
+        "bad = sorted(m for m in ('torch', 'stable_baselines3') if m in sys.modules)\n"
+        "assert not bad, bad\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT
+    )
+    assert proc.returncode == 0, proc.stderr

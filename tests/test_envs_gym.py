@@ -109,12 +109,17 @@ def test_stable_baselines3_check_env():
 
 def test_step_returns_python_types():
     env = SwarmEnv(**SMALL)
-    obs, info = env.reset(seed=1)
-    assert set(info) == {"positions", "time", "diverged"}
+    obs, reset_info = env.reset(seed=1)
+    keys = {"positions", "control", "time", "running_cost", "diverged"}
+    assert set(reset_info) == keys  # the same keys as a step's info (TorchRL needs them)
+    assert reset_info["running_cost"] == 0.0 and not np.any(reset_info["control"])
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
     assert obs.dtype == np.float32 and obs in env.observation_space
-    assert set(info) == {"positions", "control", "time", "running_cost", "diverged"}
+    assert set(info) == keys
+    for key in keys:
+        assert np.shape(info[key]) == np.shape(reset_info[key])
+        assert np.asarray(info[key]).dtype == np.asarray(reset_info[key]).dtype
     assert info["positions"].shape == (1, 6, 1) and info["control"].shape == (6, 1)
     assert type(info["diverged"]) is bool
     assert info["time"] == pytest.approx(env.dt)

@@ -349,6 +349,8 @@ def test_cli_evaluate_report_and_reproduce(tmp_path, capsys):
     assert cli_main(["evaluate", "--env-kwargs", "n_agents=5", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("agent-envs evaluate: error: --env-kwargs must be a JSON object")
+    assert cli_main(["report", str(tmp_path / "missing"), "--out", str(tmp_path / "r")]) == 2
+    assert "missing does not exist" in capsys.readouterr().err
     assert cli_main(["report", str(out), "--out", str(tmp_path / "rep")]) == 0
     assert "ratio to turnpike" in (tmp_path / "rep" / "report.md").read_text()
     rt = tmp_path / "rt"

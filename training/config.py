@@ -29,6 +29,7 @@ from agent_envs.training.defaults import (
     PETTINGZOO_ENV_ID,
     check_algo,
     check_env_id,
+    parse_env_kwargs,
     parse_json_object,
 )
 
@@ -229,7 +230,7 @@ class TrainConfig:
     )
 
     def __post_init__(self) -> None:
-        self.env_kwargs = parse_json_object(self.env_kwargs, "--env-kwargs")
+        self.env_kwargs = parse_env_kwargs(self.env_kwargs)
         self.hyperparams = parse_json_object(self.hyperparams, "--hyperparams")
 
     def validate(self) -> TrainConfig:

@@ -192,6 +192,8 @@ class EvaluationResults:
     def load(cls, path: str | os.PathLike) -> EvaluationResults:
         """Load what `save` wrote (a folder, or its episodes.csv / meta.json)."""
         p = Path(path)
+        if not p.exists():
+            raise FileNotFoundError(f"{p} does not exist (expected an evaluation folder)")
         folder = p if p.is_dir() else p.parent
         if not (folder / "episodes.csv").is_file():
             raise FileNotFoundError(f"no episodes.csv in {folder} (not an evaluation folder)")

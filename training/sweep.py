@@ -49,19 +49,18 @@ from agent_envs.training.config import option_field
 from agent_envs.training.sweep_grid import (
     LEARNER,
     PRESETS,
+    TRIAL_LOG,
     GridOptions,
     Trial,
+    evaluation_dir,
     expand_grid,
+    learner_run_dir,
 )
 
 #: what `OUT/sweep.json` holds: the options and the expanded grid of the first start
 SWEEP_FILE = "sweep.json"
 #: Tune's experiment folder under OUT
 TUNE_NAME = "tune"
-#: a learner trial's log file in its run folder
-TRIAL_LOG = "sweep_trial.log"
-#: a learner trial's held-out evaluation, in its run folder
-TEST_EVALUATION = "test_evaluation"
 
 
 def _ints(text: str | None, option: str) -> tuple[int, ...] | None:
@@ -153,21 +152,6 @@ class SweepConfig:
 
 
 # ------------------------------------------------------------------------------------- trials
-
-
-def learner_run_dir(trial: Trial, out: Path) -> Path:
-    return out / "runs" / str(trial.train["run_name"])
-
-
-def reference_dir(trial: Trial, out: Path) -> Path:
-    return out / "references" / trial.setting / trial.policy
-
-
-def evaluation_dir(trial: Trial, out: Path) -> Path:
-    """Where a trial's held-out evaluation is saved."""
-    if trial.kind == LEARNER:
-        return learner_run_dir(trial, out) / TEST_EVALUATION
-    return reference_dir(trial, out)
 
 
 def _finished_evaluation(folder: Path, trial: Trial) -> bool:

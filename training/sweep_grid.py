@@ -27,6 +27,7 @@ import dataclasses
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from agent_envs.training.defaults import (
@@ -39,6 +40,10 @@ from agent_envs.training.defaults import (
 
 LEARNER = "learner"
 REFERENCE = "reference"
+#: a trial's log file (in its run folder, or its reference folder)
+TRIAL_LOG = "sweep_trial.log"
+#: a learner trial's held-out evaluation, in its run folder
+TEST_EVALUATION = "test_evaluation"
 
 
 @dataclass(frozen=True)
@@ -448,6 +453,26 @@ def expand_grid(
     return trials + list(references_by_env.values())
 
 
+# ------------------------------------------------------------------------ where trials write
+
+
+def learner_run_dir(trial: Trial, out: Path) -> Path:
+    """The run folder of a learner trial under the sweep's output folder `out`."""
+    return out / "runs" / str(trial.train["run_name"])
+
+
+def reference_dir(trial: Trial, out: Path) -> Path:
+    """The folder of a reference trial's evaluation."""
+    return out / "references" / trial.setting / trial.policy
+
+
+def evaluation_dir(trial: Trial, out: Path) -> Path:
+    """Where a trial's held-out evaluation is saved."""
+    if trial.kind == LEARNER:
+        return learner_run_dir(trial, out) / TEST_EVALUATION
+    return reference_dir(trial, out)
+
+
 def learners_by_name(preset: SweepPreset) -> dict[str, SweepLearner]:
     return {learner.name: learner for learner in preset.learners}
 
@@ -464,6 +489,8 @@ __all__ = [
     "SweepPreset",
     "Trial",
     "available_references",
+    "evaluation_dir",
     "expand_grid",
+    "learner_run_dir",
     "run_name",
 ]

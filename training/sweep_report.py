@@ -34,7 +34,7 @@ def model_label(trial: Trial) -> str:
 def setting_results(trials: list[Trial], setting: str, out: Path):
     """The evaluations of one setting merged into one `EvaluationResults` (models renamed)."""
     from agent_envs.training.results import EvaluationResults, merge_results
-    from agent_envs.training.sweep import evaluation_dir
+    from agent_envs.training.sweep_grid import evaluation_dir
 
     parts = []
     for trial in trials:
@@ -54,7 +54,7 @@ def policy_scores(trials: list[Trial], setting: str, out: Path) -> dict[str, Any
     """{learner or reference: PolicyScores (runs = training seeds, tasks = test seeds)}."""
     from agent_envs.training.results import EvaluationResults
     from agent_envs.training.seed_statistics import PolicyScores
-    from agent_envs.training.sweep import evaluation_dir
+    from agent_envs.training.sweep_grid import evaluation_dir
 
     rows: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     for trial in trials:
@@ -84,7 +84,7 @@ def plot_learning_curve_bands(
 
     from agent_envs.training.callbacks import read_learning_curve
     from agent_envs.training.defaults import is_multiagent
-    from agent_envs.training.sweep import learner_run_dir
+    from agent_envs.training.sweep_grid import learner_run_dir
 
     curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     references: dict[str, float] = {}
@@ -136,7 +136,7 @@ def plot_learning_curve_bands(
 def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
     """One row per learner trial: budget, wall time, best validation cost."""
     from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.sweep import learner_run_dir
+    from agent_envs.training.sweep_grid import learner_run_dir
 
     rows = []
     for trial in trials:

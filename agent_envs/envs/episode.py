@@ -41,7 +41,7 @@ from agent_envs.integrators import (
     Integrator,
     make_integrator,
 )
-from agent_envs.params import SwarmParams, check_int, check_positive
+from agent_envs.params import SwarmParams
 from agent_envs.simulator import (
     DEFAULT_DIVERGENCE_THRESHOLD,
     as_positions,
@@ -49,6 +49,17 @@ from agent_envs.simulator import (
     check_phi_method_fits_kernel,
     diverged_paths,
     uniform_positions,
+)
+from agent_envs.validation import (
+    DIVERGENCE_THRESHOLD_RANGE,
+    MAX_BATCH_SIZE,
+    MAX_CONTROL_RANGE,
+    MAX_PATHS,
+    MAX_STEPS,
+    check_int,
+    check_positive,
+    check_size,
+    real_array,
 )
 
 #: Default number of time steps m (the paper's turnpike experiments).
@@ -68,7 +79,8 @@ def reset_options(options: Any, strict: bool) -> dict[str, Any]:
 
     With `strict`, an unknown key (a typo such as "initial_position") raises `ValueError`
     naming it; otherwise unknown keys are ignored (PettingZoo's API tests pass
-    ``{"options": 1}`` and expect it to be accepted).
+    ``{"options": 1}`` and expect it to be accepted). The values are checked by
+    `SwarmEpisode.reset` (errors name ``initial_positions`` or ``target``).
     """
     if options is None:
         options = {}
@@ -96,9 +108,22 @@ ENV_OPTION_NAMES = (
 def _check_target(params: SwarmParams, threshold: float) -> None:
     if np.any(np.abs(params.target_vector) >= threshold):
         raise ValueError(
-            f"target must lie inside the divergence threshold (|target| < {threshold}), "
+            f"target must lie inside the divergence threshold (|target| < {threshold:g}), "
             f"got {params.target}"
         )
+
+
+def unexpected_keyword(owner: str, name: str, accepted: tuple[str, ...]) -> TypeError:
+    """Python's own error for an unknown keyword argument, with the accepted names as a note.
+
+    The message is exactly ``"<owner>() got an unexpected keyword argument '<name>'"``, the
+    form Python raises for a function call, because clients parse it (TorchRL's `GymEnv`
+    retries `gym.make` without ``render_mode`` or ``frameskip`` only on that message).
+    """
+    error = TypeError(f"{owner}() got an unexpected keyword argument {name!r}")
+    if hasattr(error, "add_note"):  # Python >= 3.11
+        error.add_note(f"the swarm envs take {', '.join(accepted)}")
+    return error
 
 
 @dataclass(frozen=True)
@@ -107,7 +132,11 @@ class EpisodeConfig:
 
     Build it with `EpisodeConfig.from_kwargs(**kwargs)`: the `SwarmParams` fields go to
     `params`, the rest are the fields below. A bad value raises `ValueError` (or `TypeError`)
-    naming the argument; an unknown name raises `TypeError`.
+    naming the argument and its range (`agent_envs.validation`); an unknown name raises
+    Python's standard `TypeError` ("... got an unexpected keyword argument 'x'").
+
+    Ranges: 1 <= n_steps <= 1e9; 1 <= n_paths <= 1e6 with n_paths N d <= 1e8;
+    0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it.
     """
 
     params: SwarmParams
@@ -125,21 +154,33 @@ class EpisodeConfig:
         make_integrator(self.integrator, jacobian=self.jacobian, phi_method=self.phi_method)
         check_phi_method_fits_kernel(self.params, self.integrator, self.jacobian, self.phi_method)
         set_ = object.__setattr__
-        set_(self, "n_steps", check_int("n_steps", self.n_steps, 1))
-        set_(self, "n_paths", check_int("n_paths", self.n_paths, 1))
-        set_(self, "max_control", check_positive("max_control", self.max_control))
-        threshold = check_positive("divergence_threshold", self.divergence_threshold)
+        set_(self, "n_steps", check_int("n_steps", self.n_steps, 1, MAX_STEPS))
+        n_paths = check_int("n_paths", self.n_paths, 1, MAX_PATHS)
+        state_size = self.params.n_agents * self.params.dim
+        check_size("n_paths", n_paths, n_paths * state_size, MAX_BATCH_SIZE, "n_paths * N * d")
+        set_(self, "n_paths", n_paths)
+        max_control = check_positive("max_control", self.max_control, MAX_CONTROL_RANGE)
+        set_(self, "max_control", max_control)
+        threshold = check_positive(
+            "divergence_threshold", self.divergence_threshold, DIVERGENCE_THRESHOLD_RANGE
+        )
         set_(self, "divergence_threshold", threshold)
         _check_target(self.params, threshold)
 
     @classmethod
-    def from_kwargs(cls, **kwargs: Any) -> EpisodeConfig:
-        """Split env keyword arguments into `SwarmParams` fields and env options."""
+    def from_kwargs(
+        cls, owner: str = "EpisodeConfig.from_kwargs", /, **kwargs: Any
+    ) -> EpisodeConfig:
+        """Split env keyword arguments into `SwarmParams` fields and env options.
+
+        `owner` names the callable in the `TypeError` for an unknown keyword (the env's
+        ``__init__``), as Python would.
+        """
         param_names = SwarmParams.field_names()
-        unknown = sorted(set(kwargs) - set(param_names) - set(ENV_OPTION_NAMES))
-        if unknown:
-            allowed = ", ".join((*param_names, *ENV_OPTION_NAMES, "render_mode"))
-            raise TypeError(f"unknown keyword argument(s) {unknown}; the swarm envs take {allowed}")
+        accepted = (*param_names, *ENV_OPTION_NAMES, "render_mode")
+        for name in kwargs:
+            if name not in param_names and name not in ENV_OPTION_NAMES:
+                raise unexpected_keyword(owner, name, accepted)
         params = SwarmParams(**{k: v for k, v in kwargs.items() if k in param_names})
         return cls(params=params, **{k: v for k, v in kwargs.items() if k not in param_names})
 
@@ -290,7 +331,7 @@ class SwarmEpisode:
                 )
         params = self.config.params
         if target is not None:
-            params = dataclasses.replace(params, target=target)
+            params = dataclasses.replace(params, target=target)  # checks and names `target`
             _check_target(params, self.config.divergence_threshold)
         if params != self.params:
             self.params = params
@@ -299,7 +340,10 @@ class SwarmEpisode:
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
         drift = self._mean_drift_at(x)
         if not np.all(np.isfinite(drift)):
-            raise ValueError("the interaction drift is not finite at the initial positions")
+            raise ValueError(
+                "kernel: the interaction drift is not finite at the initial positions (a user "
+                "kernel must return finite values there)"
+            )
         self.positions, self._mean_drift = x, drift
         self.step_index = 0
         self.diverged = False
@@ -354,18 +398,16 @@ class SwarmEpisode:
     def control_from_action(self, action: Any, name: str = "action") -> np.ndarray:
         """u = max_control * clip(action, -1, 1) as an (N, d) float64 array.
 
-        `action` must have N d entries, shaped (N d,) or (N, d) (or (N,) for d = 1); a NaN or
-        infinite entry raises `ValueError`, an entry outside [-1, 1] is clipped.
+        `action` must have N d entries, shaped (N d,) or (N, d) (or (N,) for d = 1), of a real
+        numeric dtype (`agent_envs.validation.real_array`): strings, bools and complex numbers
+        raise `TypeError` (a complex part is never dropped silently); an object array is
+        accepted when every entry is an int or a float. A NaN or infinite entry, or an int too
+        large for a float, raises `ValueError`; a finite entry outside [-1, 1] is clipped.
         """
         n, d = self.config.params.n_agents, self.config.params.dim
-        try:
-            arr = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"{name} must be an array of {n * d} real numbers: {exc}") from None
+        arr = real_array(name, action)
         if arr.shape not in ((n * d,), (n, d)):
             raise ValueError(f"{name} must have shape ({n * d},) or ({n}, {d}), got {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            raise ValueError(f"{name} must be finite, got NaN or inf entries")
         return self.config.max_control * np.clip(arr, -1.0, 1.0).reshape(n, d)
 
 

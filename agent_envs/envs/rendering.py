@@ -126,6 +126,18 @@ class SwarmRenderer:
             plt.pause(1.0 / self.fps)
         return None
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle/deepcopy without the matplotlib figure (its canvas does not survive a copy).
+
+        The recorded history is kept; the copy draws a new figure on its next `render()`.
+        """
+        state = self.__dict__.copy()
+        state["_figure"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+
     def close(self) -> None:
         """Release the figure (safe to call twice)."""
         if self._figure is not None and self.render_mode == "human":

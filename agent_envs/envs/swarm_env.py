@@ -25,6 +25,7 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
+from agent_envs.validation import check_seed
 
 ENV_ID = "agent_envs/Swarm-v0"
 
@@ -108,7 +109,9 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
 
     `positions` (n_paths, N, d) after the step, `control` (N, d) the applied u,
     `time` the time after the step, `running_cost` c(x^n, u^n), `diverged` (bool).
-    `reset` returns `positions`, `time` (0.0) and `diverged` (False).
+    `reset` returns the same keys (clients such as TorchRL build their specs from the reset
+    info): `positions`, `control` (zeros: nothing applied yet), `time` (0.0), `running_cost`
+    (0.0: nothing accrued yet) and `diverged` (False).
 
     ## Arguments
 
@@ -133,7 +136,10 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     | divergence_threshold | 1e4           | max |x| beyond which a step counts as diverged   |
     | render_mode          | None          | None, "rgb_array" or "human"                     |
 
-    Bad values raise `ValueError`/`TypeError` naming the argument.
+    Bad values raise `ValueError`/`TypeError` naming the argument and its accepted range (the
+    README's table; `agent_envs.validation` derives the ranges so that every accepted value
+    gives finite rewards and observations inside the spaces). An unknown keyword raises
+    Python's own `TypeError("SwarmEnv.__init__() got an unexpected keyword argument 'x'")`.
 
     ## Attributes (on `env.unwrapped`)
 
@@ -144,7 +150,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        self.config = EpisodeConfig.from_kwargs(**kwargs)
+        self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
         self.episode = SwarmEpisode(self.config)
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
@@ -169,13 +175,19 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
+        super().reset(seed=check_seed(seed))
         self.episode.reset(self.np_random, **reset_options(options, strict=True))
         if self._renderer is not None:
             self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)
             if self.render_mode == "human":
                 self.render()
-        info = {"positions": self.episode.positions.copy(), "time": 0.0, "diverged": False}
+        info = {
+            "positions": self.episode.positions.copy(),
+            "control": np.zeros((self.episode.n_agents, self.episode.dim)),
+            "time": 0.0,
+            "running_cost": 0.0,
+            "diverged": False,
+        }
         return self._observation(), info
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:

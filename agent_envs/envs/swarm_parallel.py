@@ -25,6 +25,7 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
+from agent_envs.validation import check_seed, real_array
 
 
 class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarray]):
@@ -40,7 +41,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
 
     Per agent `Box(-1, 1, (d,), float32)`; u_k = max_control * clip(action_k, -1, 1). Every
     live agent must act each step; a missing or unknown agent, a NaN/infinite entry or a
-    wrong shape raises `ValueError`. Out-of-range actions are clipped.
+    wrong shape raises `ValueError`, an action that is not real numbers (strings, bools,
+    complex numbers) raises `TypeError` naming the agent. Out-of-range actions are clipped.
 
     ## Observation Space
 
@@ -72,7 +74,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     ## Info (per agent)
 
     `time` (after the step), `running_cost` (the agent's term |x_k - xbar|^2 + gamma |u_k|^2,
-    mean over the paths), `diverged` (bool). Global quantities (positions of all paths, the
+    mean over the paths), `diverged` (bool). `reset` returns the same keys, with `time` and
+    `running_cost` 0.0 and `diverged` False. Global quantities (positions of all paths, the
     control) are on the env: `positions`, `last_control`.
     """
 
@@ -84,7 +87,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        self.config = EpisodeConfig.from_kwargs(**kwargs)
+        self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
         self.episode = SwarmEpisode(self.config)
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
@@ -145,8 +148,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        if seed is not None:
-            self._np_random, self._np_random_seed = seeding.np_random(seed)
+        if check_seed(seed) is not None:
+            self._np_random, self._np_random_seed = seeding.np_random(int(seed))
         # unknown keys ignored: PettingZoo's API tests pass {"options": 1}
         self.episode.reset(self.np_random, **reset_options(options, strict=False))
         self.agents = self.possible_agents[:]
@@ -155,7 +158,10 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)
             if self.render_mode == "human":
                 self.render()
-        infos = {agent: {"time": 0.0, "diverged": False} for agent in self.agents}
+        # the same keys as the step infos (TorchRL's PettingZooWrapper builds its specs here)
+        infos = {
+            agent: {"time": 0.0, "running_cost": 0.0, "diverged": False} for agent in self.agents
+        }
         return self._observations(), infos
 
     def _control(self, actions: dict[str, Any]) -> np.ndarray:
@@ -171,19 +177,25 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
                 f"{'...' if len(missing) > 5 else ''}, unknown {extra[:5]}"
             )
         n, d = self.config.params.n_agents, self.config.params.dim
-        try:
-            stacked = np.asarray([actions[a] for a in self.possible_agents], dtype=np.float64)
-        except (TypeError, ValueError):
-            stacked = None
-        if stacked is None or stacked.shape not in ((n, d), (n,) if d == 1 else (n, d)):
-            for agent in self.possible_agents:  # slow path: name the offending agent
-                try:
-                    shape = np.asarray(actions[agent], dtype=np.float64).shape
-                except (TypeError, ValueError) as exc:
-                    raise TypeError(f"actions[{agent!r}] must be real numbers: {exc}") from None
-                if shape not in ((d,), () if d == 1 else (d,)):
-                    raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {shape}")
-            raise ValueError(f"actions must all have the same shape ({d},) to stack to ({n}, {d})")
+        agent_shapes = ((d,), ()) if d == 1 else ((d,),)
+        values = [actions[a] for a in self.possible_agents]
+        # fast path: numpy arrays of a real dtype (stacking would promote a bool or an int
+        # action among float ones silently, so every value's own dtype is checked)
+        stacked = None
+        if all(isinstance(v, (np.ndarray, np.generic)) and v.dtype.kind in "iuf" for v in values):
+            try:
+                stacked = np.asarray(values)
+            except ValueError:  # ragged: the slow path names the agent
+                stacked = None
+        fast = stacked is not None and stacked.shape in ((n, d), (n,) if d == 1 else (n, d))
+        if not fast:  # slow path: check every agent's action to name the offending one
+            rows = []
+            for agent in self.possible_agents:
+                arr = real_array(f"actions[{agent!r}]", actions[agent])  # names the agent
+                if arr.shape not in agent_shapes:
+                    raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {arr.shape}")
+                rows.append(arr.reshape(d))
+            stacked = np.stack(rows)
         return self.episode.control_from_action(stacked, name="actions")
 
     def step(
