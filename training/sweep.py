@@ -24,8 +24,10 @@ Trials (one `tune.grid_search` over the trials of `sweep_grid.expand_grid`):
 
 Resuming. ``--resume`` restores the Tune experiment (`Tuner.restore`): finished trials are kept,
 interrupted and failed ones run again, and a learner trial that runs again continues its run
-from the last checkpoint (`train --resume`); a finished evaluation is not repeated. The grid is
-the one saved in ``OUT/sweep.json`` at the start.
+from its last checkpoint (`train --resume`; a sweep checkpoints every quarter of a run's budget,
+and Ray stops the trials at an interrupt without the checkpoint that `train` writes on Ctrl-C);
+a finished training or evaluation is not repeated. The grid is the one saved in
+``OUT/sweep.json`` at the start.
 
 Report. When every trial has finished, `agent_envs.training.sweep_report` writes
 ``OUT/report/report.md`` and ``.html``: the report of `agent-envs compare` (per-policy table,
@@ -382,7 +384,7 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
             f"{len(missing)} of {len(trials)} trials did not finish ({', '.join(missing[:5])}"
             f"{'...' if len(missing) > 5 else ''}); errors: {errors or 'none (interrupted)'}; "
             f"per-trial logs in {out}/runs/*/{TRIAL_LOG}; continue with: "
-            f"{replace(config, resume=True).command()}"
+            f"agent-envs sweep --preset {config.preset} --out {shlex.quote(str(out))} --resume"
         )
     timing = {
         "ray_init_s": round(ray_started - started, 1),

@@ -165,7 +165,8 @@ PAPER_HYPERPARAMS_SOURCE = (
     "N = 10 tuning does not leak in. Changed from the zoo: the budgets (n_timesteps); "
     "the replay buffers hold the whole budget (the zoo's 2e5 / SB3's 1e6 would never fill, and "
     "SB3 allocates them up front: 1.6 GB per SAC run at N = 100); parameter-shared PPO takes "
-    "n_steps = 40 per agent so that a rollout holds 4000 samples like the zoo's 4 x 1024; "
+    "n_steps = 32 per agent so that a rollout holds 3200 samples (a multiple of the zoo's "
+    "batch of 64), near the zoo's 4 x 1024; "
     "observation/reward normalization and the horizon-as-termination wrapper stay as in the "
     "training layer."
 )
@@ -185,7 +186,7 @@ PAPER_ENV = {
 
 # Budgets (SB3 timesteps) of the paper preset; see README "Sweeps" for how they were chosen.
 # SAC and TD3 keep the zoo's Pendulum-v1 n_timesteps (2e4); PPO gets 8 rollouts of 4 x 1024,
-# parameter-shared PPO 1.2e6 agent-steps (12 000 swarm steps, 300 rollouts of 4000 samples).
+# parameter-shared PPO 1.2e6 agent-steps (12 000 swarm steps, 375 rollouts of 3200 samples).
 PAPER_BUDGETS = {"ppo": 32_768, "sac": 20_000, "td3": 20_000, "ppo-shared": 1_200_000}
 
 # rl-zoo3 Pendulum-v1 entries (+ SB3 defaults for the keys the entry leaves out).
@@ -294,7 +295,7 @@ PRESETS: dict[str, SweepPreset] = {
                 "ppo",
                 PETTINGZOO_ENV_ID,
                 PAPER_BUDGETS["ppo-shared"],
-                {**_ZOO_PPO, "n_steps": 40},
+                {**_ZOO_PPO, "n_steps": 32},
                 1,
                 "parameter-shared PPO, one agent per swarm member (SuperSuit)",
             ),

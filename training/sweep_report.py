@@ -74,12 +74,22 @@ def policy_scores(trials: list[Trial], setting: str, out: Path) -> dict[str, Any
     }
 
 
+#: references the training callback does not log on the validation seeds (too costly to run at
+#: every evaluation): the learning curves show their mean cost on the test seeds instead
+TEST_SEED_LINES = ("optimal", "mpc")
+
+
 def plot_learning_curve_bands(
-    trials: list[Trial], out: Path, setting: str, path: Path
+    trials: list[Trial],
+    out: Path,
+    setting: str,
+    path: Path,
+    test_references: dict[str, float] | None = None,
 ) -> pd.DataFrame | None:
     """Validation cost against swarm steps per learner: mean over training seeds (line) and the
     range over seeds (band); the reference controllers on the same validation seeds as black
-    lines. Returns the plotted points, or None when no run logged a curve."""
+    lines, and `test_references` (name -> mean cost on the test seeds; the optimal control and
+    MPC) as grey lines. Returns the plotted points, or None when no run logged a curve."""
     from matplotlib.figure import Figure
 
     from agent_envs.training.callbacks import read_learning_curve
@@ -120,6 +130,8 @@ def plot_learning_curve_bands(
     styles = {"turnpike": "--", "proportional": "-.", "zero": ":", "optimal": "-", "mpc": "-"}
     for name, value in references.items():
         ax.axhline(value, ls=styles.get(name, "-"), color="k", lw=1, label=name)
+    for name, value in (test_references or {}).items():
+        ax.axhline(value, ls=styles.get(name, "-"), color="0.5", lw=1.5, label=f"{name} (test)")
     ax.set_yscale("log")
     ax.set_xlabel("swarm steps (env transitions)")
     ax.set_ylabel("validation cost (mean over validation seeds)")
@@ -216,7 +228,12 @@ def write_sweep_report(
             )
         )
         curves_png = report_dir / f"learning_curves_{setting.name}.png"
-        points = plot_learning_curve_bands(trials, out, setting.name, curves_png)
+        test_lines = {
+            name: float(data.costs[~data.diverged].mean())
+            for name, data in scores.items()
+            if name in TEST_SEED_LINES and (~data.diverged).any()
+        }
+        points = plot_learning_curve_bands(trials, out, setting.name, curves_png, test_lines)
         if points is not None:
             points.to_csv(report_dir / f"learning_curves_{setting.name}.csv", index=False)
             sections.append(
@@ -227,8 +244,10 @@ def write_sweep_report(
                         "training: the line is the mean over training seeds, the band their "
                         "range (min to max). Black lines: the reference controllers on the same "
                         "validation seeds (turnpike dashed, proportional dash-dotted, zero "
-                        "dotted). Swarm steps are env transitions (the parameter-shared learner "
-                        "gets N agent samples per swarm step)."
+                        "dotted); grey lines: the optimal control and MPC, when present, by "
+                        "their mean cost on the test seeds (not run during training). Swarm "
+                        "steps are env transitions (the parameter-shared learner gets N agent "
+                        "samples per swarm step)."
                     ),
                     images=[curves_png],
                     captions=[f"learning curves, setting {setting.name}"],
