@@ -7,8 +7,11 @@
 
 Ray. By default a local Ray instance is started (`ray.init(num_cpus=...)`, all of the
 machine's CPUs unless ``--num-cpus``); ``--address`` joins an existing cluster instead (its
-nodes need this package installed). Each trial asks for ``--cpus-per-trial`` CPUs (1: the
-networks are small and train with one torch thread), so Ray runs that many trials at once.
+nodes need this package installed, and OUT must be on a filesystem every node shares: the
+trials write their run folders there themselves, and the driver reads them for the report).
+Each trial asks for ``--cpus-per-trial`` CPUs (1: the networks are small and train with one
+torch thread), so Ray runs (CPUs / cpus-per-trial) trials at once; the workers get
+``OPENBLAS_NUM_THREADS=1`` and ``OMP_NUM_THREADS=1`` (Ray's ``runtime_env``).
 Ray's own session logs go to its temp dir (``/tmp/ray`` by default), Tune's experiment state to
 ``OUT/tune`` (`RunConfig(storage_path=OUT)`), never to the working directory.
 
@@ -229,7 +232,6 @@ def tune_trainable(config: dict[str, Any]) -> None:
     """The Ray Tune function trainable: one trial, its metrics reported once at the end."""
     from ray import tune
 
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     trial = Trial.from_dict(config["trial"])
     tune.report(execute_trial(trial, Path(config["out"])))
 
