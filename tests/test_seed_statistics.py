@@ -83,3 +83,28 @@ def test_one_run_has_a_zero_width_interval():
 def test_probability_of_improvement_needs_the_same_tasks():
     with pytest.raises(ValueError, match="same tasks"):
         probability_of_improvement(np.zeros((2, 3)), np.zeros((1, 4)))
+
+
+def test_batched_improvement_used_by_the_bootstrap_agrees_with_rliable():
+    """The bootstrap evaluates P(X > Y) on many resamples at once; on one sample it is rliable's
+    Mann-Whitney based value (integer scores, so ties occur)."""
+    from rliable import metrics
+
+    from agent_envs.training.seed_statistics import _pairwise_improvement_batched
+
+    rng = np.random.default_rng(3)
+    for runs_x, runs_y in ((3, 1), (2, 4), (5, 5)):
+        x = rng.integers(0, 4, size=(runs_x, 6)).astype(float)
+        y = rng.integers(0, 4, size=(runs_y, 6)).astype(float)
+        expected = float(metrics.probability_of_improvement(x, y))
+        assert float(_pairwise_improvement_batched(x, y)) == pytest.approx(expected)
+
+
+def test_batched_iqm_used_by_the_bootstrap_agrees_with_rliable():
+    from rliable import metrics
+
+    from agent_envs.training.seed_statistics import _trimmed_mean_batched
+
+    batch = np.random.default_rng(4).normal(size=(5, 3, 7))  # 5 resamples of (3 runs, 7 tasks)
+    expected = [float(metrics.aggregate_iqm(b)) for b in batch]
+    assert _trimmed_mean_batched(batch) == pytest.approx(expected)
