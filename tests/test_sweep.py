@@ -162,12 +162,13 @@ def test_resume_needs_a_started_sweep_and_a_second_start_needs_resume(tmp_path):
     out = tmp_path / "sw"
     with pytest.raises(ValueError, match="--resume"):
         _load_or_save_grid(SweepConfig(preset="smoke", out=str(out), resume=True), out)
-    _, trials = _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
+    _, trials, command = _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
+    assert command.startswith("agent-envs sweep --preset smoke --out")
     assert (out / "sweep.json").is_file() and len(trials) == 5
     with pytest.raises(ValueError, match="--resume"):
         _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
     # the resumed grid is the saved one, whatever grid options come with --resume
-    resumed, again = _load_or_save_grid(
+    resumed, again, _ = _load_or_save_grid(
         SweepConfig(preset="smoke", out=str(out), resume=True, seeds="7"), out
     )
     assert again == trials and resumed.seeds is None
@@ -214,4 +215,5 @@ def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
     assert main([*args, "--resume"]) == 0
     after = json.loads((out / "runs" / "main__ppo__0" / "summary.json").read_text())
     assert after == before
+    assert "# resumed with --resume" in (out / "report" / "report.md").read_text()
     assert sorted(p.name for p in (out / "runs").iterdir()) == ["main__ppo__0", "main__ppo__1"]

@@ -299,8 +299,9 @@ def run_tuner(config: SweepConfig, trials: list[Trial], out: Path):
 # ------------------------------------------------------------------------------------ the run
 
 
-def _load_or_save_grid(config: SweepConfig, out: Path) -> tuple[SweepConfig, list[Trial]]:
-    """The grid of this sweep: saved in OUT/sweep.json at the first start, read back on resume."""
+def _load_or_save_grid(config: SweepConfig, out: Path) -> tuple[SweepConfig, list[Trial], str]:
+    """(config, trials, the starting command) of this sweep: saved in OUT/sweep.json at the
+    first start, read back on resume (then only the Ray options come from `config`)."""
     path = out / SWEEP_FILE
     if config.resume:
         if not path.is_file():
@@ -318,7 +319,8 @@ def _load_or_save_grid(config: SweepConfig, out: Path) -> tuple[SweepConfig, lis
             address=config.address,
             cpus_per_trial=config.cpus_per_trial,
         )
-        return keep, [Trial.from_dict(t) for t in saved["trials"]]
+        command = f"{saved['command']}  # resumed with --resume"
+        return keep, [Trial.from_dict(t) for t in saved["trials"]], command
     if (out / TUNE_NAME).exists() or path.exists():
         raise ValueError(
             f"{out} already holds a sweep; pass --resume to continue it or choose another --out"
@@ -331,7 +333,7 @@ def _load_or_save_grid(config: SweepConfig, out: Path) -> tuple[SweepConfig, lis
         "trials": [t.to_dict() for t in trials],
     }
     path.write_text(json.dumps(record, indent=1) + "\n")
-    return config, trials
+    return config, trials, record["command"]
 
 
 def describe_trials(trials: list[Trial]) -> str:
@@ -362,7 +364,7 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
         trials = expand_grid(PRESETS[config.preset], config.grid_options(), str(out / "runs"))
         print(describe_trials(trials))
         return {"trials": trials}
-    config, trials = _load_or_save_grid(config, out)
+    config, trials, command = _load_or_save_grid(config, out)
     n_learn = sum(t.kind == LEARNER for t in trials)
     print(
         f"sweep --preset {config.preset}: {n_learn} learner trials and "
@@ -392,7 +394,7 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
         "ray_init_s": round(ray_started - started, 1),
         "tune_s": round(tune_done - ray_started, 1),
     }
-    paths = write_sweep_report(config, trials, out, timing)
+    paths = write_sweep_report(config, trials, out, timing, command)
     total = time.perf_counter() - started
     print(f"report: {paths['markdown']} and {paths['html']} ({total:.0f} s in all)")
     return {"paths": paths, "trials": trials, "timing": timing}

@@ -174,9 +174,12 @@ def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
 
 
 def write_sweep_report(
-    config: Any, trials: list[Trial], out: Path, timing: dict[str, float]
+    config: Any, trials: list[Trial], out: Path, timing: dict[str, float], command: str
 ) -> dict[str, Path]:
-    """Write OUT/report/report.md and .html (and the tables as CSV); returns the paths."""
+    """Write OUT/report/report.md and .html (and the tables as CSV); returns the paths.
+
+    `command` is the command line that started the sweep (a resumed sweep shows it too).
+    """
     from agent_envs.training.report import ReportSection, build_report
     from agent_envs.training.seed_statistics import across_seed_table, display_across_seed_table
     from agent_envs.training.sweep_grid import available_references
@@ -274,7 +277,7 @@ def write_sweep_report(
         f"{timing.get('tune_s', float('nan')):.0f} s (all trials), report written "
         f"{time.strftime('%Y-%m-%d %H:%M:%S')}."
     )
-    sections.append(ReportSection("Run", text="\n\n".join(sources), code=config.command()))
+    sections.append(ReportSection("Run", text="\n\n".join(sources), code=command))
     main = settings[0]
     return build_report(
         setting_results(trials, main.name, out),
@@ -282,7 +285,7 @@ def write_sweep_report(
         title=f"Sweep {preset.name}: learned policies vs the reference controllers "
         f"(setting {main.name})",
         extra_sections=sections,
-        command=config.command(),
+        command=command,
     )
 
 
