@@ -217,3 +217,21 @@ def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
     assert after == before
     assert "# resumed with --resume" in (out / "report" / "report.md").read_text()
     assert sorted(p.name for p in (out / "runs").iterdir()) == ["main__ppo__0", "main__ppo__1"]
+
+
+def test_reference_trial_without_ray_evaluates_once_then_reuses(tmp_path):
+    """`execute_trial` (what each Tune trial runs) evaluates the reference on the test seeds
+    into its folder; run again (a resumed trial), it reuses the finished evaluation."""
+    from agent_envs.training.results import EvaluationResults
+    from agent_envs.training.sweep import execute_trial
+    from agent_envs.training.sweep_grid import TRIAL_LOG, evaluation_dir
+
+    trial = next(t for t in expand_grid(PRESETS["smoke"]) if t.policy == "turnpike")
+    first = execute_trial(trial, tmp_path)
+    folder = evaluation_dir(trial, tmp_path)
+    episodes = EvaluationResults.load(folder).episodes
+    assert list(episodes["seed"]) == list(trial.test_seeds)
+    assert first["mean_cost"] == pytest.approx(episodes["total_cost"].mean())
+    second = execute_trial(trial, tmp_path)
+    assert second["mean_cost"] == first["mean_cost"]
+    assert "reusing the finished evaluation" in (folder / TRIAL_LOG).read_text()
