@@ -24,6 +24,8 @@ from agent_envs.training.sweep_grid import LEARNER, PRESETS, SweepPreset, Trial
 
 #: references the probability of improvement is taken against, in this order, when present
 IMPROVEMENT_REFERENCES = ("optimal", "mpc", "turnpike", "proportional", "zero")
+#: references that get their own per-policy table (the gap to them), when present
+GAP_REFERENCES = ("optimal", "mpc", "proportional")
 
 
 def model_label(trial: Trial) -> str:
@@ -180,7 +182,8 @@ def write_sweep_report(
 
     `command` is the command line that started the sweep (a resumed sweep shows it too).
     """
-    from agent_envs.training.report import ReportSection, build_report
+    from agent_envs.training.report import ReportSection, build_report, display_table
+    from agent_envs.training.results import summarize
     from agent_envs.training.seed_statistics import across_seed_table, display_across_seed_table
     from agent_envs.training.sweep_grid import available_references
 
@@ -212,9 +215,6 @@ def write_sweep_report(
         )
         if setting is not settings[0]:
             results = setting_results(trials, setting.name, out)
-            from agent_envs.training.report import display_table
-            from agent_envs.training.results import summarize
-
             sections.append(
                 ReportSection(
                     f"Setting {setting.name}: per trained model",
@@ -279,12 +279,26 @@ def write_sweep_report(
     )
     sections.append(ReportSection("Run", text="\n\n".join(sources), code=command))
     main = settings[0]
+    main_results = setting_results(trials, main.name, out)
+    gaps = [
+        ReportSection(
+            f"Gap to {name}, setting {main.name}",
+            text=(
+                f"The per-policy table with {name} as the reference: 'ratio to {name}' divides "
+                f"mean costs, the paired ratio (with its 95% t-interval) averages the per-seed "
+                f"ratios cost / {name} cost on the same test episodes; the gap is ratio - 1."
+            ),
+            table=display_table(summarize(main_results.episodes, name), name),
+        )
+        for name in GAP_REFERENCES
+        if name in main_results.policies
+    ]
     return build_report(
-        setting_results(trials, main.name, out),
+        main_results,
         report_dir,
         title=f"Sweep {preset.name}: learned policies vs the reference controllers "
         f"(setting {main.name})",
-        extra_sections=sections,
+        extra_sections=[*gaps, *sections],
         command=command,
     )
 
