@@ -474,10 +474,6 @@ def evaluation_dir(trial: Trial, out: Path) -> Path:
     return reference_dir(trial, out)
 
 
-def learners_by_name(preset: SweepPreset) -> dict[str, SweepLearner]:
-    return {learner.name: learner for learner in preset.learners}
-
-
 __all__ = [
     "LEARNER",
     "PAPER_ENV",
