@@ -115,6 +115,8 @@ def test_paper_preset_definition():
 
     wanted = [r for r in preset.references if r in BASELINES]
     assert sorted(t.policy for t in references if t.setting == "main") == sorted(wanted)
+    eps1 = sorted(t.policy for t in references if t.setting == "eps1")
+    assert eps1 == sorted(r for r in wanted if r != "mpc")  # MPC: the main setting only
 
 
 @pytest.mark.parametrize(("algo", "learner"), [("ppo", "ppo"), ("sac", "sac"), ("td3", "td3")])
@@ -235,3 +237,20 @@ def test_reference_trial_without_ray_evaluates_once_then_reuses(tmp_path):
     second = execute_trial(trial, tmp_path)
     assert second["mean_cost"] == first["mean_cost"]
     assert "reusing the finished evaluation" in (folder / TRIAL_LOG).read_text()
+
+
+def test_paper_preset_takes_optimal_and_mpc_once_the_baselines_have_them(monkeypatch):
+    """With `optimal` and `mpc` registered (the optimal-control branch), the main env gets all
+    five references (shared with the EM-trained contrast) and eps = 1 all but MPC."""
+    from agent_envs.baselines import BASELINES
+
+    for name in ("optimal", "mpc"):
+        monkeypatch.setitem(BASELINES, name, object)
+    trials = expand_grid(PRESETS["paper"], GridOptions(vec_env="dummy"))
+    by_setting: dict[str, set[str]] = {}
+    for t in trials:
+        if t.kind == REFERENCE:
+            for setting in t.settings:
+                by_setting.setdefault(setting, set()).add(t.policy)
+    five = {"optimal", "mpc", "turnpike", "proportional", "zero"}
+    assert by_setting == {"main": five, "em-to-serb": five, "eps1": five - {"mpc"}}

@@ -74,6 +74,7 @@ class EnvSetting:
         eval_env_kwargs: kwargs changed for the held-out evaluation only (train on one env,
             evaluate on another); {} evaluates on the training env.
         learners: names of the preset's learners trained in this setting; None: all.
+        references: names of the preset's references evaluated in this setting; None: all.
     """
 
     name: str
@@ -81,6 +82,7 @@ class EnvSetting:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     eval_env_kwargs: dict[str, Any] = field(default_factory=dict)
     learners: tuple[str, ...] | None = None
+    references: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -271,6 +273,8 @@ PRESETS: dict[str, SweepPreset] = {
                 "non-stiff contrast: eps = 1, SERB",
                 env_kwargs={"epsilon": 1.0},
                 learners=("ppo",),
+                # MPC re-solves the optimal control at every step: the main setting only
+                references=("optimal", "turnpike", "proportional", "zero"),
             ),
             EnvSetting(
                 "em-to-serb",
@@ -434,6 +438,8 @@ def expand_grid(
                     )
                 )
         for reference in references:
+            if setting.references is not None and reference not in setting.references:
+                continue
             key = repr(sorted(eval_kwargs.items())) + reference
             if key in references_by_env:
                 shared = references_by_env[key]
