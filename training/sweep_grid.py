@@ -107,7 +107,6 @@ class SweepPreset:
     evaluations: int = 8
     vec_env: str = "dummy"
     hyperparams_source: str = ""
-    budget: str = ""
 
 
 @dataclass(frozen=True)
@@ -314,7 +313,6 @@ PRESETS: dict[str, SweepPreset] = {
         # `--vec-env dummy` to run it on DummyVecEnv).
         vec_env="native",
         hyperparams_source=PAPER_HYPERPARAMS_SOURCE,
-        budget="about 2 hours on 2 CPU cores (README, Sweeps: how the budgets were estimated)",
     ),
 }
 
