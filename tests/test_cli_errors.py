@@ -239,6 +239,22 @@ BATTERY: list[tuple[list[str], str]] = [
     (["train", "--resume", "{run}", "--algo", "sac"], "--algo"),
     (["train", "--resume", "{badrun}"], "config.json"),
     # compare: one bad value per option
+    # sweep: --preset --out --num-cpus --address --cpus-per-trial --resume --seeds --learners
+    # --settings --timesteps-scale --test-episodes --vec-env --dry-run --bootstrap-seed
+    (["sweep", "--out", "{out}", "--preset", "bogus"], "--preset"),
+    (["sweep", "--out", "{file}"], "--out"),
+    (["sweep", "--out", "{out}", "--num-cpus", "0"], "--num-cpus"),
+    (["sweep", "--out", "{out}", "--address", ""], "--address"),
+    (["sweep", "--out", "{out}", "--cpus-per-trial", "-1"], "--cpus-per-trial"),
+    (["sweep", "--out", "{out}", "--resume"], "--resume"),
+    (["sweep", "--out", "{out}", "--seeds", "0,x"], "--seeds"),
+    (["sweep", "--out", "{out}", "--learners", "dqn"], "--learners"),
+    (["sweep", "--out", "{out}", "--settings", "bogus"], "--settings"),
+    (["sweep", "--out", "{out}", "--timesteps-scale", "0"], "--timesteps-scale"),
+    (["sweep", "--out", "{out}", "--test-episodes", "1"], "--test-episodes"),
+    (["sweep", "--out", "{out}", "--vec-env", "threads"], "--vec-env"),
+    (["sweep", "--out", "{out}", "--dry-run=1"], "--dry-run"),
+    (["sweep", "--out", "{out}", "--bootstrap-seed", "-1"], "--bootstrap-seed"),
     (["compare", "--out", "{out}", "--preset", "bogus"], "--preset"),
     (["compare", "--out", "{out}", "--optimum", "optimal,bogus"], "--optimum"),
     (["compare", "--out", "{out}", "--optimum", "mpc,mpc"], "--optimum"),

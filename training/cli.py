@@ -578,6 +578,32 @@ def _run_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------------- sweep
+
+
+def _sweep_arguments(parser: argparse.ArgumentParser) -> None:
+    from agent_envs.training.sweep import SweepConfig
+
+    parser.description = (
+        "Run a grid of (learner x training seed x env setting) as Ray Tune trials (each one "
+        "train + evaluation on the held-out test seeds) and write OUT/report/report.md with "
+        "across-seed statistics (needs the 'sweep' extra: pip install 'agent-envs[sweep]')."
+    )
+    add_dataclass_arguments(parser, SweepConfig)
+
+
+def _run_sweep(args: argparse.Namespace) -> int:
+    from agent_envs.training.sweep import SweepConfig, sweep
+
+    config = config_from_namespace(SweepConfig, args)
+    try:
+        sweep(config)
+    except RuntimeError as exc:  # trials that did not finish: not a bad input
+        print(f"agent-envs sweep: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
 # ------------------------------------------------------------------------------------ main
 
 #: name -> subcommand, in the order `agent-envs --help` lists them
@@ -612,6 +638,12 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         "train learners and compare them with the turnpike controller",
         _compare_arguments,
         _run_compare,
+    ),
+    "sweep": Subcommand(
+        "a grid of learners x training seeds x env settings on Ray Tune, with across-seed "
+        "statistics",
+        _sweep_arguments,
+        _run_sweep,
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.

@@ -1,0 +1,256 @@
+"""`agent-envs sweep`: the grid without Ray, and (slow) the smoke sweep on a local Ray
+instance (skipped without the `sweep` extra)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from agent_envs.training.config import TrainConfig
+from agent_envs.training.sweep_grid import (
+    LEARNER,
+    PRESETS,
+    REFERENCE,
+    GridOptions,
+    Trial,
+    expand_grid,
+    training_vec_env_choices,
+)
+
+# ------------------------------------------------------------------------------- the grid
+
+
+def test_smoke_grid_is_two_learner_trials_and_the_three_references():
+    trials = expand_grid(PRESETS["smoke"], runs_dir="/x/runs")
+    learners = [t for t in trials if t.kind == LEARNER]
+    references = [t for t in trials if t.kind == REFERENCE]
+    assert [(t.policy, t.seed) for t in learners] == [("ppo", 0), ("ppo", 1)]
+    assert sorted(t.policy for t in references) == ["proportional", "turnpike", "zero"]
+    assert {t.trial_id for t in trials} == {
+        "main__ppo__0",
+        "main__ppo__1",
+        "main__turnpike",
+        "main__proportional",
+        "main__zero",
+    }
+    for t in learners:
+        config = TrainConfig.from_dict(t.train).validate()
+        assert config.run_name == t.trial_id and config.out == "/x/runs"
+        assert config.env_kwargs == {"n_agents": 5, "n_steps": 5} == t.eval_env_kwargs
+        assert config.timesteps == 256 and config.seed == t.seed
+        assert not config.progress_bar
+    assert all(t.test_seeds == (10000, 10001, 10002, 10003, 10004) for t in trials)
+
+
+def test_trial_round_trips_through_json():
+    for trial in expand_grid(PRESETS["smoke"]):
+        assert Trial.from_dict(json.loads(json.dumps(trial.to_dict()))) == trial
+
+
+def test_grid_options_change_seeds_budget_and_test_episodes():
+    options = GridOptions(seeds=(3, 4, 5), timesteps_scale=0.5, test_episodes=3)
+    trials = expand_grid(PRESETS["smoke"], options)
+    learners = [t for t in trials if t.kind == LEARNER]
+    assert [t.seed for t in learners] == [3, 4, 5]
+    assert {t.train["timesteps"] for t in learners} == {128}
+    assert all(len(t.test_seeds) == 3 for t in trials)
+
+
+@pytest.mark.parametrize(
+    ("options", "flag"),
+    [
+        (GridOptions(learners=("dqn",)), "--learners"),
+        (GridOptions(settings=("nope",)), "--settings"),
+        (GridOptions(seeds=(0, 0)), "--seeds"),
+        (GridOptions(seeds=(-1,)), "--seeds"),
+        (GridOptions(timesteps_scale=0.0), "--timesteps-scale"),
+        (GridOptions(test_episodes=1), "--test-episodes"),
+        (GridOptions(vec_env="threads"), "--vec-env"),
+    ],
+)
+def test_bad_grid_options_name_the_option(options, flag):
+    with pytest.raises(ValueError, match=flag):
+        expand_grid(PRESETS["smoke"], options)
+
+
+def test_paper_preset_definition():
+    preset = PRESETS["paper"]
+    assert preset.env_kwargs == {
+        "n_agents": 100,
+        "n_steps": 50,
+        "epsilon": 0.05,
+        "alpha": 0.1,
+        "sigma": 0.01,
+        "horizon": 1.0,
+        "target": 0.7,
+        "integrator": "serb",
+        "n_paths": 20,
+    }
+    assert preset.references == ("optimal", "mpc", "turnpike", "proportional", "zero")
+    assert len(preset.seeds) >= 3
+    if preset.vec_env not in training_vec_env_choices():
+        with pytest.raises(ValueError, match="--vec-env"):
+            expand_grid(preset)
+    trials = expand_grid(preset, GridOptions(vec_env="dummy"))
+    learners = [t for t in trials if t.kind == LEARNER]
+    main = {(t.policy, t.seed) for t in learners if t.setting == "main"}
+    assert main == {(a, s) for a in ("ppo", "sac", "td3", "ppo-shared") for s in preset.seeds}
+    by_setting = {t.setting: t for t in learners}
+    assert by_setting["eps1"].train["env_kwargs"]["epsilon"] == 1.0
+    em = by_setting["em-to-serb"]
+    assert em.train["env_kwargs"]["integrator"] == "em"
+    assert em.eval_env_kwargs["integrator"] == "serb"
+    shared = next(t for t in learners if t.policy == "ppo-shared")
+    assert shared.train["env_id"] == "agent_envs.swarm_v0" and shared.train["algo"] == "ppo"
+    # train-on-EM is evaluated on the main env: the main setting's reference trials serve both
+    references = [t for t in trials if t.kind == REFERENCE]
+    for ref in references:
+        if ref.setting == "main":
+            assert ref.settings == ("main", "em-to-serb")
+    from agent_envs.baselines import BASELINES
+
+    wanted = [r for r in preset.references if r in BASELINES]
+    assert sorted(t.policy for t in references if t.setting == "main") == sorted(wanted)
+    eps1 = sorted(t.policy for t in references if t.setting == "eps1")
+    assert eps1 == sorted(r for r in wanted if r != "mpc")  # MPC: the main setting only
+
+
+@pytest.mark.parametrize(("algo", "learner"), [("ppo", "ppo"), ("sac", "sac"), ("td3", "td3")])
+def test_paper_hyperparameters_are_rl_zoo3_pendulum_entries(algo, learner):
+    """Every key of rl-zoo3's tuned Pendulum-v1 entry is in the preset with the zoo's value,
+    except the budget, the buffer size (the whole budget) and the zoo-only keys."""
+    yaml = pytest.importorskip("yaml")
+    rl_zoo3 = pytest.importorskip("rl_zoo3")
+    path = Path(rl_zoo3.__file__).parent / "hyperparams" / f"{algo}.yml"
+    zoo = yaml.safe_load(path.read_text())["Pendulum-v1"]
+    preset = {lr.name: lr for lr in PRESETS["paper"].learners}[learner]
+    for key, value in zoo.items():
+        if key in ("n_timesteps", "policy", "n_envs", "buffer_size"):
+            continue
+        if key == "policy_kwargs":
+            value = eval(value, {"dict": dict})  # the zoo writes "dict(net_arch=[400, 300])"
+        assert preset.hyperparams[key] == value, key
+    if "n_envs" in zoo:
+        assert preset.n_envs == zoo["n_envs"]
+    if "buffer_size" in preset.hyperparams:
+        assert preset.hyperparams["buffer_size"] >= preset.timesteps
+
+
+# ------------------------------------------------------------------------------------ CLI
+
+
+def test_sweep_dry_run_lists_the_trials(capsys):
+    from agent_envs.training.cli import main
+
+    assert main(["sweep", "--preset", "smoke", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "main__ppo__0: train ppo" in out and "main__zero: evaluate zero" in out
+
+
+def test_sweep_bad_seeds_is_a_clean_error(capsys):
+    from agent_envs.training.cli import main
+
+    assert main(["sweep", "--preset", "smoke", "--dry-run", "--seeds", "a,b"]) == 2
+    assert "--seeds" in capsys.readouterr().err
+
+
+def test_resume_needs_a_started_sweep_and_a_second_start_needs_resume(tmp_path):
+    from agent_envs.training.sweep import SweepConfig, _load_or_save_grid
+
+    out = tmp_path / "sw"
+    with pytest.raises(ValueError, match="--resume"):
+        _load_or_save_grid(SweepConfig(preset="smoke", out=str(out), resume=True), out)
+    _, trials, command = _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
+    assert command.startswith("agent-envs sweep --preset smoke --out")
+    assert (out / "sweep.json").is_file() and len(trials) == 5
+    with pytest.raises(ValueError, match="--resume"):
+        _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
+    # the resumed grid is the saved one, whatever grid options come with --resume
+    resumed, again, _ = _load_or_save_grid(
+        SweepConfig(preset="smoke", out=str(out), resume=True, seeds="7"), out
+    )
+    assert again == trials and resumed.seeds is None
+
+
+# ------------------------------------------------------------------------- smoke (slow)
+
+
+@pytest.mark.slow
+def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
+    pytest.importorskip("ray")
+    pytest.importorskip("rliable")
+    from agent_envs.training.cli import main
+    from agent_envs.training.results import EvaluationResults
+    from agent_envs.training.seed_statistics import iqm
+
+    out = tmp_path / "sweep"
+    args = ["sweep", "--preset", "smoke", "--out", str(out), "--num-cpus", "2"]
+    assert main(args) == 0
+    report = (out / "report" / "report.md").read_text()
+    for heading in ("Results per policy", "Across training seeds", "Learning curves"):
+        assert heading in report
+    assert "ppo (seed 0)" in report and "ppo (seed 1)" in report
+    assert (out / "report" / "learning_curves_main.png").stat().st_size > 0
+    costs = []
+    for seed in (0, 1):
+        run = out / "runs" / f"main__ppo__{seed}"
+        for name in ("config.json", "learning_curve.csv", "summary.json", "sweep_trial.log"):
+            assert (run / name).is_file(), name
+        assert any((run / "tb").rglob("events.out.tfevents.*"))
+        assert json.loads((run / "summary.json").read_text())["timesteps"] >= 256
+        episodes = EvaluationResults.load(run / "test_evaluation").episodes
+        assert list(episodes["seed"]) == list(range(10000, 10005))
+        costs.append(episodes["total_cost"].to_numpy())
+    # the report's IQM is the IQM of the two runs' test costs
+    stats = pd.read_csv(out / "report" / "across_seeds.csv").set_index("policy")
+    assert stats.loc["ppo", "runs"] == 2 and stats.loc["ppo", "episodes"] == 10
+    assert stats.loc["ppo", "iqm_cost"] == pytest.approx(-iqm(-np.stack(costs)))
+    assert set(stats.index) == {"ppo", "turnpike", "proportional", "zero"}
+    assert not any(Path.cwd().glob("ray_results"))
+
+    # resuming a finished sweep trains nothing again and rewrites the report
+    before = json.loads((out / "runs" / "main__ppo__0" / "summary.json").read_text())
+    assert main([*args, "--resume"]) == 0
+    after = json.loads((out / "runs" / "main__ppo__0" / "summary.json").read_text())
+    assert after == before
+    assert "# resumed with --resume" in (out / "report" / "report.md").read_text()
+    assert sorted(p.name for p in (out / "runs").iterdir()) == ["main__ppo__0", "main__ppo__1"]
+
+
+def test_reference_trial_without_ray_evaluates_once_then_reuses(tmp_path):
+    """`execute_trial` (what each Tune trial runs) evaluates the reference on the test seeds
+    into its folder; run again (a resumed trial), it reuses the finished evaluation."""
+    from agent_envs.training.results import EvaluationResults
+    from agent_envs.training.sweep import execute_trial
+    from agent_envs.training.sweep_grid import TRIAL_LOG, evaluation_dir
+
+    trial = next(t for t in expand_grid(PRESETS["smoke"]) if t.policy == "turnpike")
+    first = execute_trial(trial, tmp_path)
+    folder = evaluation_dir(trial, tmp_path)
+    episodes = EvaluationResults.load(folder).episodes
+    assert list(episodes["seed"]) == list(trial.test_seeds)
+    assert first["mean_cost"] == pytest.approx(episodes["total_cost"].mean())
+    second = execute_trial(trial, tmp_path)
+    assert second["mean_cost"] == first["mean_cost"]
+    assert "reusing the finished evaluation" in (folder / TRIAL_LOG).read_text()
+
+
+def test_paper_preset_takes_optimal_and_mpc_once_the_baselines_have_them(monkeypatch):
+    """With `optimal` and `mpc` registered (the optimal-control branch), the main env gets all
+    five references (shared with the EM-trained contrast) and eps = 1 all but MPC."""
+    from agent_envs.baselines import BASELINES
+
+    for name in ("optimal", "mpc"):
+        monkeypatch.setitem(BASELINES, name, object)
+    trials = expand_grid(PRESETS["paper"], GridOptions(vec_env="dummy"))
+    by_setting: dict[str, set[str]] = {}
+    for t in trials:
+        if t.kind == REFERENCE:
+            for setting in t.settings:
+                by_setting.setdefault(setting, set()).add(t.policy)
+    five = {"optimal", "mpc", "turnpike", "proportional", "zero"}
+    assert by_setting == {"main": five, "em-to-serb": five, "eps1": five - {"mpc"}}

@@ -1,0 +1,306 @@
+"""The report of a sweep: the trials' evaluations gathered per env setting, written with
+`agent_envs.training.report.build_report` (the report of `agent-envs compare`).
+
+Sections: the per-policy table and plots of `build_report` for the main (first) setting, one
+row per trained model (``ppo (seed 0)``, ...) and per reference controller; the across-seed
+statistics of every setting (`agent_envs.training.seed_statistics`: IQM with
+stratified-bootstrap CIs, probability of improvement against the references, next to the
+per-episode mean); the learning curves of every learner with a band over training seeds;
+the training runs; the run (command, wall times).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from agent_envs.training.sweep_grid import LEARNER, PRESETS, SweepPreset, Trial
+
+#: references the probability of improvement is taken against, in this order, when present
+IMPROVEMENT_REFERENCES = ("optimal", "mpc", "turnpike", "proportional", "zero")
+#: references that get their own per-policy table (the gap to them), when present
+GAP_REFERENCES = ("optimal", "mpc", "proportional")
+
+
+def model_label(trial: Trial) -> str:
+    """The policy name of one trained model in the per-policy table: ``{learner} (seed s)``."""
+    return f"{trial.policy} (seed {trial.seed})" if trial.kind == LEARNER else trial.policy
+
+
+def setting_results(trials: list[Trial], setting: str, out: Path):
+    """The evaluations of one setting merged into one `EvaluationResults` (models renamed)."""
+    from agent_envs.training.results import EvaluationResults, merge_results
+    from agent_envs.training.sweep_grid import evaluation_dir
+
+    parts = []
+    for trial in trials:
+        if setting not in trial.settings:
+            continue
+        res = EvaluationResults.load(evaluation_dir(trial, out))
+        label = model_label(trial)
+        res.episodes = res.episodes.assign(policy=label)
+        (arrays,) = res.trajectories.values()  # one policy per trial
+        res.trajectories = {label: arrays}
+        res.meta = {**res.meta, "policies": {label: res.meta.get("policies", {})}}
+        parts.append(res)
+    return merge_results(parts)
+
+
+def policy_scores(trials: list[Trial], setting: str, out: Path) -> dict[str, Any]:
+    """{learner or reference: PolicyScores (runs = training seeds, tasks = test seeds)}."""
+    from agent_envs.training.results import EvaluationResults
+    from agent_envs.training.seed_statistics import PolicyScores
+    from agent_envs.training.sweep_grid import evaluation_dir
+
+    rows: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
+    for trial in trials:
+        if setting not in trial.settings:
+            continue
+        episodes = EvaluationResults.load(evaluation_dir(trial, out)).episodes
+        episodes = episodes.set_index("seed").loc[list(trial.test_seeds)]
+        rows[trial.policy].append(
+            (
+                episodes["total_cost"].to_numpy(float),
+                episodes["diverged"].astype(bool).to_numpy(),
+            )
+        )
+    return {
+        name: PolicyScores(np.stack([c for c, _ in runs]), np.stack([d for _, d in runs]))
+        for name, runs in rows.items()
+    }
+
+
+#: references the training callback does not log on the validation seeds (too costly to run at
+#: every evaluation): the learning curves show their mean cost on the test seeds instead
+TEST_SEED_LINES = ("optimal", "mpc")
+
+
+def plot_learning_curve_bands(
+    trials: list[Trial],
+    out: Path,
+    setting: str,
+    path: Path,
+    test_references: dict[str, float] | None = None,
+) -> pd.DataFrame | None:
+    """Validation cost against swarm steps per learner: mean over training seeds (line) and the
+    range over seeds (band); the reference controllers on the same validation seeds as black
+    lines, and `test_references` (name -> mean cost on the test seeds; the optimal control and
+    MPC) as grey lines. Returns the plotted points, or None when no run logged a curve."""
+    from matplotlib.figure import Figure
+
+    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.defaults import is_multiagent
+    from agent_envs.training.sweep_grid import learner_run_dir
+
+    curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
+    references: dict[str, float] = {}
+    for trial in trials:
+        if trial.kind != LEARNER or trial.setting != setting:
+            continue
+        run_dir = learner_run_dir(trial, out)
+        rows = read_learning_curve(run_dir / "learning_curve.csv")
+        if not rows:
+            continue
+        n_agents = json.loads((run_dir / "env.json").read_text())["n_agents"]
+        per_step = n_agents if is_multiagent(trial.train["env_id"]) else 1
+        steps = np.array([r["timesteps"] for r in rows], float) / per_step
+        curves[trial.policy].append((steps, np.array([r["cost_mean"] for r in rows], float)))
+        for name in IMPROVEMENT_REFERENCES:
+            if f"{name}_cost" in rows[-1]:
+                references[name] = float(rows[-1][f"{name}_cost"])
+    if not curves:
+        return None
+    fig = Figure(figsize=(8, 4.5))
+    ax = fig.subplots()
+    points = []
+    for i, (name, runs) in enumerate(curves.items()):
+        # the runs share the evaluation schedule; cut to the shortest (an unfinished run)
+        k = min(len(s) for s, _ in runs)
+        steps = runs[0][0][:k]
+        costs = np.stack([c[:k] for _, c in runs])
+        mean = costs.mean(axis=0)
+        ax.plot(steps, mean, "o-", ms=3, color=f"C{i}", label=f"{name} ({len(runs)} seeds)")
+        ax.fill_between(steps, costs.min(axis=0), costs.max(axis=0), color=f"C{i}", alpha=0.2)
+        for s, m, lo, hi in zip(steps, mean, costs.min(axis=0), costs.max(axis=0), strict=True):
+            points.append({"learner": name, "swarm steps": s, "mean": m, "min": lo, "max": hi})
+    styles = {"turnpike": "--", "proportional": "-.", "zero": ":", "optimal": "-", "mpc": "-"}
+    for name, value in references.items():
+        ax.axhline(value, ls=styles.get(name, "-"), color="k", lw=1, label=name)
+    for name, value in (test_references or {}).items():
+        ax.axhline(value, ls=styles.get(name, "-"), color="0.5", lw=1.5, label=f"{name} (test)")
+    ax.set_yscale("log")
+    ax.set_xlabel("swarm steps (env transitions)")
+    ax.set_ylabel("validation cost (mean over validation seeds)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(
+        f"Learning curves, setting {setting}: mean over training seeds, band min-max", fontsize=10
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return pd.DataFrame(points)
+
+
+def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
+    """One row per learner trial: budget, wall time, best validation cost."""
+    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.sweep_grid import learner_run_dir
+
+    rows = []
+    for trial in trials:
+        if trial.kind != LEARNER:
+            continue
+        run_dir = learner_run_dir(trial, out)
+        summary = json.loads((run_dir / "summary.json").read_text())
+        curve = read_learning_curve(run_dir / "learning_curve.csv")
+        best = min(curve, key=lambda r: r["cost_mean"]) if curve else None
+        rows.append(
+            {
+                "setting": trial.setting,
+                "learner": trial.policy,
+                "seed": trial.seed,
+                "SB3 timesteps": summary["timesteps"],
+                "swarm steps": summary["swarm_steps"],
+                "training wall time [s]": summary["train_wall_time_s"],
+                "best validation cost": None if best is None else round(best["cost_mean"], 4),
+                "run": run_dir.name,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def write_sweep_report(
+    config: Any, trials: list[Trial], out: Path, timing: dict[str, float], command: str
+) -> dict[str, Path]:
+    """Write OUT/report/report.md and .html (and the tables as CSV); returns the paths.
+
+    `command` is the command line that started the sweep (a resumed sweep shows it too).
+    """
+    from agent_envs.training.report import ReportSection, build_report, display_table
+    from agent_envs.training.results import summarize
+    from agent_envs.training.seed_statistics import across_seed_table, display_across_seed_table
+    from agent_envs.training.sweep_grid import available_references
+
+    preset: SweepPreset = PRESETS[config.preset]
+    report_dir = out / "report"
+    report_dir.mkdir(parents=True, exist_ok=True)
+    settings = [s for s in preset.settings if any(s.name in t.settings for t in trials)]
+    _, lacking = available_references(preset)
+    rng = np.random.default_rng(config.bootstrap_seed)
+
+    sections = []
+    stats_tables = {}
+    for setting in settings:
+        scores = policy_scores(trials, setting.name, out)
+        refs = [r for r in IMPROVEMENT_REFERENCES if r in scores]
+        table = across_seed_table(scores, refs, rng)
+        table.insert(0, "setting", setting.name)
+        stats_tables[setting.name] = table
+        text = (
+            f"Setting {setting.name}: {setting.description}. Scores for rliable are the negative "
+            "costs (a diverged episode scores -inf, i.e. it costs more than any finished one); "
+            "the table shows the IQM of the cost (the 25% trimmed mean over training seeds x "
+            "test episodes, lower is better) with a 95% stratified-bootstrap CI (training "
+            "seeds resampled within each test episode; a reference controller is one run, so "
+            "its interval has zero width), and P(cost < ref): the probability that a random "
+            "training seed of the policy costs less than the reference on a random test "
+            "episode (ties count one half), with its bootstrap CI. 'mean cost' is the "
+            "per-episode mean over finished episodes, as in the per-policy table."
+        )
+        if setting is not settings[0]:
+            results = setting_results(trials, setting.name, out)
+            sections.append(
+                ReportSection(
+                    f"Setting {setting.name}: per trained model",
+                    text=f"{setting.description}; evaluation env kwargs "
+                    f"{results.meta.get('env_kwargs')}.",
+                    table=display_table(summarize(results.episodes, "turnpike"), "turnpike"),
+                )
+            )
+        sections.append(
+            ReportSection(
+                f"Across training seeds, setting {setting.name}",
+                text=text,
+                table=display_across_seed_table(table, refs),
+            )
+        )
+        curves_png = report_dir / f"learning_curves_{setting.name}.png"
+        test_lines = {
+            name: float(data.costs[~data.diverged].mean())
+            for name, data in scores.items()
+            if name in TEST_SEED_LINES and (~data.diverged).any()
+        }
+        points = plot_learning_curve_bands(trials, out, setting.name, curves_png, test_lines)
+        if points is not None:
+            points.to_csv(report_dir / f"learning_curves_{setting.name}.csv", index=False)
+            sections.append(
+                ReportSection(
+                    f"Learning curves, setting {setting.name}",
+                    text=(
+                        "Validation cost (mean over the validation seeds 1000..1000+k) during "
+                        "training: the line is the mean over training seeds, the band their "
+                        "range (min to max). Black lines: the reference controllers on the same "
+                        "validation seeds (turnpike dashed, proportional dash-dotted, zero "
+                        "dotted); grey lines: the optimal control and MPC, when present, by "
+                        "their mean cost on the test seeds (not run during training). Swarm "
+                        "steps are env transitions (the parameter-shared learner gets N agent "
+                        "samples per swarm step)."
+                    ),
+                    images=[curves_png],
+                    captions=[f"learning curves, setting {setting.name}"],
+                )
+            )
+    pd.concat(stats_tables.values(), ignore_index=True).to_csv(
+        report_dir / "across_seeds.csv", index=False
+    )
+    sections.append(ReportSection("Training runs", table=training_table(trials, out)))
+    sources = [
+        f"Preset {preset.name}: {preset.description}.",
+        f"Reference controllers: {', '.join(r for r in preset.references if r not in lacking)}"
+        + (
+            f" ({', '.join(lacking)} wanted by the preset but not in this install's "
+            "agent_envs.baselines.BASELINES, so left out)."
+            if lacking
+            else "."
+        ),
+    ]
+    if preset.hyperparams_source:
+        sources.append(f"Hyperparameters: {preset.hyperparams_source}")
+    sources.append(
+        f"Wall time: ray.init {timing.get('ray_init_s', float('nan')):.0f} s, Tune "
+        f"{timing.get('tune_s', float('nan')):.0f} s (all trials), report written "
+        f"{time.strftime('%Y-%m-%d %H:%M:%S')}."
+    )
+    sections.append(ReportSection("Run", text="\n\n".join(sources), code=command))
+    main = settings[0]
+    main_results = setting_results(trials, main.name, out)
+    gaps = [
+        ReportSection(
+            f"Gap to {name}, setting {main.name}",
+            text=(
+                f"The per-policy table with {name} as the reference: 'ratio to {name}' divides "
+                f"mean costs, the paired ratio (with its 95% t-interval) averages the per-seed "
+                f"ratios cost / {name} cost on the same test episodes; the gap is ratio - 1."
+            ),
+            table=display_table(summarize(main_results.episodes, name), name),
+        )
+        for name in GAP_REFERENCES
+        if name in main_results.policies
+    ]
+    return build_report(
+        main_results,
+        report_dir,
+        title=f"Sweep {preset.name}: learned policies vs the reference controllers "
+        f"(setting {main.name})",
+        extra_sections=[*gaps, *sections],
+        command=command,
+    )
+
+
+__all__ = ["write_sweep_report"]
