@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from agent_envs.training.defaults import (
-    BASELINE_POLICIES,
     DEFAULT_TEST_SEED,
+    FEEDBACK_BASELINES,
     GYM_ENV_ID,
     PETTINGZOO_ENV_ID,
     is_multiagent,
@@ -101,7 +101,7 @@ class SweepPreset:
     settings: tuple[EnvSetting, ...]
     learners: tuple[SweepLearner, ...]
     seeds: tuple[int, ...]
-    references: tuple[str, ...] = BASELINE_POLICIES
+    references: tuple[str, ...] = FEEDBACK_BASELINES
     test_episodes: int = 20
     validation_episodes: int = 5
     evaluations: int = 8
