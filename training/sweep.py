@@ -18,9 +18,9 @@ Ray's own session logs go to its temp dir (``/tmp/ray`` by default), Tune's expe
 Trials (one `tune.grid_search` over the trials of `sweep_grid.expand_grid`):
 
 - a learner trial runs `agent_envs.training.train.train` into ``OUT/runs/{setting}__{learner}__
-  {seed}`` (config, checkpoints, learning curve, TensorBoard in ``tb/``: the usual run folder),
-  with its stdout/stderr in ``sweep_trial.log`` there, then evaluates the best model (on the
-  validation seeds) on the held-out test seeds (`agent_envs.training.evaluate`) into the run
+  {seed}`` (config, checkpoints, learning curve, TensorBoard in ``tb/``: the usual run folder), with
+  its stdout/stderr in ``{run folder}.sweep_trial.log`` beside it, then evaluates the best model (on
+  the validation seeds) on the held-out test seeds (`agent_envs.training.evaluate`) into the run
   folder's ``test_evaluation/``;
 - a reference trial evaluates one reference controller on the same test seeds into
   ``OUT/references/{setting}/{name}/``.
@@ -194,10 +194,21 @@ def train_learner(trial: Trial, out: Path) -> Path:
     return train(config)
 
 
+def trial_log_path(trial: Trial, out: Path) -> Path:
+    """Where a trial's stdout/stderr go: beside a learner's run folder (which `train` must
+    create itself, exclusively), inside a reference trial's evaluation folder."""
+    if trial.kind == LEARNER:
+        run_dir = learner_run_dir(trial, out)
+        return run_dir.parent / f"{run_dir.name}.{TRIAL_LOG}"
+    return evaluation_dir(trial, out) / TRIAL_LOG
+
+
 def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
     """Run one trial without Ray (the Tune trainable calls this); returns its metrics.
 
-    A learner trial writes its log to ``sweep_trial.log`` in its run folder.
+    A learner trial writes its log to ``{run folder}.sweep_trial.log`` beside its run folder
+    (`train` creates the run folder itself, exclusively), a reference trial to
+    ``sweep_trial.log`` in its evaluation folder.
     """
     from agent_envs.training.compare import best_model_path
     from agent_envs.training.defaults import GYM_ENV_ID
@@ -206,10 +217,10 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
 
     started = time.perf_counter()
     folder = evaluation_dir(trial, out)
-    log_dir = learner_run_dir(trial, out) if trial.kind == LEARNER else folder
-    log_dir.mkdir(parents=True, exist_ok=True)
+    log_path = trial_log_path(trial, out)
+    log_path.parent.mkdir(parents=True, exist_ok=True)
     with (
-        open(log_dir / TRIAL_LOG, "a", buffering=1) as log,
+        open(log_path, "a", buffering=1) as log,
         contextlib.redirect_stdout(log),
         contextlib.redirect_stderr(log),
     ):
@@ -401,7 +412,7 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
         raise RuntimeError(
             f"{len(missing)} of {len(trials)} trials did not finish ({', '.join(missing[:5])}"
             f"{'...' if len(missing) > 5 else ''}); errors: {errors or 'none (interrupted)'}; "
-            f"per-trial logs in {out}/runs/*/{TRIAL_LOG}; continue with: "
+            f"per-trial logs in {out}/runs/*.{TRIAL_LOG}; continue with: "
             f"agent-envs sweep --preset {config.preset} --out {shlex.quote(str(out))} --resume"
         )
     timing = {
