@@ -308,9 +308,8 @@ PRESETS: dict[str, SweepPreset] = {
         test_episodes=20,
         validation_episodes=5,
         evaluations=8,
-        # The native vector env (branch vector-env) adds `--vec-env native` to `agent-envs
-        # train`; until then this field makes `expand_grid` refuse the preset (pass
-        # `--vec-env dummy` to run it on DummyVecEnv).
+        # trains on the native vector env (`agent-envs train --vec-env native`); `--vec-env
+        # dummy` runs the same preset on SB3's DummyVecEnv (bit-identical results, slower)
         vec_env="native",
         hyperparams_source=PAPER_HYPERPARAMS_SOURCE,
     ),
