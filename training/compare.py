@@ -25,15 +25,14 @@ from __future__ import annotations
 
 import json
 import math
-import shlex
 import time
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agent_envs.training.config import TrainConfig, option_field
+from agent_envs.training.config import Learner, TrainConfig, command_line, option_field
 from agent_envs.training.defaults import (
     BASELINE_POLICIES,
     DEFAULT_TEST_SEED,
@@ -42,19 +41,6 @@ from agent_envs.training.defaults import (
     PETTINGZOO_ENV_ID,
     parse_env_kwargs,
 )
-
-
-@dataclass(frozen=True)
-class Learner:
-    """One learner of a preset: an SB3 algorithm on one of the two swarm envs."""
-
-    name: str
-    algo: str
-    env_id: str
-    timesteps: int
-    hyperparams: dict[str, Any] = field(default_factory=dict)
-    n_envs: int | None = None
-    description: str = ""
 
 
 @dataclass(frozen=True)
@@ -258,20 +244,7 @@ class CompareConfig:
 
     def command(self) -> str:
         """The `agent-envs compare` command line of this config (non-default options only)."""
-        parts = ["agent-envs", "compare"]
-        default = CompareConfig()
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if value == getattr(default, f.name) and f.name != "preset":
-                continue
-            flag = "--" + f.name.replace("_", "-")
-            if isinstance(value, bool):
-                parts.append(flag if value else "--no-" + f.name.replace("_", "-"))
-            elif isinstance(value, dict):
-                parts += [flag, shlex.quote(json.dumps(value))]
-            else:
-                parts += [flag, shlex.quote(str(value))]
-        return " ".join(parts)
+        return command_line("compare", self)
 
 
 # ------------------------------------------------------------------------------------ training

@@ -15,6 +15,7 @@ import dataclasses
 import json
 import math
 import os
+import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -150,6 +151,43 @@ def default_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
 def option_field(default: Any, help: str, **kwargs: Any) -> Any:
     """A dataclass field with a scalar default and its --help text."""
     return field(default=default, metadata={"help": help, **kwargs})
+
+
+def command_line(prog: str, config: Any) -> str:
+    """The `agent-envs PROG` command line of an options dataclass: non-default options only
+    (`preset` always), ``--no-x`` for a false flag, dicts as quoted JSON."""
+    parts = ["agent-envs", prog]
+    default = type(config)()
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if value == getattr(default, f.name) and f.name != "preset":
+            continue
+        flag = "--" + f.name.replace("_", "-")
+        if isinstance(value, bool):
+            parts.append(flag if value else "--no-" + f.name.replace("_", "-"))
+        elif isinstance(value, dict):
+            parts += [flag, shlex.quote(json.dumps(value))]
+        else:
+            parts += [flag, shlex.quote(str(value))]
+    return " ".join(parts)
+
+
+@dataclass(frozen=True)
+class Learner:
+    """One learner of a comparison or sweep: an SB3 algorithm on one of the two swarm envs,
+    with its budget.
+
+    `hyperparams` override the training layer's defaults (`HYPERPARAMS`) key by key;
+    `timesteps` counts SB3 timesteps (agent-steps on the PettingZoo env).
+    """
+
+    name: str
+    algo: str
+    env_id: str
+    timesteps: int
+    hyperparams: dict[str, Any] = field(default_factory=dict)
+    n_envs: int | None = None
+    description: str = ""
 
 
 @dataclass

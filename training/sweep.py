@@ -50,7 +50,7 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from agent_envs.training.config import option_field
+from agent_envs.training.config import command_line, option_field
 from agent_envs.training.sweep_grid import (
     LEARNER,
     PRESETS,
@@ -155,18 +155,7 @@ class SweepConfig:
 
     def command(self) -> str:
         """The `agent-envs sweep` command line of this config (non-default options only)."""
-        parts = ["agent-envs", "sweep"]
-        default = SweepConfig()
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if value == getattr(default, f.name) and f.name != "preset":
-                continue
-            flag = "--" + f.name.replace("_", "-")
-            if isinstance(value, bool):
-                parts.append(flag if value else "--no-" + f.name.replace("_", "-"))
-            else:
-                parts += [flag, shlex.quote(str(value))]
-        return " ".join(parts)
+        return command_line("sweep", self)
 
 
 # ------------------------------------------------------------------------------------- trials

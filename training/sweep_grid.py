@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agent_envs.training.config import Learner
 from agent_envs.training.defaults import (
     DEFAULT_TEST_SEED,
     FEEDBACK_BASELINES,
@@ -44,23 +45,6 @@ REFERENCE = "reference"
 TRIAL_LOG = "sweep_trial.log"
 #: a learner trial's held-out evaluation, in its run folder
 TEST_EVALUATION = "test_evaluation"
-
-
-@dataclass(frozen=True)
-class SweepLearner:
-    """One learner: an SB3 algorithm on one of the two swarm envs, with its budget.
-
-    `hyperparams` override the training layer's defaults (`agent_envs.training.config`) key
-    by key; `timesteps` counts SB3 timesteps (agent-steps on the PettingZoo env).
-    """
-
-    name: str
-    algo: str
-    env_id: str
-    timesteps: int
-    hyperparams: dict[str, Any] = field(default_factory=dict)
-    n_envs: int | None = None
-    description: str = ""
 
 
 @dataclass(frozen=True)
@@ -99,7 +83,7 @@ class SweepPreset:
     description: str
     env_kwargs: dict[str, Any]
     settings: tuple[EnvSetting, ...]
-    learners: tuple[SweepLearner, ...]
+    learners: tuple[Learner, ...]
     seeds: tuple[int, ...]
     references: tuple[str, ...] = FEEDBACK_BASELINES
     test_episodes: int = 20
@@ -243,7 +227,7 @@ PRESETS: dict[str, SweepPreset] = {
         env_kwargs=_SMOKE_ENV,
         settings=(EnvSetting("main", "N = 5, m = 5, SERB"),),
         learners=(
-            SweepLearner(
+            Learner(
                 "ppo",
                 "ppo",
                 GYM_ENV_ID,
@@ -284,16 +268,16 @@ PRESETS: dict[str, SweepPreset] = {
             ),
         ),
         learners=(
-            SweepLearner(
+            Learner(
                 "ppo", "ppo", GYM_ENV_ID, PAPER_BUDGETS["ppo"], _ZOO_PPO, 4, "PPO, one controller"
             ),
-            SweepLearner(
+            Learner(
                 "sac", "sac", GYM_ENV_ID, PAPER_BUDGETS["sac"], _ZOO_SAC, 1, "SAC, one controller"
             ),
-            SweepLearner(
+            Learner(
                 "td3", "td3", GYM_ENV_ID, PAPER_BUDGETS["td3"], _ZOO_TD3, 1, "TD3, one controller"
             ),
-            SweepLearner(
+            Learner(
                 "ppo-shared",
                 "ppo",
                 PETTINGZOO_ENV_ID,
@@ -485,7 +469,7 @@ __all__ = [
     "REFERENCE",
     "EnvSetting",
     "GridOptions",
-    "SweepLearner",
+    "Learner",
     "SweepPreset",
     "Trial",
     "available_references",
