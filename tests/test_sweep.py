@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from agent_envs.training.config import TrainConfig
+from agent_envs.training.config import VEC_ENV_CHOICES, TrainConfig
 from agent_envs.training.sweep_grid import (
     LEARNER,
     PRESETS,
@@ -19,7 +19,6 @@ from agent_envs.training.sweep_grid import (
     GridOptions,
     Trial,
     expand_grid,
-    training_vec_env_choices,
 )
 
 # ------------------------------------------------------------------------------- the grid
@@ -93,9 +92,11 @@ def test_paper_preset_definition():
     }
     assert preset.references == ("optimal", "mpc", "turnpike", "proportional", "zero")
     assert len(preset.seeds) >= 3
-    if preset.vec_env not in training_vec_env_choices():
-        with pytest.raises(ValueError, match="--vec-env"):
-            expand_grid(preset)
+    assert preset.vec_env == "native" and preset.vec_env in VEC_ENV_CHOICES
+    assert {t.train["vec_env"] for t in expand_grid(preset) if t.kind == LEARNER} == {
+        "native",
+        "dummy",  # the PettingZoo learner trains on SuperSuit's vector env
+    }
     trials = expand_grid(preset, GridOptions(vec_env="dummy"))
     learners = [t for t in trials if t.kind == LEARNER]
     main = {(t.policy, t.seed) for t in learners if t.setting == "main"}

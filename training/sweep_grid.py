@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agent_envs.training.config import Learner
+from agent_envs.training.config import VEC_ENV_CHOICES, Learner
 from agent_envs.training.defaults import (
     DEFAULT_TEST_SEED,
     FEEDBACK_BASELINES,
@@ -311,16 +311,6 @@ def available_references(preset: SweepPreset) -> tuple[list[str], list[str]]:
     return have, [r for r in preset.references if r not in BASELINES]
 
 
-def training_vec_env_choices() -> tuple[str, ...]:
-    """The values `agent-envs train --vec-env` accepts in this install."""
-    from agent_envs.training.config import TrainConfig
-
-    for f in dataclasses.fields(TrainConfig):
-        if f.name == "vec_env":
-            return tuple(f.metadata.get("choices", (f.default,)))
-    return ()
-
-
 def _select(names: Sequence[str], wanted: Sequence[str] | None, option: str) -> list[str]:
     if wanted is None:
         return list(names)
@@ -346,7 +336,7 @@ def expand_grid(
     """The trials of `preset`: learners x seeds x settings, then the reference trials.
 
     Raises ValueError naming the option for an unknown learner / setting, a bad scale or test
-    episode count, or a `vec_env` that `agent-envs train` does not offer in this install.
+    episode count, or a `vec_env` that `agent-envs train` does not offer.
     """
     from agent_envs.training.config import TrainConfig
 
@@ -362,13 +352,8 @@ def expand_grid(
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"--seeds lists a seed twice: {seeds!r}")
     vec_env = options.vec_env or preset.vec_env
-    choices = training_vec_env_choices()
-    if vec_env not in choices:
-        raise ValueError(
-            f"the {preset.name} preset trains with --vec-env {vec_env!r}, which `agent-envs "
-            f"train` does not offer in this install (choices: {', '.join(choices)}); pass "
-            f"--vec-env {choices[0]} to run it anyway"
-        )
+    if vec_env not in VEC_ENV_CHOICES:
+        raise ValueError(f"--vec-env must be one of {', '.join(VEC_ENV_CHOICES)}, got {vec_env!r}")
     learner_names = _select([lr.name for lr in preset.learners], options.learners, "--learners")
     setting_names = _select([s.name for s in preset.settings], options.settings, "--settings")
     test_seeds = tuple(range(DEFAULT_TEST_SEED, DEFAULT_TEST_SEED + n_test))
