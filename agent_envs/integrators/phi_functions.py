@@ -170,14 +170,6 @@ class _RowOperator:
             self._at = arrays.namespace(a).matrix_transpose(a)
             self.arrays = (a,)
 
-    @property
-    def norm_inf(self) -> float:
-        """||A||_inf (a bound for an operator), the largest over the batch."""
-        if self._op is not None:
-            return float(self._op.norm_inf)
-        xp = arrays.namespace(self._a)
-        return float(arrays.to_numpy(xp.max(xp.sum(xp.abs(self._a), axis=-1))))
-
     def member_norms(self, batch: tuple) -> np.ndarray:
         """||A||_inf per batch member (a float64 array of shape `batch`); an operator's bound
         is shared by its members."""
@@ -191,7 +183,7 @@ class _RowOperator:
     def max_abs(self) -> Any:
         """max |A_kl| per batch entry (..., 1), or a float bound for an operator."""
         if self._op is not None:
-            return self.norm_inf
+            return float(self._op.norm_inf)  # max |A_kl| <= ||A||_inf
         xp = arrays.namespace(self._a)
         return xp.max(xp.abs(self._a), axis=(-2, -1))[..., None]
 
