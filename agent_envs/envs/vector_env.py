@@ -84,15 +84,6 @@ def single_env_phi_method(config: EpisodeConfig) -> str:
     return auto_phi_method(size, config.n_paths, symmetric)
 
 
-def _is_int(tensor: Any) -> bool:
-    """True for a torch tensor of a (non-bool) integer dtype."""
-    return (
-        not tensor.is_floating_point()
-        and not tensor.is_complex()
-        and str(tensor.dtype) != "torch.bool"
-    )
-
-
 class SwarmVectorEnv(VectorEnv):
     r"""B copies of `agent_envs/Swarm-v0` stepped together as one batch of arrays.
 
@@ -361,7 +352,8 @@ class SwarmVectorEnv(VectorEnv):
         b, xp = self.num_envs, self._xp
         n, d = self.config.params.n_agents, self.config.params.dim
         if arrays.is_torch(actions):
-            if actions.is_complex() or not (actions.is_floating_point() or _is_int(actions)):
+            # torch dtypes are floating, integer, complex or bool: the last two are not real
+            if actions.is_complex() or str(actions.dtype) == "torch.bool":
                 raise TypeError(f"actions must hold real numbers, got a tensor of {actions.dtype}")
             if self._device is not None:
                 arr = actions.to(device=self._device, dtype=self._positions.dtype)
