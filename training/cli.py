@@ -234,7 +234,6 @@ def _run_turnpike_property(args: argparse.Namespace) -> int:
         check_real,
     )
 
-    args.n_steps = None
     _check_sizes(args)
     if args.n_agents < 2:
         raise ValueError(f"--n-agents must be an integer >= 2, got {args.n_agents}")

@@ -257,6 +257,12 @@ def mean_confidence_interval(values: Sequence[float], confidence: float = 0.95):
     return mean, mean - half, mean + half
 
 
+def _same_seeds(costs: pd.Series, other: pd.Series) -> tuple[np.ndarray, np.ndarray]:
+    """Two policies' costs (indexed by seed) on the seeds both have, as aligned arrays."""
+    common = costs.index.intersection(other.index)
+    return costs.loc[common].to_numpy(float), other.loc[common].to_numpy(float)
+
+
 def summarize(
     episodes: pd.DataFrame,
     reference: str | None = DEFAULT_REFERENCE,
@@ -294,6 +300,8 @@ def summarize(
         if bool(best_rows["diverged"].astype(bool).any()):
             best = best * float("nan")
     for policy, group in episodes.groupby("policy", sort=False):
+        costs = group.set_index("seed")["total_cost"]
+        policy_diverged = bool(group["diverged"].astype(bool).any())
         mean, low, high = mean_confidence_interval(group["total_cost"], confidence)
         row: dict[str, Any] = {
             "policy": policy,
@@ -305,12 +313,10 @@ def summarize(
         if ref is not None:
             ref_mean = float(ref.mean())
             row["ratio_to_reference"] = mean / ref_mean if ref_mean else float("nan")
-            paired = group.set_index("seed")["total_cost"]
-            common = paired.index.intersection(ref.index)
-            ratios = (paired.loc[common] / ref.loc[common]).to_numpy(float)
-            pm, pl, ph = mean_confidence_interval(ratios, confidence)
+            own, theirs = _same_seeds(costs, ref)
+            pm, pl, ph = mean_confidence_interval(own / theirs, confidence)
             row.update(paired_ratio=pm, paired_ratio_ci_low=pl, paired_ratio_ci_high=ph)
-            if ref_diverged or bool(group["diverged"].astype(bool).any()):
+            if ref_diverged or policy_diverged:
                 for key in (
                     "ratio_to_reference",
                     "paired_ratio",
@@ -319,10 +325,9 @@ def summarize(
                 ):
                     row[key] = float("nan")
         if best is not None:
-            paired = group.set_index("seed")["total_cost"]
-            common = paired.index.intersection(best.index)
-            gaps = ((paired.loc[common] - best.loc[common]) / best.loc[common]).to_numpy(float)
-            if bool(group["diverged"].astype(bool).any()):
+            own, optimal = _same_seeds(costs, best)
+            gaps = (own - optimal) / optimal
+            if policy_diverged:
                 gaps = gaps * float("nan")
             gm, gl, gh = mean_confidence_interval(gaps, confidence)
             row.update(gap_to_optimal=gm, gap_ci_low=gl, gap_ci_high=gh)
