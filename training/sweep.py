@@ -42,6 +42,7 @@ band over seeds, and a section per contrast setting.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import shlex
@@ -217,6 +218,11 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
         if trial.kind == LEARNER:
             run_dir = train_learner(trial, out)
             spec = str(best_model_path(run_dir))
+        elif trial.policy_kwargs:
+            from agent_envs.baselines import make_baseline
+
+            spec = functools.partial(make_baseline, trial.policy, **trial.policy_kwargs)
+            print(f"reference {trial.policy} built with {trial.policy_kwargs}")
         else:
             spec = trial.policy
         if _finished_evaluation(folder, trial):
@@ -361,7 +367,9 @@ def describe_trials(trials: list[Trial]) -> str:
             )
         else:
             lines.append(
-                f"{t.trial_id}: evaluate {t.policy} on {len(t.test_seeds)} test seeds "
+                f"{t.trial_id}: evaluate {t.policy}"
+                + (f" {t.policy_kwargs}" if t.policy_kwargs else "")
+                + f" on {len(t.test_seeds)} test seeds "
                 f"(env {t.eval_env_kwargs}; settings {', '.join(t.settings)})"
             )
     return "\n".join(lines)

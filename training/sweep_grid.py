@@ -75,6 +75,8 @@ class SweepPreset:
 
     `references` lists the reference controllers wanted; those not in
     `agent_envs.baselines.BASELINES` of this install are left out (and named in the report).
+    `reference_kwargs` maps a reference's name to the keyword arguments its controller is built
+    with (`agent_envs.baselines.make_baseline(name, env, **kwargs)`).
     `vec_env` is the training envs' vectorization (`agent-envs train --vec-env`) of the
     single-controller learners.
     """
@@ -86,6 +88,7 @@ class SweepPreset:
     learners: tuple[Learner, ...]
     seeds: tuple[int, ...]
     references: tuple[str, ...] = FEEDBACK_BASELINES
+    reference_kwargs: dict[str, dict[str, Any]] = field(default_factory=dict)
     test_episodes: int = 20
     validation_episodes: int = 5
     evaluations: int = 8
@@ -100,7 +103,8 @@ class Trial:
     `train` is the `TrainConfig` of a learner trial as a dict (None for a reference);
     `eval_env_kwargs` are the full env kwargs of the held-out evaluation; `test_seeds` its
     reset seeds. `settings` lists the env settings whose report uses this trial (a reference
-    trial serves every setting evaluated on the same env).
+    trial serves every setting evaluated on the same env). `policy_kwargs` are the keyword
+    arguments a reference controller is built with (empty: its defaults).
     """
 
     trial_id: str
@@ -112,6 +116,7 @@ class Trial:
     test_seeds: tuple[int, ...]
     settings: tuple[str, ...] = ()
     train: dict[str, Any] | None = None
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -121,6 +126,7 @@ class Trial:
         values = dict(data)
         values["test_seeds"] = tuple(int(s) for s in values["test_seeds"])
         values["settings"] = tuple(values.get("settings", ()))
+        values["policy_kwargs"] = dict(values.get("policy_kwargs") or {})
         return cls(**values)
 
 
@@ -148,6 +154,7 @@ PAPER_HYPERPARAMS_SOURCE = (
     "gamma = 0.9, the training layer's own choice for 50-step episodes). Keys the zoo entry "
     "leaves out are set to Stable-Baselines3's defaults explicitly, so the training layer's "
     "N = 10 tuning does not leak in. Changed from the zoo: the budgets (n_timesteps); "
+    "TD3's learning_starts (2 500 instead of 1e4, a quarter of the halved budget); "
     "the replay buffers hold the whole budget (the zoo's 2e5 / SB3's 1e6 would never fill, and "
     "SB3 allocates them up front: 1.6 GB per SAC run at N = 100); parameter-shared PPO takes "
     "n_steps = 32 per agent so that a rollout holds 3200 samples (a multiple of the zoo's "
@@ -170,9 +177,11 @@ PAPER_ENV = {
 }
 
 # Budgets (SB3 timesteps) of the paper preset; see README "Sweeps" for how they were chosen.
-# SAC and TD3 keep the zoo's Pendulum-v1 n_timesteps (2e4); PPO gets 8 rollouts of 4 x 1024,
-# parameter-shared PPO 1.2e6 agent-steps (12 000 swarm steps, 375 rollouts of 3200 samples).
-PAPER_BUDGETS = {"ppo": 32_768, "sac": 20_000, "td3": 20_000, "ppo-shared": 1_200_000}
+# Sized so that the whole preset ends in about 1.5 h on 2 cores (README "Results at the paper's
+# scale"): PPO gets 8 rollouts of 4 x 1024; SAC and TD3 half the zoo's Pendulum-v1 n_timesteps
+# (1e4 of 2e4; TD3's random warm-up is cut further, see _ZOO_TD3), parameter-shared
+# PPO 6e5 agent-steps (6 000 swarm steps, 187 rollouts of 3200 samples).
+PAPER_BUDGETS = {"ppo": 32_768, "sac": 10_000, "td3": 10_000, "ppo-shared": 600_000}
 
 # rl-zoo3 Pendulum-v1 entries (+ SB3 defaults for the keys the entry leaves out).
 _ZOO_PPO = {
@@ -204,7 +213,9 @@ _ZOO_SAC = {
 _ZOO_TD3 = {
     "gamma": 0.98,
     "buffer_size": PAPER_BUDGETS["td3"],
-    "learning_starts": 10_000,
+    # the zoo's random-action warm-up is 1e4 of a 2e4 budget; at a 1e4 budget that would leave
+    # no learning, so 2 500 (a quarter) leaves 7 500 learning steps
+    "learning_starts": 2_500,
     "noise_type": "normal",
     "noise_std": 0.1,
     "gradient_steps": 1,
@@ -256,7 +267,7 @@ PRESETS: dict[str, SweepPreset] = {
                 "non-stiff contrast: eps = 1, SERB",
                 env_kwargs={"epsilon": 1.0},
                 learners=("ppo",),
-                # MPC re-solves the optimal control at every step: the main setting only
+                # MPC re-solves at every step: the main setting only
                 references=("optimal", "turnpike", "proportional", "zero"),
             ),
             EnvSetting(
@@ -289,6 +300,10 @@ PRESETS: dict[str, SweepPreset] = {
         ),
         seeds=(0, 1, 2),
         references=("optimal", "mpc", "turnpike", "proportional", "zero"),
+        # certainty-equivalent MPC: each re-solve plans on the sigma = 0 model (one path).
+        # Re-solving the 20-path sample average at every step costs ~11 s a step at N = 100
+        # (~5 min an episode, 1.7 core-h for 20 episodes); the noise-free re-solve ~0.6 s.
+        reference_kwargs={"mpc": {"noise_free": True}},
         test_episodes=20,
         validation_episodes=5,
         evaluations=8,
@@ -422,6 +437,7 @@ def expand_grid(
                 eval_env_kwargs=eval_kwargs,
                 test_seeds=test_seeds,
                 settings=(setting.name,),
+                policy_kwargs=dict(preset.reference_kwargs.get(reference, {})),
             )
     return trials + list(references_by_env.values())
 
