@@ -89,6 +89,7 @@ def test_paper_preset_definition():
         "target": 0.7,
         "integrator": "serb",
         "n_paths": 20,
+        "max_control": 25.0,
     }
     assert preset.references == ("optimal", "mpc", "turnpike", "proportional", "zero")
     assert len(preset.seeds) >= 3
@@ -117,6 +118,9 @@ def test_paper_preset_definition():
 
     wanted = [r for r in preset.references if r in BASELINES]
     assert sorted(t.policy for t in references if t.setting == "main") == sorted(wanted)
+    bound = [t for t in learners if t.setting == "bound150"]
+    assert {t.policy for t in bound} == {"ppo"}
+    assert all(t.train["env_kwargs"]["max_control"] == 150.0 for t in bound)
     eps1 = sorted(t.policy for t in references if t.setting == "eps1")
     assert eps1 == sorted(r for r in wanted if r != "mpc")  # MPC: the main setting only
 
@@ -267,7 +271,12 @@ def test_paper_preset_takes_optimal_and_mpc_once_the_baselines_have_them(monkeyp
             for setting in t.settings:
                 by_setting.setdefault(setting, set()).add(t.policy)
     five = {"optimal", "mpc", "turnpike", "proportional", "zero"}
-    assert by_setting == {"main": five, "em-to-serb": five, "eps1": five - {"mpc"}}
+    assert by_setting == {
+        "main": five,
+        "em-to-serb": five,
+        "eps1": five - {"mpc"},
+        "bound150": five - {"mpc"},
+    }
 
 
 def test_paper_preset_builds_mpc_on_the_noise_free_model_and_the_rest_on_defaults():
