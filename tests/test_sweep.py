@@ -101,7 +101,15 @@ def test_paper_preset_definition():
     trials = expand_grid(preset, GridOptions(vec_env="dummy"))
     learners = [t for t in trials if t.kind == LEARNER]
     main = {(t.policy, t.seed) for t in learners if t.setting == "main"}
-    assert main == {(a, s) for a in ("ppo", "sac", "td3", "ppo-shared") for s in preset.seeds}
+    names = ("ppo", "ppo-swarm", "sac", "td3", "ppo-shared")
+    assert main == {(a, s) for a in names for s in preset.seeds}
+    assert {t.policy for t in learners if t.setting in ("eps1", "em-to-serb")} == {"ppo-swarm"}
+    swarm = next(t for t in learners if t.policy == "ppo-swarm")
+    from agent_envs.training.config import default_hyperparams
+
+    config = TrainConfig.from_dict(swarm.train)
+    assert config.hyperparams == {} and config.n_envs is None  # the training layer's own
+    assert default_hyperparams("ppo", swarm.train["env_id"])["policy_kwargs"]["log_std_init"] < 0
     by_setting = {t.setting: t for t in learners}
     assert by_setting["eps1"].train["env_kwargs"]["epsilon"] == 1.0
     em = by_setting["em-to-serb"]

@@ -16,10 +16,11 @@ Presets:
   5 test episodes; a CI check that the whole pipeline runs.
 - ``paper``: issue 12's study at the paper's scale (N = 100, m = 50, eps = 0.05, alpha = 0.1,
   sigma = 0.01, T = 1, target 0.7, SERB, 20 Brownian paths): PPO, SAC, TD3 on the
-  single-controller env and parameter-shared PPO on the PettingZoo env, 3 training seeds,
-  max_control = 25, plus three contrasts with PPO (eps = 1; the env's default bound
-  max_control = 150; train with Euler-Maruyama, evaluate with SERB).
-  Hyperparameters: rl-zoo3's tuned entries for Pendulum-v1 (`PAPER_HYPERPARAMS_SOURCE`).
+  single-controller env and parameter-shared PPO on the PettingZoo env with rl-zoo3's tuned
+  entries for Pendulum-v1 (`PAPER_HYPERPARAMS_SOURCE`), and ``ppo-swarm``: PPO with the
+  training layer's own hyperparameters; 3 training seeds, max_control = 25. Three contrasts:
+  eps = 1 and train with Euler-Maruyama / evaluate with SERB (``ppo-swarm``), and the env's
+  default bound max_control = 150 (the zoo's ``ppo``).
 """
 
 from __future__ import annotations
@@ -274,7 +275,7 @@ PRESETS: dict[str, SweepPreset] = {
                 "eps1",
                 "non-stiff contrast: eps = 1, SERB",
                 env_kwargs={"epsilon": 1.0},
-                learners=("ppo",),
+                learners=("ppo-swarm",),
                 # MPC re-solves at every step: the main setting only
                 references=("optimal", "turnpike", "proportional", "zero"),
             ),
@@ -291,12 +292,22 @@ PRESETS: dict[str, SweepPreset] = {
                 "trained with Euler-Maruyama, evaluated with SERB (eps = 0.05)",
                 env_kwargs={"integrator": "em"},
                 eval_env_kwargs={"integrator": "serb"},
-                learners=("ppo",),
+                learners=("ppo-swarm",),
             ),
         ),
         learners=(
             Learner(
                 "ppo", "ppo", GYM_ENV_ID, PAPER_BUDGETS["ppo"], _ZOO_PPO, 4, "PPO, one controller"
+            ),
+            Learner(
+                "ppo-swarm",
+                "ppo",
+                GYM_ENV_ID,
+                PAPER_BUDGETS["ppo"],
+                {},
+                None,
+                "PPO, one controller, with the training layer's own hyperparameters (tuned on "
+                "this env at N = 10: small initial action noise, log_std_init = -3)",
             ),
             Learner(
                 "sac", "sac", GYM_ENV_ID, PAPER_BUDGETS["sac"], _ZOO_SAC, 1, "SAC, one controller"

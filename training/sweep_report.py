@@ -215,12 +215,14 @@ def write_sweep_report(
         )
         if setting is not settings[0]:
             results = setting_results(trials, setting.name, out)
+            # the gap to the optimum where the setting has it (else the turnpike controller)
+            ref = next((r for r in GAP_REFERENCES if r in results.policies), "turnpike")
             sections.append(
                 ReportSection(
                     f"Setting {setting.name}: per trained model",
                     text=f"{setting.description}; evaluation env kwargs "
-                    f"{results.meta.get('env_kwargs')}.",
-                    table=display_table(summarize(results.episodes, "turnpike"), "turnpike"),
+                    f"{results.meta.get('env_kwargs')}. Ratios and gaps against {ref}.",
+                    table=display_table(summarize(results.episodes, ref), ref),
                 )
             )
         sections.append(
