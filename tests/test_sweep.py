@@ -234,6 +234,18 @@ def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
     assert stats.loc["ppo", "iqm_cost"] == pytest.approx(-iqm(-np.stack(costs)))
     assert set(stats.index) == {"ppo", "turnpike", "proportional", "zero"}
     assert not any(Path.cwd().glob("ray_results"))
+    # every trial's wall time, as Tune recorded it, in grid order
+    times = pd.read_csv(out / "report" / "trial_wall_times.csv")
+    assert list(times["trial"]) == [
+        "main__ppo__0",
+        "main__ppo__1",
+        "main__turnpike",
+        "main__proportional",
+        "main__zero",
+    ]
+    assert "Wall time per trial" in report
+    assert (times["wall time [s]"] >= 0).all()  # a reference at N = 5 can round to 0.0 s
+    assert (times.loc[times["kind"] == "learner", "wall time [s]"] > 0).all()
 
     # resuming a finished sweep trains nothing again and rewrites the report
     before = json.loads((out / "runs" / "main__ppo__0" / "summary.json").read_text())
@@ -241,6 +253,8 @@ def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
     after = json.loads((out / "runs" / "main__ppo__0" / "summary.json").read_text())
     assert after == before
     assert "# resumed with --resume" in (out / "report" / "report.md").read_text()
+    # the restored Tune results keep the first run's wall times
+    assert pd.read_csv(out / "report" / "trial_wall_times.csv").equals(times)
     assert sorted(p.name for p in (out / "runs").iterdir() if p.is_dir()) == [
         "main__ppo__0",
         "main__ppo__1",

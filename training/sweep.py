@@ -416,7 +416,12 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
         "ray_init_s": round(ray_started - started, 1),
         "tune_s": round(tune_done - ray_started, 1),
     }
-    paths = write_sweep_report(config, trials, out, timing, command)
+    trial_times = {
+        str(r.config["trial"]["trial_id"]): float(r.metrics["trial_wall_time_s"])
+        for r in grid
+        if r.config and r.metrics and "trial_wall_time_s" in r.metrics
+    }
+    paths = write_sweep_report(config, trials, out, timing, command, trial_times)
     total = time.perf_counter() - started
     print(f"report: {paths['markdown']} and {paths['html']} ({total:.0f} s in all)")
     return {"paths": paths, "trials": trials, "timing": timing}

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import time
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -175,12 +176,36 @@ def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def trial_time_table(trials: list[Trial], trial_times: Mapping[str, float]) -> pd.DataFrame:
+    """One row per trial with the wall time Tune recorded for it (train + held-out evaluation
+    for a learner; the evaluation for a reference), trials in grid order."""
+    rows = [
+        {
+            "trial": t.trial_id,
+            "kind": t.kind,
+            "setting": t.setting,
+            "policy": t.policy,
+            "seed": "" if t.seed is None else t.seed,
+            "wall time [s]": round(trial_times[t.trial_id], 1),
+        }
+        for t in trials
+        if t.trial_id in trial_times
+    ]
+    return pd.DataFrame(rows)
+
+
 def write_sweep_report(
-    config: Any, trials: list[Trial], out: Path, timing: dict[str, float], command: str
+    config: Any,
+    trials: list[Trial],
+    out: Path,
+    timing: dict[str, float],
+    command: str,
+    trial_times: Mapping[str, float] | None = None,
 ) -> dict[str, Path]:
     """Write OUT/report/report.md and .html (and the tables as CSV); returns the paths.
 
-    `command` is the command line that started the sweep (a resumed sweep shows it too).
+    `command` is the command line that started the sweep (a resumed sweep shows it too);
+    `trial_times` the wall time of each trial by trial id (Tune's `trial_wall_time_s`).
     """
     from agent_envs.training.report import ReportSection, build_report, display_table
     from agent_envs.training.results import summarize
@@ -262,6 +287,20 @@ def write_sweep_report(
         report_dir / "across_seeds.csv", index=False
     )
     sections.append(ReportSection("Training runs", table=training_table(trials, out)))
+    if trial_times:
+        times = trial_time_table(trials, trial_times)
+        times.to_csv(report_dir / "trial_wall_times.csv", index=False)
+        sections.append(
+            ReportSection(
+                "Wall time per trial",
+                text=(
+                    "As Tune recorded it: a learner trial's training and held-out evaluation, "
+                    "a reference trial's evaluation. Trials run side by side, one per "
+                    "--cpus-per-trial CPUs of the Ray instance, so they share the machine."
+                ),
+                table=times,
+            )
+        )
     sources = [
         f"Preset {preset.name}: {preset.description}.",
         f"Reference controllers: {', '.join(r for r in preset.references if r not in lacking)}"
