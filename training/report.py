@@ -179,36 +179,27 @@ def _pct(v: Any) -> str:
     return f"{100 * v:+.2f}%" if np.isfinite(v) else "n/a"
 
 
+def _with_ci(summary: pd.DataFrame, point: str, low: str, high: str, fmt) -> list[str]:
+    """'point [low, high]' per row of `summary`, each value written by `fmt`."""
+    return [
+        f"{fmt(m)} [{fmt(lo)}, {fmt(hi)}]"
+        for m, lo, hi in zip(summary[point], summary[low], summary[high], strict=True)
+    ]
+
+
 def display_table(summary: pd.DataFrame, reference: str | None) -> pd.DataFrame:
     """The summary as strings for the report (CI merged into one column)."""
     out = pd.DataFrame({"policy": summary["policy"], "episodes": summary["episodes"]})
-    out["mean cost [95% CI]"] = [
-        f"{_fmt(m)} [{_fmt(lo)}, {_fmt(hi)}]"
-        for m, lo, hi in zip(
-            summary["mean_cost"], summary["cost_ci_low"], summary["cost_ci_high"], strict=True
-        )
-    ]
+    out["mean cost [95% CI]"] = _with_ci(summary, "mean_cost", "cost_ci_low", "cost_ci_high", _fmt)
     if "ratio_to_reference" in summary:
         out[f"ratio to {reference}"] = summary["ratio_to_reference"].map(_fmt)
-        out["paired ratio [95% CI]"] = [
-            f"{_fmt(m)} [{_fmt(lo)}, {_fmt(hi)}]"
-            for m, lo, hi in zip(
-                summary["paired_ratio"],
-                summary["paired_ratio_ci_low"],
-                summary["paired_ratio_ci_high"],
-                strict=True,
-            )
-        ]
+        out["paired ratio [95% CI]"] = _with_ci(
+            summary, "paired_ratio", "paired_ratio_ci_low", "paired_ratio_ci_high", _fmt
+        )
     if "gap_to_optimal" in summary:
-        out["gap to optimal [95% CI]"] = [
-            f"{_pct(m)} [{_pct(lo)}, {_pct(hi)}]"
-            for m, lo, hi in zip(
-                summary["gap_to_optimal"],
-                summary["gap_ci_low"],
-                summary["gap_ci_high"],
-                strict=True,
-            )
-        ]
+        out["gap to optimal [95% CI]"] = _with_ci(
+            summary, "gap_to_optimal", "gap_ci_low", "gap_ci_high", _pct
+        )
     out["divergence rate"] = summary["divergence_rate"].map(lambda v: f"{100 * v:.0f}%")
     out["final RMS distance"] = summary["mean_final_distance"].map(_fmt)
     out["control energy"] = summary["mean_control_energy"].map(_fmt)
