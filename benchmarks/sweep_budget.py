@@ -26,13 +26,11 @@ pessimistic.
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 import tempfile
 import time
 from collections import defaultdict
 
-from agent_envs.baselines import make_baseline
 from agent_envs.training.config import TrainConfig
 from agent_envs.training.evaluate import evaluate_policies
 from agent_envs.training.sweep_grid import LEARNER, PRESETS, GridOptions, expand_grid
@@ -99,12 +97,8 @@ def main() -> None:
     print(f"td3 warm-up {1e3 * warmup_per_step:8.2f} ms per timestep (random actions)")
     for trial in trials:
         if trial.kind != LEARNER and trial.policy not in per_episode:
-            spec = (
-                functools.partial(make_baseline, trial.policy, **trial.policy_kwargs)
-                if trial.policy_kwargs  # the preset's MPC plans on the noise-free model
-                else trial.policy
-            )
-            per_episode[trial.policy] = timed_eval(spec, trial)
+            # reference_spec: the preset's MPC plans on the noise-free model
+            per_episode[trial.policy] = timed_eval(trial.reference_spec(), trial)
             print(f"{trial.policy:11s} {per_episode[trial.policy]:6.2f} s per test episode")
 
     seconds: dict[str, float] = defaultdict(float)

@@ -42,7 +42,6 @@ band over seeds, and a section per contrast setting.
 from __future__ import annotations
 
 import contextlib
-import functools
 import json
 import os
 import shlex
@@ -218,13 +217,10 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
         if trial.kind == LEARNER:
             run_dir = train_learner(trial, out)
             spec = str(best_model_path(run_dir))
-        elif trial.policy_kwargs:
-            from agent_envs.baselines import make_baseline
-
-            spec = functools.partial(make_baseline, trial.policy, **trial.policy_kwargs)
-            print(f"reference {trial.policy} built with {trial.policy_kwargs}")
         else:
-            spec = trial.policy
+            spec = trial.reference_spec()
+            if trial.policy_kwargs:
+                print(f"reference {trial.policy} built with {trial.policy_kwargs}")
         if _finished_evaluation(folder, trial):
             print(f"reusing the finished evaluation in {folder}")
             results = EvaluationResults.load(folder)

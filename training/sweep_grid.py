@@ -26,6 +26,7 @@ Presets:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -123,6 +124,16 @@ class Trial:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+    def reference_spec(self) -> Any:
+        """The policy spec `evaluate_policies` takes for this reference trial: its registered
+        name, or a factory building it with `policy_kwargs` (`make_baseline(name, env, **kw)`).
+        """
+        if not self.policy_kwargs:
+            return self.policy
+        from agent_envs.baselines import make_baseline
+
+        return functools.partial(make_baseline, self.policy, **self.policy_kwargs)
+
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Trial:
         values = dict(data)
@@ -185,11 +196,11 @@ PAPER_ENV = {
     "max_control": 25.0,
 }
 
-# Budgets (SB3 timesteps) of the paper preset; see README "Sweeps" for how they were chosen.
-# Sized so that the whole preset ends in about 1.5 h on 2 cores (README "Results at the paper's
-# scale"): PPO gets 8 rollouts of 4 x 1024; SAC and TD3 half the zoo's Pendulum-v1 n_timesteps
-# (1e4 of 2e4; TD3's random warm-up is cut further, see _ZOO_TD3), parameter-shared
-# PPO 6e5 agent-steps (6 000 swarm steps, 187 rollouts of 3200 samples).
+# Budgets (SB3 timesteps) of the paper preset, sized so that the whole preset ends in about
+# 1.5 h on 2 cores (README "The paper preset: what it runs"; it took 59 min): PPO gets 8
+# rollouts of 4 x 1024; SAC and TD3 half the zoo's Pendulum-v1 n_timesteps (1e4 of 2e4; TD3's
+# random warm-up is cut further, see _ZOO_TD3); parameter-shared PPO 6e5 agent-steps (SB3 ends
+# on a whole rollout: 188 rollouts of 3200 samples, 601 600 agent-steps, 6 016 swarm steps).
 PAPER_BUDGETS = {"ppo": 32_768, "sac": 10_000, "td3": 10_000, "ppo-shared": 600_000}
 
 # rl-zoo3 Pendulum-v1 entries (+ SB3 defaults for the keys the entry leaves out).
