@@ -11,7 +11,7 @@ path per env:
    uniform draws in [-0.5, 0.5]; autoresets happen inside the timing (m = 50). Each figure
    is the best of `--repeats` interleaved blocks of at least `--seconds` seconds, per CPU
    second of this process (robust when other processes share the cores) and per wall second.
-2. PPO with the project's hyperparameters (`agent_envs.training.config.HYPERPARAMS`, with
+2. PPO with the project's hyperparameters (`training/hyperparams/ppo.yml`, with
    VecNormalize and the horizon as termination), `--ppo-timesteps` timesteps, on
    `NativeVecEnv` and on SB3's `DummyVecEnv` of `gym.make` envs: timesteps/s of
    `model.learn` (torch with one thread), for n_envs = 4 (the default, n_steps = 256) and

@@ -33,7 +33,8 @@ from collections import defaultdict
 
 from agent_envs.training.config import TrainConfig
 from agent_envs.training.evaluate import evaluate_policies
-from agent_envs.training.sweep_grid import LEARNER, PRESETS, GridOptions, expand_grid
+from agent_envs.training.experiment import LEARNER, ExperimentOptions, build_trials
+from agent_envs.training.presets import PRESETS
 from agent_envs.training.train import train
 
 #: short-run timesteps per learner (PPO: two rollouts; SAC/TD3: 1500 steps of gradient updates)
@@ -74,7 +75,7 @@ def main() -> None:
     args = parser.parse_args()
     out = args.out or tempfile.mkdtemp(prefix="sweep_budget_")
     preset = PRESETS["paper"]
-    trials = expand_grid(preset, GridOptions(vec_env="dummy"), out)
+    trials = build_trials(preset, ExperimentOptions(vec_env="dummy"), out)
     load_before = os.getloadavg()
 
     per_step: dict[str, float] = {}

@@ -256,6 +256,8 @@ BATTERY: list[tuple[list[str], str]] = [
     (["sweep", "--out", "{out}", "--dry-run=1"], "--dry-run"),
     (["sweep", "--out", "{out}", "--bootstrap-seed", "-1"], "--bootstrap-seed"),
     (["compare", "--out", "{out}", "--preset", "bogus"], "--preset"),
+    (["compare", "--out", "{out}", "--setting", "eps1"], "--setting"),  # quick has only main
+    (["compare", "--out", "{out}", "--preset", "paper", "--setting", "bogus"], "--setting"),
     (["compare", "--out", "{out}", "--optimum", "optimal,bogus"], "--optimum"),
     (["compare", "--out", "{out}", "--optimum", "mpc,mpc"], "--optimum"),
     (["compare", "--out", "{file}"], "--out"),

@@ -12,20 +12,20 @@ import pandas as pd
 import pytest
 
 from agent_envs.training.config import VEC_ENV_CHOICES, TrainConfig
-from agent_envs.training.sweep_grid import (
+from agent_envs.training.experiment import (
     LEARNER,
-    PRESETS,
     REFERENCE,
-    GridOptions,
+    ExperimentOptions,
     Trial,
-    expand_grid,
+    build_trials,
 )
+from agent_envs.training.presets import PRESETS
 
 # ------------------------------------------------------------------------------- the grid
 
 
 def test_smoke_grid_is_two_learner_trials_and_the_three_references():
-    trials = expand_grid(PRESETS["smoke"], runs_dir="/x/runs")
+    trials = build_trials(PRESETS["smoke"], runs_dir="/x/runs")
     learners = [t for t in trials if t.kind == LEARNER]
     references = [t for t in trials if t.kind == REFERENCE]
     assert [(t.policy, t.seed) for t in learners] == [("ppo", 0), ("ppo", 1)]
@@ -47,13 +47,13 @@ def test_smoke_grid_is_two_learner_trials_and_the_three_references():
 
 
 def test_trial_round_trips_through_json():
-    for trial in expand_grid(PRESETS["smoke"]):
+    for trial in build_trials(PRESETS["smoke"]):
         assert Trial.from_dict(json.loads(json.dumps(trial.to_dict()))) == trial
 
 
 def test_grid_options_change_seeds_budget_and_test_episodes():
-    options = GridOptions(seeds=(3, 4, 5), timesteps_scale=0.5, test_episodes=3)
-    trials = expand_grid(PRESETS["smoke"], options)
+    options = ExperimentOptions(seeds=(3, 4, 5), timesteps_scale=0.5, test_episodes=3)
+    trials = build_trials(PRESETS["smoke"], options)
     learners = [t for t in trials if t.kind == LEARNER]
     assert [t.seed for t in learners] == [3, 4, 5]
     assert {t.train["timesteps"] for t in learners} == {128}
@@ -63,18 +63,18 @@ def test_grid_options_change_seeds_budget_and_test_episodes():
 @pytest.mark.parametrize(
     ("options", "flag"),
     [
-        (GridOptions(learners=("dqn",)), "--learners"),
-        (GridOptions(settings=("nope",)), "--settings"),
-        (GridOptions(seeds=(0, 0)), "--seeds"),
-        (GridOptions(seeds=(-1,)), "--seeds"),
-        (GridOptions(timesteps_scale=0.0), "--timesteps-scale"),
-        (GridOptions(test_episodes=1), "--test-episodes"),
-        (GridOptions(vec_env="threads"), "--vec-env"),
+        (ExperimentOptions(learners=("dqn",)), "--learners"),
+        (ExperimentOptions(settings=("nope",)), "--settings"),
+        (ExperimentOptions(seeds=(0, 0)), "--seeds"),
+        (ExperimentOptions(seeds=(-1,)), "--seeds"),
+        (ExperimentOptions(timesteps_scale=0.0), "--timesteps-scale"),
+        (ExperimentOptions(test_episodes=1), "--test-episodes"),
+        (ExperimentOptions(vec_env="threads"), "--vec-env"),
     ],
 )
 def test_bad_grid_options_name_the_option(options, flag):
     with pytest.raises(ValueError, match=flag):
-        expand_grid(PRESETS["smoke"], options)
+        build_trials(PRESETS["smoke"], options)
 
 
 def test_paper_preset_definition():
@@ -94,11 +94,11 @@ def test_paper_preset_definition():
     assert preset.references == ("optimal", "mpc", "turnpike", "proportional", "zero")
     assert len(preset.seeds) >= 3
     assert preset.vec_env == "native" and preset.vec_env in VEC_ENV_CHOICES
-    assert {t.train["vec_env"] for t in expand_grid(preset) if t.kind == LEARNER} == {
+    assert {t.train["vec_env"] for t in build_trials(preset) if t.kind == LEARNER} == {
         "native",
         "dummy",  # the PettingZoo learner trains on SuperSuit's vector env
     }
-    trials = expand_grid(preset, GridOptions(vec_env="dummy"))
+    trials = build_trials(preset, ExperimentOptions(vec_env="dummy"))
     learners = [t for t in trials if t.kind == LEARNER]
     main = {(t.policy, t.seed) for t in learners if t.setting == "main"}
     names = ("ppo", "ppo-swarm", "sac", "td3", "ppo-shared")
@@ -264,11 +264,11 @@ def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
 def test_reference_trial_without_ray_evaluates_once_then_reuses(tmp_path):
     """`execute_trial` (what each Tune trial runs) evaluates the reference on the test seeds
     into its folder; run again (a resumed trial), it reuses the finished evaluation."""
+    from agent_envs.training.experiment import TRIAL_LOG, evaluation_dir
     from agent_envs.training.results import EvaluationResults
     from agent_envs.training.sweep import execute_trial
-    from agent_envs.training.sweep_grid import TRIAL_LOG, evaluation_dir
 
-    trial = next(t for t in expand_grid(PRESETS["smoke"]) if t.policy == "turnpike")
+    trial = next(t for t in build_trials(PRESETS["smoke"]) if t.policy == "turnpike")
     first = execute_trial(trial, tmp_path)
     folder = evaluation_dir(trial, tmp_path)
     episodes = EvaluationResults.load(folder).episodes
@@ -286,7 +286,7 @@ def test_paper_preset_takes_optimal_and_mpc_once_the_baselines_have_them(monkeyp
 
     for name in ("optimal", "mpc"):
         monkeypatch.setitem(BASELINES, name, object)
-    trials = expand_grid(PRESETS["paper"], GridOptions(vec_env="dummy"))
+    trials = build_trials(PRESETS["paper"], ExperimentOptions(vec_env="dummy"))
     by_setting: dict[str, set[str]] = {}
     for t in trials:
         if t.kind == REFERENCE:
@@ -305,7 +305,7 @@ def test_paper_preset_builds_mpc_on_the_noise_free_model_and_the_rest_on_default
     """The paper preset's MPC trial carries `noise_free=True` (certainty-equivalent MPC: the
     20-path re-solve at every step would cost ~1.7 core-h for 20 episodes); no other reference
     gets arguments, and the arguments survive the grid's JSON round trip (resume)."""
-    trials = expand_grid(PRESETS["paper"], GridOptions(vec_env="dummy"))
+    trials = build_trials(PRESETS["paper"], ExperimentOptions(vec_env="dummy"))
     kwargs = {t.trial_id: t.policy_kwargs for t in trials if t.kind == REFERENCE}
     assert kwargs.pop("main__mpc") == {"noise_free": True}
     assert kwargs and all(v == {} for v in kwargs.values())
@@ -316,7 +316,7 @@ def test_paper_preset_builds_mpc_on_the_noise_free_model_and_the_rest_on_default
 def test_trial_saved_before_policy_kwargs_existed_loads_with_none():
     """A grid.json written before `policy_kwargs` (an interrupted sweep resumed by this version)
     loads with empty arguments."""
-    trial = next(t for t in expand_grid(PRESETS["smoke"]) if t.kind == REFERENCE)
+    trial = next(t for t in build_trials(PRESETS["smoke"]) if t.kind == REFERENCE)
     old = trial.to_dict()
     del old["policy_kwargs"]
     assert Trial.from_dict(old) == trial and Trial.from_dict(old).policy_kwargs == {}
@@ -325,9 +325,9 @@ def test_trial_saved_before_policy_kwargs_existed_loads_with_none():
 def test_reference_trial_builds_its_controller_with_the_trial_kwargs(tmp_path):
     """`execute_trial` builds a reference with its `policy_kwargs`: the noise-free MPC plans
     one path (its repr says so) and its evaluation differs from no controller at all."""
+    from agent_envs.training.experiment import TRIAL_LOG, evaluation_dir
     from agent_envs.training.results import EvaluationResults
     from agent_envs.training.sweep import execute_trial
-    from agent_envs.training.sweep_grid import TRIAL_LOG, evaluation_dir
 
     env = {"n_agents": 4, "n_steps": 4}
     trial = Trial(
@@ -348,3 +348,54 @@ def test_reference_trial_builds_its_controller_with_the_trial_kwargs(tmp_path):
     episodes = EvaluationResults.load(folder).episodes
     assert list(episodes["seed"]) == [10000, 10001]
     assert mpc_metrics["mean_cost"] < zero_metrics["mean_cost"]
+
+
+# ----------------------------------------------------------------- one preset, two commands
+
+
+def test_compare_runs_one_seed_of_the_sweeps_grid():
+    """`compare --preset paper` and `sweep --preset paper` mean the same setting: compare's
+    learner configs are the sweep's main-setting configs of its seed, but for the run folder
+    naming (compare finds finished runs by their configuration) and compare's progress bar."""
+    from agent_envs.training.compare import CompareConfig
+
+    compare = [t for t in CompareConfig(preset="paper", out="x").trials() if t.kind == LEARNER]
+    sweep = [
+        t
+        for t in build_trials(PRESETS["paper"], runs_dir="x/runs")
+        if t.kind == LEARNER and t.setting == "main" and t.seed == 0
+    ]
+    assert [t.policy for t in compare] == [t.policy for t in sweep]
+    for c, s in zip(compare, sweep, strict=True):
+        same = {"run_name": None, "progress_bar": None}
+        assert {**c.train, **same} == {**s.train, **same}
+        assert c.eval_env_kwargs == s.eval_env_kwargs and c.test_seeds == s.test_seeds
+    # a contrast setting: its learners, its env, its evaluation env
+    em = CompareConfig(preset="paper", setting="em-to-serb", seed=2, out="x").trials()
+    learners = [t for t in em if t.kind == LEARNER]
+    assert [(t.policy, t.seed) for t in learners] == [("ppo-swarm", 2)]
+    assert learners[0].train["env_kwargs"]["integrator"] == "em"
+    assert {t.eval_env_kwargs["integrator"] for t in em} == {"serb"}
+
+
+def test_compare_references_are_the_presets_with_optimum_chosen():
+    from agent_envs.training.compare import CompareConfig
+
+    def references(**kw):
+        return [t.policy for t in CompareConfig(out="x", **kw).trials() if t.kind == REFERENCE]
+
+    assert references() == ["turnpike", "proportional", "zero", "optimal", "mpc"]
+    assert references(optimum="") == ["turnpike", "proportional", "zero"]
+    assert references(optimum="mpc") == ["turnpike", "proportional", "zero", "mpc"]
+    # the paper preset's MPC plans on the noise-free model, in compare as in the sweep
+    mpc = next(t for t in CompareConfig(preset="paper", out="x").trials() if t.policy == "mpc")
+    assert mpc.policy_kwargs == {"noise_free": True}
+
+
+def test_no_two_presets_share_a_name_and_unknown_names_say_the_known_ones():
+    from agent_envs.training.presets import get_preset
+
+    with pytest.raises(ValueError, match="smoke, quick, paper"):
+        get_preset("paper-sweep")
+    assert len({p.name for p in PRESETS.values()}) == len(PRESETS)
+    assert all(name == preset.name for name, preset in PRESETS.items())

@@ -15,7 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent_envs.training.config import HYPERPARAMS, TrainConfig, hyperparams_file
+from agent_envs.training.config import (
+    ZOO_KEYS,
+    TrainConfig,
+    default_hyperparams,
+    hyperparams_file,
+)
 from agent_envs.training.defaults import ALGORITHMS, GYM_ENV_ID, PETTINGZOO_ENV_ID
 
 TINY_ENV = {"n_agents": 5, "n_steps": 10}
@@ -173,11 +178,26 @@ def test_cli_resume_refuses_to_change_the_run(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)
-def test_rl_zoo_yaml_equals_the_hyperparameters_train_uses(algo):
+def test_shipped_yaml_is_what_train_uses(algo):
+    """The YAML file rl-zoo3 is pointed at is the one source of `agent-envs train`'s defaults:
+    an entry for both swarm envs, valid SB3 keyword arguments, and the measured choices
+    (gamma 0.9 for 20-50 step episodes, the horizon wrapper, normalization)."""
+    from agent_envs.training.sb3_arguments import check_hyperparams
+
     yaml = pytest.importorskip("yaml")
     with open(hyperparams_file(algo)) as handle:
-        assert yaml.safe_load(handle) == HYPERPARAMS[algo]
-    assert set(HYPERPARAMS[algo]) == {GYM_ENV_ID, PETTINGZOO_ENV_ID}
+        raw = yaml.safe_load(handle)
+    assert set(raw) == {GYM_ENV_ID, PETTINGZOO_ENV_ID}
+    for env_id, entry in raw.items():
+        assert default_hyperparams(algo, env_id) == entry
+        assert entry["gamma"] == 0.9 and entry["normalize"] is True
+        assert entry["env_wrapper"] == "agent_envs.training.wrappers.HorizonAsTermination"
+        kwargs = {k: v for k, v in entry.items() if k not in ZOO_KEYS}
+        check_hyperparams(algo, kwargs, entry["policy"])
+    if algo in ("ppo", "a2c"):
+        assert raw[GYM_ENV_ID]["policy_kwargs"]["log_std_init"] == -3.0
+    with pytest.raises(ValueError, match="--env-id"):
+        default_hyperparams(algo, "Pendulum-v1")
 
 
 def test_run_name_follows_cleanrl_pattern():

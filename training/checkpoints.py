@@ -33,6 +33,12 @@ FINAL_VECNORMALIZE = "final_model_vecnormalize.pkl"
 CHECKPOINT_PREFIX = "rl_model"
 
 
+def best_model_path(run_dir: str | Path) -> Path:
+    """The model a run is evaluated with: the best on the validation seeds, else the final one."""
+    best = Path(run_dir) / BEST_MODEL
+    return best if best.exists() else Path(run_dir) / FINAL_MODEL
+
+
 def checkpoint_model(run_dir: str | Path, steps: int) -> Path:
     """Path of a checkpoint's model zip."""
     return Path(run_dir) / "checkpoints" / f"{CHECKPOINT_PREFIX}_{steps}_steps.zip"

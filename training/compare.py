@@ -2,8 +2,14 @@
 
     agent-envs compare --preset quick            # a few minutes on 2 CPU cores
     agent-envs compare --preset paper            # N = 100, stiff, SERB, m = 50; much longer
+    agent-envs compare --preset paper --setting eps1 --learners ppo-swarm
 
-Steps: (1) train every learner of the preset (`agent_envs.training.train.train`; a finished run
+The presets are the ones of `agent-envs sweep` (`agent_envs.training.presets`): compare runs one
+training seed (``--seed``, default the preset's first) of one env setting (``--setting``,
+default the main one) in process; the runs come from the experiment builder
+(`agent_envs.training.experiment`), as the sweep's do.
+
+Steps: (1) train every learner of the preset (`experiment.train_learner`; a finished run
 of the same configuration in ``OUT/runs`` is reused, an interrupted one resumed from its last
 checkpoint); (2) evaluate the learners' best models (chosen on the validation seeds) and the
 turnpike, proportional and zero controllers on the same held-out test seeds
@@ -16,126 +22,62 @@ learning curves, turnpike logged on the same seeds) uses seeds ``1000 + i``; the
 the held-out test seeds ``10000 + i`` (`agent_envs.training.defaults.DEFAULT_TEST_SEEDS`). Costs
 are minus the episode return, i.e. the paper's discrete cost functional.
 
-Train on one, evaluate on another: ``--eval-env-kwargs '{"integrator": "serb"}'`` evaluates
-every policy also on that modified env, e.g. policies trained with Euler-Maruyama
+Train on one, evaluate on another: a setting with ``eval_env_kwargs`` (the paper preset's
+``em-to-serb``) evaluates on its evaluation env; ``--eval-env-kwargs '{"integrator": "serb"}'``
+evaluates every policy also on that modified env, e.g. policies trained with Euler-Maruyama
 (``--env-kwargs '{"integrator": "em"}'``) evaluated with SERB.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agent_envs.training.config import Learner, TrainConfig, command_line, option_field
+from agent_envs.training.config import MAX_SEED, command_line, option_field
 from agent_envs.training.defaults import (
     BASELINE_POLICIES,
-    DEFAULT_TEST_SEED,
-    FEEDBACK_BASELINES,
     GYM_ENV_ID,
     PETTINGZOO_ENV_ID,
     parse_env_kwargs,
 )
-
-
-@dataclass(frozen=True)
-class Preset:
-    """A comparison setting: env kwargs, learners, evaluation sizes."""
-
-    name: str
-    description: str
-    env_kwargs: dict[str, Any]
-    learners: tuple[Learner, ...]
-    validation_episodes: int = 10
-    evaluations: int = 8
-    test_episodes: int = 20
-
-
-def _sac_target_entropy(env_kwargs: dict[str, Any], per_dim: float = -5.0) -> float:
-    n = int(env_kwargs.get("n_agents", 100))
-    d = int(env_kwargs.get("dim", 1))
-    return per_dim * n * d
-
-
-_QUICK_ENV = {"n_agents": 10, "n_steps": 20}
-
-
-def _default_learners(
-    env_kwargs: dict[str, Any], *, ppo: int, sac: int, ppo_shared: int
-) -> tuple[Learner, ...]:
-    """PPO and SAC on the Gymnasium env and parameter-shared PPO on the PettingZoo env,
-    with the given timestep budgets (the shared learner counts agent-steps)."""
-    return (
-        Learner("ppo", "ppo", GYM_ENV_ID, ppo, description="PPO, one controller"),
-        Learner(
-            "sac",
-            "sac",
-            GYM_ENV_ID,
-            sac,
-            {"target_entropy": _sac_target_entropy(env_kwargs)},
-            description="SAC, one controller",
-        ),
-        Learner(
-            "ppo-shared",
-            "ppo",
-            PETTINGZOO_ENV_ID,
-            ppo_shared,
-            description="parameter-shared PPO, one agent per swarm member (SuperSuit)",
-        ),
-    )
-
-
-PRESETS: dict[str, Preset] = {
-    "quick": Preset(
-        name="quick",
-        description=(
-            "N = 10 agents, m = 20 steps, otherwise the paper's stiff setting (eps = 0.05, "
-            "alpha = 0.1, sigma = 0.01, T = 1, target 0.7, SERB); a few minutes on 2 CPU cores"
-        ),
-        env_kwargs=_QUICK_ENV,
-        learners=_default_learners(_QUICK_ENV, ppo=40_000, sac=20_000, ppo_shared=150_000),
-    ),
-    "paper": Preset(
-        name="paper",
-        description=(
-            "the paper's setting: N = 100 agents, m = 50 steps, eps = 0.05, alpha = 0.1, "
-            "sigma = 0.01, T = 1, target 0.7, SERB (the env defaults)"
-        ),
-        env_kwargs={},
-        learners=_default_learners({}, ppo=400_000, sac=60_000, ppo_shared=3_000_000),
-        validation_episodes=10,
-        evaluations=10,
-        test_episodes=20,
-    ),
-}
-
-
-#: Largest --timesteps-scale (the paper preset's budgets times this stay far below 10**12).
-MAX_TIMESTEPS_SCALE = 1000.0
-
-
-#: the optimal-control references (`agent_envs.baselines.optimal_controllers`)
-OPTIMUM_POLICIES = ("optimal", "mpc")
+from agent_envs.training.experiment import (
+    LEARNER,
+    ExperimentOptions,
+    Trial,
+    build_trials,
+    select,
+    train_learner,
+)
+from agent_envs.training.presets import OPTIMUM_POLICIES, PRESETS, Learner, get_preset
+from agent_envs.validation import check_int
 
 
 @dataclass
 class CompareConfig:
     """Options of `agent-envs compare` (one field = one option)."""
 
-    preset: str = option_field("quick", "comparison setting", choices=tuple(PRESETS))
+    preset: str = option_field("quick", "the experiment setting", choices=tuple(PRESETS))
+    setting: str | None = option_field(
+        None,
+        "the preset's env setting to run (default: its main one; "
+        + "; ".join(f"{k}: {','.join(s.name for s in p.settings)}" for k, p in PRESETS.items())
+        + ")",
+    )
     out: str | None = option_field(None, "output directory (default compare-{preset})")
     learners: str | None = option_field(
         None,
-        "comma-separated learners to train (default: all of the preset: "
+        "comma-separated learners to train (default: all of the preset's setting: "
         + "; ".join(f"{k}: {','.join(x.name for x in p.learners)}" for k, p in PRESETS.items())
         + ")",
     )
-    seed: int = option_field(0, "training seed of every learner")
+    seed: int | None = option_field(
+        None, "training seed of every learner (default: the preset's first training seed)"
+    )
     env_kwargs: dict = field(
         default_factory=dict,
         metadata={
@@ -162,58 +104,43 @@ class CompareConfig:
     progress_bar: bool = option_field(True, "progress bars")
     verbose: int = option_field(0, "SB3 verbosity")
     torch_threads: int = option_field(1, "torch threads (1 is fastest for these small networks)")
-    optimum: str = option_field(
-        ",".join(OPTIMUM_POLICIES),
+    optimum: str | None = option_field(
+        None,
         "comma-separated optimal-control references evaluated with the baselines (optimal = "
         "open-loop optimum, the V of the 'gap to optimal' column; mpc = receding horizon); '' "
-        "for none. Seconds per episode at N = 10; at the paper's N = 100 an optimal episode "
-        "takes tens of seconds and mpc far longer",
+        "for none (default: the preset's). Seconds per episode at N = 10; at the paper's "
+        "N = 100 an optimal episode takes tens of seconds and mpc far longer",
     )
 
     def __post_init__(self) -> None:
         self.env_kwargs = parse_env_kwargs(self.env_kwargs)
         self.eval_env_kwargs = parse_env_kwargs(self.eval_env_kwargs, "--eval-env-kwargs")
-        if self.preset not in PRESETS:
-            raise ValueError(f"--preset must be one of {', '.join(PRESETS)}; got {self.preset!r}")
-        if not (
-            isinstance(self.timesteps_scale, (int, float))
-            and not isinstance(self.timesteps_scale, bool)
-            and math.isfinite(self.timesteps_scale)
-            and 0 < self.timesteps_scale <= MAX_TIMESTEPS_SCALE
-        ):
-            raise ValueError(
-                f"--timesteps-scale must be a number in (0, {MAX_TIMESTEPS_SCALE}], "
-                f"got {self.timesteps_scale!r}"
-            )
-        if not isinstance(self.optimum, str):
+        get_preset(self.preset).setting(self.setting)  # ValueError naming --preset / --setting
+        if self.seed is not None:
+            check_int("--seed", self.seed, 0, MAX_SEED)
+        if self.optimum is not None and not isinstance(self.optimum, str):
             raise TypeError(f"--optimum must be a comma-separated string, got {self.optimum!r}")
-        unknown = [p for p in self.optimum_policies if p not in OPTIMUM_POLICIES]
-        if unknown or len(set(self.optimum_policies)) != len(self.optimum_policies):
+        wanted = self.optimum_policies
+        if any(p not in OPTIMUM_POLICIES for p in wanted) or len(set(wanted)) != len(wanted):
             raise ValueError(
                 f"--optimum takes distinct names among {', '.join(OPTIMUM_POLICIES)} "
                 f"(or '' for none), comma-separated; got {self.optimum!r}"
             )
-        if self.test_episodes is not None and not 2 <= self.test_episodes <= 100_000:
-            raise ValueError(
-                f"--test-episodes must be an integer in [2, 100000], got {self.test_episodes}"
-            )
+        self.options()  # ValueError naming --learners, --timesteps-scale, --test-episodes, ...
 
     def validate(self) -> CompareConfig:
         """Check everything before the first learner trains; returns self.
 
         The output folder, every selected learner's training configuration (hyperparameters,
-        seed, torch threads, ...), and the env with ``--env-kwargs`` and with
-        ``--eval-env-kwargs`` (both are built once).
+        seed, torch threads, ...; built by the experiment builder), and the env with
+        ``--env-kwargs`` and with ``--eval-env-kwargs`` (both are built once).
         """
         from agent_envs.training.environments import env_description
         from agent_envs.training.storage import check_output_dir
 
         check_output_dir(self.out_dir, "--out")
-        learners = self.selected_learners()
-        runs_dir = self.out_dir / "runs"
-        for learner in learners:
-            learner_config(self, learner, runs_dir)  # validates the TrainConfig
-        env_kwargs = {**PRESETS[self.preset].env_kwargs, **self.env_kwargs}
+        trials = self.trials()
+        env_kwargs = trials[0].eval_env_kwargs
         env_description(GYM_ENV_ID, env_kwargs)
         if self.eval_env_kwargs:
             env_description(GYM_ENV_ID, {**env_kwargs, **self.eval_env_kwargs}, "--eval-env-kwargs")
@@ -221,26 +148,50 @@ class CompareConfig:
 
     @property
     def optimum_policies(self) -> list[str]:
-        """The optimal-control references to evaluate (names in `OPTIMUM_POLICIES`)."""
+        """The optimal-control references to evaluate (default: the preset's)."""
+        if self.optimum is None:
+            return [p for p in get_preset(self.preset).references if p in OPTIMUM_POLICIES]
         return [p.strip() for p in self.optimum.split(",") if p.strip()]
 
     @property
     def out_dir(self) -> Path:
         return Path(self.out or f"compare-{self.preset}")
 
+    def options(self) -> ExperimentOptions:
+        """The experiment builder's options: one seed, one setting, the references asked for."""
+        preset = get_preset(self.preset)
+        setting = preset.setting(self.setting)
+        learners = None
+        if self.learners is not None:
+            learners = tuple(n.strip() for n in self.learners.split(",") if n.strip())
+            offered = setting.learners or [lr.name for lr in preset.learners]
+            select(offered, learners, "--learners")
+        references = [
+            r for r in preset.references if r not in OPTIMUM_POLICIES
+        ] + self.optimum_policies
+        options = ExperimentOptions(
+            seeds=(preset.seeds[0] if self.seed is None else self.seed,),
+            learners=learners,
+            settings=(setting.name,),
+            timesteps_scale=self.timesteps_scale,
+            test_episodes=self.test_episodes,
+            env_kwargs=self.env_kwargs,
+            references=tuple(references),
+            run_names=False,
+            progress_bar=self.progress_bar,
+            verbose=self.verbose,
+            torch_threads=self.torch_threads,
+        )
+        options.check(preset)
+        return options
+
+    def trials(self) -> list[Trial]:
+        """The runs of this comparison (the experiment builder's), every TrainConfig checked."""
+        return build_trials(get_preset(self.preset), self.options(), self.out_dir / "runs")
+
     def selected_learners(self) -> list[Learner]:
-        preset = PRESETS[self.preset]
-        if self.learners is None:
-            return list(preset.learners)
-        by_name = {learner.name: learner for learner in preset.learners}
-        names = [n.strip() for n in self.learners.split(",") if n.strip()]
-        unknown = [n for n in names if n not in by_name]
-        if unknown or not names or len(set(names)) != len(names):
-            raise ValueError(
-                f"--learners must list distinct learners of the {self.preset} preset "
-                f"({', '.join(by_name)}), comma-separated; got {self.learners!r}"
-            )
-        return [by_name[n] for n in names]
+        by_name = {lr.name: lr for lr in get_preset(self.preset).learners}
+        return [by_name[t.policy] for t in self.trials() if t.kind == LEARNER]
 
     def command(self) -> str:
         """The `agent-envs compare` command line of this config (non-default options only)."""
@@ -248,96 +199,6 @@ class CompareConfig:
 
 
 # ------------------------------------------------------------------------------------ training
-
-
-def scaled_timesteps(learner: Learner, scale: float) -> int:
-    return max(round(learner.timesteps * scale), 1)
-
-
-def learner_config(config: CompareConfig, learner: Learner, runs_dir: Path) -> TrainConfig:
-    """The TrainConfig of one learner in this comparison."""
-    preset = PRESETS[config.preset]
-    timesteps = scaled_timesteps(learner, config.timesteps_scale)
-    return TrainConfig(
-        algo=learner.algo,
-        env_id=learner.env_id,
-        env_kwargs={**preset.env_kwargs, **config.env_kwargs},
-        timesteps=timesteps,
-        seed=config.seed,
-        out=str(runs_dir),
-        n_envs=learner.n_envs,
-        hyperparams=dict(learner.hyperparams),
-        eval_freq=max(timesteps // preset.evaluations, 1),
-        eval_episodes=preset.validation_episodes,
-        checkpoint_freq=max(timesteps // 4, 1),
-        progress_bar=config.progress_bar,
-        verbose=config.verbose,
-        torch_threads=config.torch_threads,
-    ).validate()
-
-
-#: A run is reused or resumed only when all of these match, the budget included: a run resumed
-#: with another budget would keep its old evaluation and checkpoint schedule.
-_SAME_RUN_FIELDS = (
-    "algo",
-    "env_id",
-    "env_kwargs",
-    "seed",
-    "n_envs",
-    "hyperparams",
-    "eval_seed",
-    "timesteps",
-)
-
-
-def find_run(runs_dir: Path, wanted: TrainConfig) -> tuple[Path, bool] | None:
-    """The newest run in `runs_dir` with the same setting: (run dir, finished with enough steps)."""
-    candidates = []
-    for cfg_path in runs_dir.glob("*/config.json"):
-        try:
-            saved = json.loads(cfg_path.read_text())
-        except (OSError, json.JSONDecodeError):
-            continue
-        if any(saved.get(k) != getattr(wanted, k) for k in _SAME_RUN_FIELDS):
-            continue
-        run_dir = cfg_path.parent
-        summary_path = run_dir / "summary.json"
-        finished = False
-        if summary_path.exists():
-            summary = json.loads(summary_path.read_text())
-            finished = int(summary.get("timesteps", 0)) >= wanted.timesteps
-        candidates.append((cfg_path.stat().st_mtime, run_dir, finished))
-    if not candidates:
-        return None
-    _, run_dir, finished = max(candidates)
-    return run_dir, finished
-
-
-def train_learner(config: CompareConfig, learner: Learner, runs_dir: Path) -> Path:
-    """Train (or reuse / resume) one learner; return its run directory."""
-    from agent_envs.training.train import train
-
-    wanted = learner_config(config, learner, runs_dir)
-    existing = None if config.retrain else find_run(runs_dir, wanted)
-    if existing is not None:
-        run_dir, finished = existing
-        if finished:
-            print(f"  reusing finished run {run_dir}")
-            return run_dir
-        print(f"  resuming {run_dir} from its last checkpoint")
-        return train(replace(wanted, resume=str(run_dir)))
-    return train(wanted)
-
-
-# ---------------------------------------------------------------------------------- evaluation
-
-
-def best_model_path(run_dir: Path) -> Path:
-    """The model to compare: the best on the validation seeds, else the final one."""
-    from agent_envs.training.checkpoints import BEST_MODEL, FINAL_MODEL
-
-    best = run_dir / BEST_MODEL
-    return best if best.exists() else run_dir / FINAL_MODEL
 
 
 def evaluate_all(
@@ -361,6 +222,7 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
     import pandas as pd
 
     import agent_envs  # noqa: F401
+    from agent_envs.training.checkpoints import best_model_path
     from agent_envs.training.multiagent import evaluate_per_agent
     from agent_envs.training.policies import load_sb3_policy
 
@@ -464,127 +326,179 @@ def training_table(run_dirs: dict[str, Path], learners: dict[str, Learner]):
     return pd.DataFrame(rows)
 
 
+def _train_all(config: CompareConfig, trials: list[Trial]) -> dict[str, Path]:
+    """Train (or reuse / resume) every learner trial; {learner name: run directory}."""
+    from agent_envs.training.config import TrainConfig
+
+    learners = [t for t in trials if t.kind == LEARNER]
+    run_dirs: dict[str, Path] = {}
+    for i, trial in enumerate(learners, 1):
+        train = TrainConfig.from_dict(trial.train)
+        print(
+            f"[{i}/{len(learners)}] training {trial.policy} ({train.algo} on {train.env_id}, "
+            f"{train.timesteps} timesteps)",
+            flush=True,
+        )
+        run_dirs[trial.policy] = train_learner(train, retrain=config.retrain)
+    return run_dirs
+
+
+def _evaluate(config: CompareConfig, trials: list[Trial], run_dirs: dict[str, Path]):
+    """The held-out evaluation of the references and the learners' best models; and, with
+    ``--eval-env-kwargs``, the same on the modified env (else None)."""
+    from agent_envs.training.checkpoints import best_model_path
+
+    references = [t for t in trials if t.kind != LEARNER]
+    env_kwargs, seeds = trials[0].eval_env_kwargs, list(trials[0].test_seeds)
+    print(f"evaluating {len(references) + len(run_dirs)} policies on {len(seeds)} seeds")
+    policies: dict[str, Any] = {t.policy: t.reference_spec() for t in references}
+    policies.update({name: str(best_model_path(d)) for name, d in run_dirs.items()})
+    out = config.out_dir
+    results = evaluate_all(policies, env_kwargs, seeds, out / "evaluation", config.progress_bar)
+    if not config.eval_env_kwargs:
+        return results, None
+    transfer_kwargs = {**env_kwargs, **config.eval_env_kwargs}
+    print(f"evaluating on the modified env {transfer_kwargs}")
+    transfer = evaluate_all(
+        policies, transfer_kwargs, seeds, out / "evaluation_transfer", config.progress_bar
+    )
+    return results, transfer
+
+
+def _proportional_section(results):
+    from agent_envs.training.report import ReportSection, display_table
+    from agent_envs.training.results import summarize
+
+    return ReportSection(
+        "Against the proportional controller",
+        text=(
+            "The same test episodes with the proportional controller beta (xbar - x_k) as "
+            "the reference: the turnpike controller without the cancellation of the "
+            "interaction drift. When it is cheaper than the turnpike controller (see the "
+            "first table), it is the stronger yardstick for the learners."
+        ),
+        table=display_table(summarize(results.episodes, "proportional"), "proportional"),
+    )
+
+
+def _learning_curve_section(run_dirs: dict[str, Path], learners: dict[str, Learner], out: Path):
+    from agent_envs.training.report import ReportSection
+
+    curves_png = out / "learning_curves.png"
+    plot_learning_curves(run_dirs, _reference_costs(run_dirs), curves_png)
+    return ReportSection(
+        "Learning curves",
+        text=(
+            "Validation cost of each learner during training on the validation seeds "
+            "1000..1000+k (one fresh episode per seed at every evaluation; the best model "
+            "on these seeds is the one compared above, on the held-out test seeds). The "
+            "reference controllers' costs on the same validation seeds are the black lines "
+            "(turnpike dashed, proportional dash-dotted, zero dotted). "
+            "Swarm steps are env transitions: the parameter-shared learner gets N agent "
+            "samples per swarm step."
+        ),
+        table=training_table(run_dirs, learners),
+        images=[curves_png],
+        captions=["validation cost against swarm steps (left) and wall time (right)"],
+    )
+
+
+def _per_agent_section(name: str, table):
+    from agent_envs.training.report import ReportSection
+
+    return ReportSection(
+        f"Per-agent costs of {name} (PettingZoo env)",
+        text=(
+            f"The parameter-shared policy {name} run on `{PETTINGZOO_ENV_ID}` itself, one "
+            "action per agent from its own observation, on the test seeds. Agent k's "
+            "cost is minus its summed reward tau/N sum_n (|x_k - xbar|^2 + gamma "
+            "|u_k|^2); the agents' costs add up to the swarm's cost."
+        ),
+        table=table,
+    )
+
+
+def _transfer_section(config: CompareConfig, env_kwargs: dict[str, Any], transfer):
+    from agent_envs.training.report import ReportSection, display_table
+    from agent_envs.training.results import summarize
+
+    return ReportSection(
+        f"Evaluated on another env: {config.eval_env_kwargs}",
+        text=(
+            f"The same policies (trained with env kwargs {env_kwargs}) evaluated with "
+            f"{config.eval_env_kwargs} changed, same test seeds."
+        ),
+        table=display_table(summarize(transfer.episodes), "turnpike"),
+    )
+
+
+def _run_section(config: CompareConfig, env_kwargs, learners, total: float, training: float):
+    from agent_envs.training.report import ReportSection
+
+    preset = get_preset(config.preset)
+    return ReportSection(
+        "Run",
+        text=(
+            f"Preset {config.preset}: {preset.description}; env kwargs used: {env_kwargs}. "
+            "Wall time of this command "
+            f"{total:.0f} s in all, {training:.0f} s of it training (a reused "
+            "finished run costs no training time; see the table above for each run's own "
+            "training time). "
+            f"Learners: {', '.join(f'{lr.name} = {lr.description}' for lr in learners)}."
+        ),
+        code=config.command(),
+    )
+
+
 def compare(config: CompareConfig) -> dict[str, Any]:
     """Run the whole comparison; returns paths and the summary table (see module docstring)."""
-    from agent_envs.training.report import ReportSection, build_report, display_table
-    from agent_envs.training.results import summarize
-    from agent_envs.training.storage import write_json_atomic
     from agent_envs.training.train import torch_threads
 
     started = time.perf_counter()
     config.validate()
-    preset = PRESETS[config.preset]
-    learners = config.selected_learners()
+    preset = get_preset(config.preset)
+    trials = config.trials()
+    learners = {lr.name: lr for lr in config.selected_learners()}
     out = config.out_dir
-    runs_dir = out / "runs"
-    runs_dir.mkdir(parents=True, exist_ok=True)
-    env_kwargs = {**preset.env_kwargs, **config.env_kwargs}
-    n_test = config.test_episodes or preset.test_episodes
-    seeds = list(range(DEFAULT_TEST_SEED, DEFAULT_TEST_SEED + n_test))
+    (out / "runs").mkdir(parents=True, exist_ok=True)
+    env_kwargs = trials[0].eval_env_kwargs
     print(f"compare --preset {config.preset}: {preset.description}")
     print(f"env kwargs {env_kwargs}; output {out}")
-
-    run_dirs: dict[str, Path] = {}
     with torch_threads(config.torch_threads):
-        for i, learner in enumerate(learners, 1):
-            steps = scaled_timesteps(learner, config.timesteps_scale)
-            print(
-                f"[{i}/{len(learners)}] training {learner.name} ({learner.algo} on "
-                f"{learner.env_id}, {steps} timesteps)",
-                flush=True,
-            )
-            run_dirs[learner.name] = train_learner(config, learner, runs_dir)
+        run_dirs = _train_all(config, trials)
         train_done = time.perf_counter()
-
-        references = [*FEEDBACK_BASELINES, *config.optimum_policies]
-        print(f"evaluating {len(references) + len(run_dirs)} policies on {n_test} seeds")
-        policies: dict[str, Any] = {name: name for name in references}
-        policies.update({name: str(best_model_path(d)) for name, d in run_dirs.items()})
-        results = evaluate_all(policies, env_kwargs, seeds, out / "evaluation", config.progress_bar)
-        transfer = None
-        if config.eval_env_kwargs:
-            transfer_kwargs = {**env_kwargs, **config.eval_env_kwargs}
-            print(f"evaluating on the modified env {transfer_kwargs}")
-            transfer = evaluate_all(
-                policies, transfer_kwargs, seeds, out / "evaluation_transfer", config.progress_bar
-            )
-        shared = [
-            n for n, lr in zip(run_dirs, learners, strict=True) if lr.env_id == PETTINGZOO_ENV_ID
-        ]
+        results, transfer = _evaluate(config, trials, run_dirs)
+        shared = [n for n in run_dirs if learners[n].env_id == PETTINGZOO_ENV_ID]
+        seeds = list(trials[0].test_seeds)
         agent_tables = {name: per_agent_table(run_dirs[name], env_kwargs, seeds) for name in shared}
-
-    sections = []
-    sections.append(
-        ReportSection(
-            "Against the proportional controller",
-            text=(
-                "The same test episodes with the proportional controller beta (xbar - x_k) as "
-                "the reference: the turnpike controller without the cancellation of the "
-                "interaction drift. When it is cheaper than the turnpike controller (see the "
-                "first table), it is the stronger yardstick for the learners."
-            ),
-            table=display_table(summarize(results.episodes, "proportional"), "proportional"),
-        )
-    )
-    curves_png = out / "learning_curves.png"
-    plot_learning_curves(run_dirs, _reference_costs(run_dirs), curves_png)
-    sections.append(
-        ReportSection(
-            "Learning curves",
-            text=(
-                "Validation cost of each learner during training on the validation seeds "
-                "1000..1000+k (one fresh episode per seed at every evaluation; the best model "
-                "on these seeds is the one compared above, on the held-out test seeds). The "
-                "reference controllers' costs on the same validation seeds are the black lines "
-                "(turnpike dashed, proportional dash-dotted, zero dotted). "
-                "Swarm steps are env transitions: the parameter-shared learner gets N agent "
-                "samples per swarm step."
-            ),
-            table=training_table(run_dirs, {lr.name: lr for lr in learners}),
-            images=[curves_png],
-            captions=["validation cost against swarm steps (left) and wall time (right)"],
-        )
-    )
-    for name, (table, _) in agent_tables.items():
-        sections.append(
-            ReportSection(
-                f"Per-agent costs of {name} (PettingZoo env)",
-                text=(
-                    f"The parameter-shared policy {name} run on `{PETTINGZOO_ENV_ID}` itself, one "
-                    "action per agent from its own observation, on the test seeds. Agent k's "
-                    "cost is minus its summed reward tau/N sum_n (|x_k - xbar|^2 + gamma "
-                    "|u_k|^2); the agents' costs add up to the swarm's cost."
-                ),
-                table=table,
-            )
-        )
+    sections = [
+        _proportional_section(results),
+        _learning_curve_section(run_dirs, learners, out),
+        *(_per_agent_section(name, table) for name, (table, _) in agent_tables.items()),
+    ]
     if transfer is not None:
-        tsum = summarize(transfer.episodes)
-        sections.append(
-            ReportSection(
-                f"Evaluated on another env: {config.eval_env_kwargs}",
-                text=(
-                    f"The same policies (trained with env kwargs {env_kwargs}) evaluated with "
-                    f"{config.eval_env_kwargs} changed, same test seeds."
-                ),
-                table=display_table(tsum, "turnpike"),
-            )
-        )
-    total = time.perf_counter() - started
+        sections.append(_transfer_section(config, env_kwargs, transfer))
     sections.append(
-        ReportSection(
-            "Run",
-            text=(
-                f"Preset {config.preset}: {preset.description}; env kwargs used: {env_kwargs}. "
-                "Wall time of this command "
-                f"{total:.0f} s in all, {train_done - started:.0f} s of it training (a reused "
-                "finished run costs no training time; see the table above for each run's own "
-                "training time). "
-                f"Learners: {', '.join(f'{lr.name} = {lr.description}' for lr in learners)}."
-            ),
-            code=config.command(),
+        _run_section(
+            config,
+            env_kwargs,
+            learners.values(),
+            time.perf_counter() - started,
+            train_done - started,
         )
     )
+    timing = (started, train_done)
+    return _finish(config, results, sections, run_dirs, (env_kwargs, seeds), timing)
+
+
+def _finish(config, results, sections, run_dirs, setting, timing) -> dict[str, Any]:
+    """Write the report and ``comparison.json`` (`setting`: env kwargs and test seeds;
+    `timing`: the start and end of training); print the table."""
+    from agent_envs.training.report import build_report, display_table
+    from agent_envs.training.results import summarize
+    from agent_envs.training.storage import write_json_atomic
+
+    out = config.out_dir
     paths = build_report(
         results,
         out / "report",
@@ -594,7 +508,9 @@ def compare(config: CompareConfig) -> dict[str, Any]:
     )
     summary = summarize(results.episodes)
     table = display_table(summary, "turnpike")
+    started, train_done = timing
     total = time.perf_counter() - started
+    env_kwargs, seeds = setting
     record = {
         "preset": config.preset,
         "command": config.command(),
@@ -614,4 +530,4 @@ def compare(config: CompareConfig) -> dict[str, Any]:
 # --------------------------------------------------------------------------------------- CLI
 
 
-__all__ = ["PRESETS", "CompareConfig", "Learner", "Preset", "compare"]
+__all__ = ["CompareConfig", "compare"]

@@ -4,14 +4,17 @@ of every (algorithm, env id) pair, resolved into SB3 keyword arguments by `resol
 `TrainConfig` is the CLI (CleanRL style): one field is one option of `agent-envs train`, and the
 `help` in the field's metadata is its `--help` text, so the two cannot drift apart.
 
-The hyperparameters in `HYPERPARAMS` are the ones `agent-envs train` uses; the same values are
-shipped as rl-zoo3 YAML files in `training/hyperparams/{algo}.yml` (a test checks that they
-agree), so `python -m rl_zoo3.train --conf-file training/hyperparams/ppo.yml` trains with them.
+The default hyperparameters live in one place, the rl-zoo3 YAML files shipped in
+`training/hyperparams/{algo}.yml` (entries per env id), read as rl-zoo3 reads them: what
+`agent-envs train` uses is what `python -m rl_zoo3.train --conf-file
+training/hyperparams/ppo.yml` trains with. The measurements behind them (N = 10, m = 20; README,
+"Training agents") are in the files' comments.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -36,9 +39,6 @@ from agent_envs.training.defaults import (
 )
 from agent_envs.training.sb3_arguments import NOISE_KEYS, check_hyperparams
 
-#: The training wrapper that makes the end of the horizon terminal (see
-#: agent_envs.training.wrappers).
-HORIZON_WRAPPER = "agent_envs.training.wrappers.HorizonAsTermination"
 #: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
 #: (rl-zoo3 reads them itself).
 ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "env_wrapper")
@@ -49,103 +49,44 @@ MAX_TIMESTEPS = 10**12
 #: Largest seed: SB3 seeds numpy's legacy global generator, which takes 32-bit seeds.
 MAX_SEED = 2**32 - 1
 
-# Measured on N = 10, m = 20 (README.md, "Training agents"): the good controls are small next
-# to max_control (the proportional control 12 (xbar - x) is ~10% of it), so the policies start
-# with little action noise (PPO/A2C log_std_init = -3, TD3 noise 0.05) and SAC's entropy
-# coefficient starts at 0.01; gamma = 0.9 fits the 20-50 step episodes.
-_PPO_SWARM = {
-    "n_envs": 4,
-    "n_timesteps": 200_000,
-    "policy": "MlpPolicy",
-    "env_wrapper": HORIZON_WRAPPER,
-    "normalize": True,
-    "n_steps": 256,
-    "batch_size": 256,
-    "n_epochs": 10,
-    "gamma": 0.9,
-    "gae_lambda": 0.95,
-    "learning_rate": 3.0e-4,
-    "clip_range": 0.2,
-    "ent_coef": 0.0,
-    "policy_kwargs": {"log_std_init": -3.0, "net_arch": [64, 64]},
-}
-_OFF_POLICY_SWARM = {
-    "n_envs": 1,
-    "n_timesteps": 50_000,
-    "policy": "MlpPolicy",
-    "env_wrapper": HORIZON_WRAPPER,
-    "normalize": True,
-    "buffer_size": 100_000,
-    "batch_size": 128,
-    "learning_starts": 1_000,
-    "gamma": 0.9,
-    "tau": 0.02,
-    "train_freq": 1,
-    "gradient_steps": 1,
-    "policy_kwargs": {"net_arch": [64, 64]},
-}
+#: The hyperparameter files shipped in ``training/hyperparams``: one per algorithm (the
+#: training layer's own, rl-zoo3 format, entries per env id) and ``zoo_pendulum`` (rl-zoo3's
+#: tuned Pendulum-v1 entries, used by the paper preset).
+HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 
-#: HYPERPARAMS[algo][env_id]: rl-zoo3 style entries (see `ZOO_KEYS` for the non-SB3 keys).
-HYPERPARAMS: dict[str, dict[str, dict[str, Any]]] = {
-    "ppo": {
-        GYM_ENV_ID: dict(_PPO_SWARM),
-        # parameter-shared PPO: SB3 sees one env per agent, so n_steps is per agent and a
-        # rollout holds n_steps * N * n_envs samples.
-        PETTINGZOO_ENV_ID: {**_PPO_SWARM, "n_envs": 1, "n_steps": 128, "batch_size": 640},
-    },
-    "a2c": {
-        GYM_ENV_ID: {
-            "n_envs": 4,
-            "n_timesteps": 200_000,
-            "policy": "MlpPolicy",
-            "env_wrapper": HORIZON_WRAPPER,
-            "normalize": True,
-            "n_steps": 8,
-            "gamma": 0.9,
-            "gae_lambda": 0.95,
-            "learning_rate": 7.0e-4,
-            "ent_coef": 0.0,
-            "policy_kwargs": {"log_std_init": -3.0, "net_arch": [64, 64]},
-        },
-    },
-    "sac": {
-        GYM_ENV_ID: {
-            **_OFF_POLICY_SWARM,
-            "learning_rate": 2.0e-3,
-            "ent_coef": "auto_0.01",
-        },
-    },
-    "td3": {
-        GYM_ENV_ID: {
-            **_OFF_POLICY_SWARM,
-            "learning_rate": 1.0e-3,
-            "noise_type": "normal",
-            "noise_std": 0.05,
-        },
-    },
-}
-# The PettingZoo env accepts every algorithm (one shared policy; SB3 sees one env per agent).
-for _algo in ("a2c", "sac", "td3"):
-    HYPERPARAMS[_algo][PETTINGZOO_ENV_ID] = {**HYPERPARAMS[_algo][GYM_ENV_ID], "n_envs": 1}
+
+@functools.cache
+def _read_yaml(path: Path) -> dict[str, Any]:
+    import yaml  # the `train` extra
+
+    with open(path) as handle:
+        return yaml.safe_load(handle)
+
+
+def read_hyperparams_file(name: str) -> dict[str, Any]:
+    """A deep copy of the shipped YAML file ``training/hyperparams/{name}.yml``, read as
+    rl-zoo3 reads it (`yaml.safe_load`; merge keys ``<<: *anchor`` resolved)."""
+    path = HYPERPARAMS_DIR / f"{name}.yml"
+    if not path.is_file():
+        known = sorted(p.stem for p in HYPERPARAMS_DIR.glob("*.yml"))
+        raise ValueError(f"no hyperparameter file {name!r}; shipped: {', '.join(known)}")
+    return json.loads(json.dumps(_read_yaml(path)))
 
 
 def hyperparams_file(algo: str) -> Path:
     """Path of the rl-zoo3 YAML file shipped for `algo` (for `rl_zoo3.train --conf-file`)."""
-    check_algo(algo)
-    return Path(__file__).parent / "hyperparams" / f"{algo}.yml"
+    return HYPERPARAMS_DIR / f"{check_algo(algo)}.yml"
 
 
 def default_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
-    """A deep copy of HYPERPARAMS[algo][env_id]."""
-    algo = check_algo(algo)
-    try:
-        entry = HYPERPARAMS[algo][env_id]
-    except KeyError:
+    """The entry of `env_id` in the shipped ``hyperparams/{algo}.yml`` (a deep copy)."""
+    entries = read_hyperparams_file(check_algo(algo))
+    if env_id not in entries:
         raise ValueError(
             f"no default hyperparameters for --algo {algo} on --env-id {env_id}; "
-            f"known env ids: {', '.join(HYPERPARAMS[algo])}"
-        ) from None
-    return json.loads(json.dumps(entry))
+            f"known env ids: {', '.join(entries)}"
+        )
+    return entries[env_id]
 
 
 def option_field(default: Any, help: str, **kwargs: Any) -> Any:
@@ -170,24 +111,6 @@ def command_line(prog: str, config: Any) -> str:
         else:
             parts += [flag, shlex.quote(str(value))]
     return " ".join(parts)
-
-
-@dataclass(frozen=True)
-class Learner:
-    """One learner of a comparison or sweep: an SB3 algorithm on one of the two swarm envs,
-    with its budget.
-
-    `hyperparams` override the training layer's defaults (`HYPERPARAMS`) key by key;
-    `timesteps` counts SB3 timesteps (agent-steps on the PettingZoo env).
-    """
-
-    name: str
-    algo: str
-    env_id: str
-    timesteps: int
-    hyperparams: dict[str, Any] = field(default_factory=dict)
-    n_envs: int | None = None
-    description: str = ""
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""`agent-envs sweep`: the grid of `agent_envs.training.sweep_grid` run as Ray Tune trials.
+"""`agent-envs sweep`: the trials of the experiment builder run as Ray Tune trials.
 
     agent-envs sweep --preset smoke --out sweep-smoke          # CI: 2 trials, well under 2 min
     agent-envs sweep --preset paper --out sweep-paper          # issue 12's study (hours)
@@ -15,7 +15,8 @@ torch thread), so Ray runs (CPUs / cpus-per-trial) trials at once; the workers g
 Ray's own session logs go to its temp dir (``/tmp/ray`` by default), Tune's experiment state to
 ``OUT/tune`` (`RunConfig(storage_path=OUT)`), never to the working directory.
 
-Trials (one `tune.grid_search` over the trials of `sweep_grid.expand_grid`):
+Trials (one `tune.grid_search` over the trials of `experiment.build_trials`, for the preset of
+`agent_envs.training.presets`, the same presets `agent-envs compare` takes):
 
 - a learner trial runs `agent_envs.training.train.train` into ``OUT/runs/{setting}__{learner}__
   {seed}`` (config, checkpoints, learning curve, TensorBoard in ``tb/``: the usual run folder), with
@@ -51,16 +52,16 @@ from pathlib import Path
 from typing import Any
 
 from agent_envs.training.config import command_line, option_field
-from agent_envs.training.sweep_grid import (
+from agent_envs.training.experiment import (
     LEARNER,
-    PRESETS,
     TRIAL_LOG,
-    GridOptions,
+    ExperimentOptions,
     Trial,
+    build_trials,
     evaluation_dir,
-    expand_grid,
     learner_run_dir,
 )
+from agent_envs.training.presets import PRESETS, get_preset
 
 #: what `OUT/sweep.json` holds: the options and the expanded grid of the first start
 SWEEP_FILE = "sweep.json"
@@ -117,8 +118,7 @@ class SweepConfig:
     bootstrap_seed: int = option_field(0, "seed of the bootstrap's generator in the report")
 
     def __post_init__(self) -> None:
-        if self.preset not in PRESETS:
-            raise ValueError(f"--preset must be one of {', '.join(PRESETS)}; got {self.preset!r}")
+        get_preset(self.preset)  # ValueError naming --preset
         if self.num_cpus is not None and self.num_cpus < 1:
             raise ValueError(f"--num-cpus must be >= 1, got {self.num_cpus}")
         if not (self.cpus_per_trial > 0):
@@ -136,15 +136,19 @@ class SweepConfig:
 
         check_output_dir(self.out_dir, "--out")
         if not self.resume:
-            expand_grid(PRESETS[self.preset], self.grid_options(), str(self.out_dir / "runs"))
+            self.trials()
         return self
 
     @property
     def out_dir(self) -> Path:
         return Path(self.out or f"sweep-{self.preset}").resolve()
 
-    def grid_options(self) -> GridOptions:
-        return GridOptions(
+    def trials(self) -> list[Trial]:
+        """The grid of this sweep (the experiment builder's trials; every config checked)."""
+        return build_trials(get_preset(self.preset), self.options(), self.out_dir / "runs")
+
+    def options(self) -> ExperimentOptions:
+        return ExperimentOptions(
             seeds=_ints(self.seeds, "--seeds"),
             learners=_names(self.learners),
             settings=_names(self.settings),
@@ -171,16 +175,12 @@ def _finished_evaluation(folder: Path, trial: Trial) -> bool:
     ) == json.loads(json.dumps(trial.eval_env_kwargs))
 
 
-def train_learner(trial: Trial, out: Path) -> Path:
+def train_trial(trial: Trial, out: Path) -> Path:
     """Train the learner of `trial` (or continue its interrupted run); return the run folder."""
     from agent_envs.training.config import TrainConfig
-    from agent_envs.training.train import train
+    from agent_envs.training.experiment import train_learner
 
-    config = TrainConfig.from_dict({**trial.train, "out": str(out / "runs")})
-    run_dir = learner_run_dir(trial, out)
-    if (run_dir / "config.json").exists():
-        return train(replace(config, resume=str(run_dir)))
-    return train(config)
+    return train_learner(TrainConfig.from_dict({**trial.train, "out": str(out / "runs")}))
 
 
 def trial_log_path(trial: Trial, out: Path) -> Path:
@@ -199,7 +199,7 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
     (`train` creates the run folder itself, exclusively), a reference trial to
     ``sweep_trial.log`` in its evaluation folder.
     """
-    from agent_envs.training.compare import best_model_path
+    from agent_envs.training.checkpoints import best_model_path
     from agent_envs.training.defaults import GYM_ENV_ID
     from agent_envs.training.evaluate import evaluate_policies
     from agent_envs.training.results import EvaluationResults
@@ -215,7 +215,7 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
     ):
         print(f"trial {trial.trial_id} started {time.strftime('%Y-%m-%d %H:%M:%S')}")
         if trial.kind == LEARNER:
-            run_dir = train_learner(trial, out)
+            run_dir = train_trial(trial, out)
             spec = str(best_model_path(run_dir))
         else:
             spec = trial.reference_spec()
@@ -340,7 +340,7 @@ def _load_or_save_grid(config: SweepConfig, out: Path) -> tuple[SweepConfig, lis
         raise ValueError(
             f"{out} already holds a sweep; pass --resume to continue it or choose another --out"
         )
-    trials = expand_grid(PRESETS[config.preset], config.grid_options(), str(out / "runs"))
+    trials = config.trials()
     out.mkdir(parents=True, exist_ok=True)
     record = {
         "config": {f.name: getattr(config, f.name) for f in fields(config)},
@@ -379,7 +379,7 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
     config.validate()
     out = config.out_dir
     if config.dry_run:
-        trials = expand_grid(PRESETS[config.preset], config.grid_options(), str(out / "runs"))
+        trials = config.trials()
         print(describe_trials(trials))
         return {"trials": trials}
     config, trials, command = _load_or_save_grid(config, out)

@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from agent_envs.training.sweep_grid import LEARNER, PRESETS, SweepPreset, Trial
+from agent_envs.training.experiment import LEARNER, Trial
+from agent_envs.training.presets import Preset, get_preset
 
 #: references the probability of improvement is taken against, in this order, when present
 IMPROVEMENT_REFERENCES = ("optimal", "mpc", "turnpike", "proportional", "zero")
@@ -36,8 +37,8 @@ def model_label(trial: Trial) -> str:
 
 def setting_results(trials: list[Trial], setting: str, out: Path):
     """The evaluations of one setting merged into one `EvaluationResults` (models renamed)."""
+    from agent_envs.training.experiment import evaluation_dir
     from agent_envs.training.results import EvaluationResults, merge_results
-    from agent_envs.training.sweep_grid import evaluation_dir
 
     parts = []
     for trial in trials:
@@ -55,9 +56,9 @@ def setting_results(trials: list[Trial], setting: str, out: Path):
 
 def policy_scores(trials: list[Trial], setting: str, out: Path) -> dict[str, Any]:
     """{learner or reference: PolicyScores (runs = training seeds, tasks = test seeds)}."""
+    from agent_envs.training.experiment import evaluation_dir
     from agent_envs.training.results import EvaluationResults
     from agent_envs.training.seed_statistics import PolicyScores
-    from agent_envs.training.sweep_grid import evaluation_dir
 
     rows: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     for trial in trials:
@@ -97,7 +98,7 @@ def plot_learning_curve_bands(
 
     from agent_envs.training.callbacks import read_learning_curve
     from agent_envs.training.defaults import is_multiagent
-    from agent_envs.training.sweep_grid import learner_run_dir
+    from agent_envs.training.experiment import learner_run_dir
 
     curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     references: dict[str, float] = {}
@@ -151,7 +152,7 @@ def plot_learning_curve_bands(
 def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
     """One row per learner trial: budget, wall time, best validation cost."""
     from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.sweep_grid import learner_run_dir
+    from agent_envs.training.experiment import learner_run_dir
 
     rows = []
     for trial in trials:
@@ -194,113 +195,120 @@ def trial_time_table(trials: list[Trial], trial_times: Mapping[str, float]) -> p
     return pd.DataFrame(rows)
 
 
-def write_sweep_report(
-    config: Any,
-    trials: list[Trial],
-    out: Path,
-    timing: dict[str, float],
-    command: str,
-    trial_times: Mapping[str, float] | None = None,
-) -> dict[str, Path]:
-    """Write OUT/report/report.md and .html (and the tables as CSV); returns the paths.
+#: What the across-seed table shows (the text of its section).
+ACROSS_SEED_TEXT = (
+    "Scores for rliable are the negative "
+    "costs (a diverged episode scores -inf, i.e. it costs more than any finished one); "
+    "the table shows the IQM of the cost (the 25% trimmed mean over training seeds x "
+    "test episodes, lower is better) with a 95% stratified-bootstrap CI (training "
+    "seeds resampled within each test episode; a reference controller is one run, so "
+    "its interval has zero width), and P(cost < ref): the probability that a random "
+    "training seed of the policy costs less than the reference on a random test "
+    "episode (ties count one half), with its bootstrap CI. 'mean cost' is the "
+    "per-episode mean over finished episodes, as in the per-policy table."
+)
+#: What the learning-curve bands show.
+CURVES_TEXT = (
+    "Validation cost (mean over the validation seeds 1000..1000+k) during "
+    "training: the line is the mean over training seeds, the band their "
+    "range (min to max). Black lines: the reference controllers on the same "
+    "validation seeds (turnpike dashed, proportional dash-dotted, zero "
+    "dotted); grey lines: the optimal control and MPC, when present, by "
+    "their mean cost on the test seeds (not run during training). Swarm "
+    "steps are env transitions (the parameter-shared learner gets N agent "
+    "samples per swarm step)."
+)
 
-    `command` is the command line that started the sweep (a resumed sweep shows it too);
-    `trial_times` the wall time of each trial by trial id (Tune's `trial_wall_time_s`).
-    """
-    from agent_envs.training.report import ReportSection, build_report, display_table
+
+def _contrast_section(trials: list[Trial], setting: Any, out: Path):
+    """The per-policy table of a contrast setting, against its optimum where it has one."""
+    from agent_envs.training.report import ReportSection, display_table
     from agent_envs.training.results import summarize
-    from agent_envs.training.seed_statistics import across_seed_table, display_across_seed_table
-    from agent_envs.training.sweep_grid import available_references
 
-    preset: SweepPreset = PRESETS[config.preset]
-    report_dir = out / "report"
-    report_dir.mkdir(parents=True, exist_ok=True)
-    settings = [s for s in preset.settings if any(s.name in t.settings for t in trials)]
-    _, lacking = available_references(preset)
-    rng = np.random.default_rng(config.bootstrap_seed)
+    results = setting_results(trials, setting.name, out)
+    # the gap to the optimum where the setting has it (else the turnpike controller)
+    ref = next((r for r in GAP_REFERENCES if r in results.policies), "turnpike")
+    return ReportSection(
+        f"Setting {setting.name}: per trained model",
+        text=f"{setting.description}; evaluation env kwargs "
+        f"{results.meta.get('env_kwargs')}. Ratios and gaps against {ref}.",
+        table=display_table(summarize(results.episodes, ref), ref),
+    )
+
+
+def _curves_section(trials, out: Path, setting: Any, scores, report_dir: Path):
+    """The learning-curve bands of one setting (also written as CSV), or None without curves."""
+    from agent_envs.training.report import ReportSection
+
+    curves_png = report_dir / f"learning_curves_{setting.name}.png"
+    test_lines = {
+        name: float(data.costs[~data.diverged].mean())
+        for name, data in scores.items()
+        if name in TEST_SEED_LINES and (~data.diverged).any()
+    }
+    points = plot_learning_curve_bands(trials, out, setting.name, curves_png, test_lines)
+    if points is None:
+        return None
+    points.to_csv(report_dir / f"learning_curves_{setting.name}.csv", index=False)
+    return ReportSection(
+        f"Learning curves, setting {setting.name}",
+        text=CURVES_TEXT,
+        images=[curves_png],
+        captions=[f"learning curves, setting {setting.name}"],
+    )
+
+
+def _setting_sections(trials, out: Path, settings: list, report_dir: Path, rng):
+    """The sections of every setting (contrast table, across-seed statistics, curves) and the
+    across-seed tables, which are also written to ``across_seeds.csv``."""
+    from agent_envs.training.report import ReportSection
+    from agent_envs.training.seed_statistics import across_seed_table, display_across_seed_table
 
     sections = []
-    stats_tables = {}
+    stats_tables = []
     for setting in settings:
         scores = policy_scores(trials, setting.name, out)
         refs = [r for r in IMPROVEMENT_REFERENCES if r in scores]
         table = across_seed_table(scores, refs, rng)
         table.insert(0, "setting", setting.name)
-        stats_tables[setting.name] = table
-        text = (
-            f"Setting {setting.name}: {setting.description}. Scores for rliable are the negative "
-            "costs (a diverged episode scores -inf, i.e. it costs more than any finished one); "
-            "the table shows the IQM of the cost (the 25% trimmed mean over training seeds x "
-            "test episodes, lower is better) with a 95% stratified-bootstrap CI (training "
-            "seeds resampled within each test episode; a reference controller is one run, so "
-            "its interval has zero width), and P(cost < ref): the probability that a random "
-            "training seed of the policy costs less than the reference on a random test "
-            "episode (ties count one half), with its bootstrap CI. 'mean cost' is the "
-            "per-episode mean over finished episodes, as in the per-policy table."
-        )
+        stats_tables.append(table)
         if setting is not settings[0]:
-            results = setting_results(trials, setting.name, out)
-            # the gap to the optimum where the setting has it (else the turnpike controller)
-            ref = next((r for r in GAP_REFERENCES if r in results.policies), "turnpike")
-            sections.append(
-                ReportSection(
-                    f"Setting {setting.name}: per trained model",
-                    text=f"{setting.description}; evaluation env kwargs "
-                    f"{results.meta.get('env_kwargs')}. Ratios and gaps against {ref}.",
-                    table=display_table(summarize(results.episodes, ref), ref),
-                )
-            )
+            sections.append(_contrast_section(trials, setting, out))
         sections.append(
             ReportSection(
                 f"Across training seeds, setting {setting.name}",
-                text=text,
+                text=f"Setting {setting.name}: {setting.description}. {ACROSS_SEED_TEXT}",
                 table=display_across_seed_table(table, refs),
             )
         )
-        curves_png = report_dir / f"learning_curves_{setting.name}.png"
-        test_lines = {
-            name: float(data.costs[~data.diverged].mean())
-            for name, data in scores.items()
-            if name in TEST_SEED_LINES and (~data.diverged).any()
-        }
-        points = plot_learning_curve_bands(trials, out, setting.name, curves_png, test_lines)
-        if points is not None:
-            points.to_csv(report_dir / f"learning_curves_{setting.name}.csv", index=False)
-            sections.append(
-                ReportSection(
-                    f"Learning curves, setting {setting.name}",
-                    text=(
-                        "Validation cost (mean over the validation seeds 1000..1000+k) during "
-                        "training: the line is the mean over training seeds, the band their "
-                        "range (min to max). Black lines: the reference controllers on the same "
-                        "validation seeds (turnpike dashed, proportional dash-dotted, zero "
-                        "dotted); grey lines: the optimal control and MPC, when present, by "
-                        "their mean cost on the test seeds (not run during training). Swarm "
-                        "steps are env transitions (the parameter-shared learner gets N agent "
-                        "samples per swarm step)."
-                    ),
-                    images=[curves_png],
-                    captions=[f"learning curves, setting {setting.name}"],
-                )
-            )
-    pd.concat(stats_tables.values(), ignore_index=True).to_csv(
-        report_dir / "across_seeds.csv", index=False
+        curves = _curves_section(trials, out, setting, scores, report_dir)
+        if curves is not None:
+            sections.append(curves)
+    pd.concat(stats_tables, ignore_index=True).to_csv(report_dir / "across_seeds.csv", index=False)
+    return sections
+
+
+def _time_section(trials, trial_times: Mapping[str, float], report_dir: Path):
+    from agent_envs.training.report import ReportSection
+
+    times = trial_time_table(trials, trial_times)
+    times.to_csv(report_dir / "trial_wall_times.csv", index=False)
+    return ReportSection(
+        "Wall time per trial",
+        text=(
+            "As Tune recorded it: a learner trial's training and held-out evaluation, "
+            "a reference trial's evaluation. Trials run side by side, one per "
+            "--cpus-per-trial CPUs of the Ray instance, so they share the machine."
+        ),
+        table=times,
     )
-    sections.append(ReportSection("Training runs", table=training_table(trials, out)))
-    if trial_times:
-        times = trial_time_table(trials, trial_times)
-        times.to_csv(report_dir / "trial_wall_times.csv", index=False)
-        sections.append(
-            ReportSection(
-                "Wall time per trial",
-                text=(
-                    "As Tune recorded it: a learner trial's training and held-out evaluation, "
-                    "a reference trial's evaluation. Trials run side by side, one per "
-                    "--cpus-per-trial CPUs of the Ray instance, so they share the machine."
-                ),
-                table=times,
-            )
-        )
+
+
+def _run_section(preset: Preset, timing: dict[str, float], command: str):
+    from agent_envs.training.experiment import available_references
+    from agent_envs.training.report import ReportSection
+
+    _, lacking = available_references(preset)
     sources = [
         f"Preset {preset.name}: {preset.description}.",
         f"Reference controllers: {', '.join(r for r in preset.references if r not in lacking)}"
@@ -318,10 +326,15 @@ def write_sweep_report(
         f"{timing.get('tune_s', float('nan')):.0f} s (all trials), report written "
         f"{time.strftime('%Y-%m-%d %H:%M:%S')}."
     )
-    sections.append(ReportSection("Run", text="\n\n".join(sources), code=command))
-    main = settings[0]
-    main_results = setting_results(trials, main.name, out)
-    gaps = [
+    return ReportSection("Run", text="\n\n".join(sources), code=command)
+
+
+def _gap_sections(main: Any, main_results) -> list:
+    """The main setting's per-policy table against each optimum / yardstick it has."""
+    from agent_envs.training.report import ReportSection, display_table
+    from agent_envs.training.results import summarize
+
+    return [
         ReportSection(
             f"Gap to {name}, setting {main.name}",
             text=(
@@ -334,14 +347,40 @@ def write_sweep_report(
         for name in GAP_REFERENCES
         if name in main_results.policies
     ]
+
+
+def write_sweep_report(
+    config: Any,
+    trials: list[Trial],
+    out: Path,
+    timing: dict[str, float],
+    command: str,
+    trial_times: Mapping[str, float] | None = None,
+) -> dict[str, Path]:
+    """Write OUT/report/report.md and .html (and the tables as CSV); returns the paths.
+
+    `command` is the command line that started the sweep (a resumed sweep shows it too);
+    `trial_times` the wall time of each trial by trial id (Tune's `trial_wall_time_s`).
+    """
+    from agent_envs.training.report import ReportSection, build_report
+
+    preset = get_preset(config.preset)
+    report_dir = out / "report"
+    report_dir.mkdir(parents=True, exist_ok=True)
+    settings = [s for s in preset.settings if any(s.name in t.settings for t in trials)]
+    rng = np.random.default_rng(config.bootstrap_seed)
+    sections = _setting_sections(trials, out, settings, report_dir, rng)
+    sections.append(ReportSection("Training runs", table=training_table(trials, out)))
+    if trial_times:
+        sections.append(_time_section(trials, trial_times, report_dir))
+    sections.append(_run_section(preset, timing, command))
+    main = settings[0]
+    main_results = setting_results(trials, main.name, out)
     return build_report(
         main_results,
         report_dir,
         title=f"Sweep {preset.name}: learned policies vs the reference controllers "
         f"(setting {main.name})",
-        extra_sections=[*gaps, *sections],
+        extra_sections=[*_gap_sections(main, main_results), *sections],
         command=command,
     )
-
-
-__all__ = ["write_sweep_report"]

@@ -153,50 +153,70 @@ def torch_threads(n: int):
 def _train_in(
     config: TrainConfig, run_dir: Path, extra_callbacks: list[Any], description: dict[str, Any]
 ) -> Path:
-    from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.vec_env import VecNormalize
+    """Train in `run_dir` (created and locked by `train`): resume point, run files, model,
+    callbacks, learning, final checkpoint and summary."""
+    from agent_envs.training.checkpoints import FINAL_MODEL, save_model_with_statistics
 
-    from agent_envs.baselines import ProportionalController, TurnpikeController, ZeroController
-    from agent_envs.training.callbacks import SwarmEvalCallback, read_learning_curve
-    from agent_envs.training.checkpoints import (
-        FINAL_MODEL,
-        checkpoint_callback,
-        resumable_checkpoint,
-        save_checkpoint,
-        save_model_with_statistics,
-    )
-    from agent_envs.training.policies import live_policy
-
-    algo_kwargs, n_envs, normalize_kwargs, policy_name = resolve_hyperparams(config)
-    normalize = normalize_kwargs is not None
+    resolved = resolve_hyperparams(config)  # (SB3 kwargs, n_envs, VecNormalize kwargs, policy)
     off_policy = config.algo in OFF_POLICY
-    eval_id = eval_env_id(config)
-
-    # Every run ends with a checkpoint of its final state (below), so the newest valid
-    # checkpoint is where a resumed run continues, finished or interrupted. Nothing in the run
-    # directory is rewritten before it is verified.
-    point = None
-    if config.resume:
-        point, skipped = resumable_checkpoint(run_dir, off_policy, normalize)
-        for line in skipped:
-            print(f"{run_dir.name}: skipping the damaged {line}", file=sys.stderr)
-        if point is not None and skipped:
-            print(
-                f"{run_dir.name}: resuming from the newest valid checkpoint, {point.model.name}",
-                file=sys.stderr,
-            )
-        if point is not None and point.buffer_note:
-            print(f"{run_dir.name}: {point.buffer_note}", file=sys.stderr)
+    point = _resume_point(config, run_dir, off_policy, resolved[2] is not None)
     if point is not None and point.steps >= config.timesteps:
         print(
             f"{run_dir.name}: {point.steps} timesteps already done (>= --timesteps "
             f"{config.timesteps}); nothing to train"
         )
         return run_dir
-    for folder in (run_dir, run_dir / "checkpoints"):  # left by a killed run; we hold the lock
+    _write_run_files(config, run_dir, description, resolved)
+    model, venv = _build_model(config, run_dir, point, resolved)
+    done = 0 if point is None else int(model.num_timesteps)
+    callbacks, eval_callback = _callbacks(config, run_dir, venv.num_envs, description, done)
+    start = time.perf_counter()
+    _learn(model, config, [*callbacks, *extra_callbacks], point is None, run_dir)
+    if eval_callback is not None and (
+        not eval_callback.history or eval_callback.history[-1]["timesteps"] != model.num_timesteps
+    ):
+        eval_callback.evaluate_now()  # the final model is always on the learning curve
+    wall = time.perf_counter() - start
+    save_checkpoint_of(model, run_dir, off_policy)  # the final state is the newest checkpoint
+    save_model_with_statistics(model, run_dir, FINAL_MODEL)
+    _write_summary(config, run_dir, description, model, wall, eval_callback)
+    venv.close()
+    return run_dir
+
+
+def _resume_point(config: TrainConfig, run_dir: Path, off_policy: bool, normalize: bool):
+    """The checkpoint to continue from (None for a new run), with what was skipped reported.
+
+    Every run ends with a checkpoint of its final state, so the newest valid checkpoint is where
+    a resumed run continues, finished or interrupted. Nothing in the run directory is rewritten
+    before it is verified.
+    """
+    from agent_envs.training.checkpoints import resumable_checkpoint
+
+    if not config.resume:
+        return None
+    point, skipped = resumable_checkpoint(run_dir, off_policy, normalize)
+    for line in skipped:
+        print(f"{run_dir.name}: skipping the damaged {line}", file=sys.stderr)
+    if point is not None and skipped:
+        print(
+            f"{run_dir.name}: resuming from the newest valid checkpoint, {point.model.name}",
+            file=sys.stderr,
+        )
+    if point is not None and point.buffer_note:
+        print(f"{run_dir.name}: {point.buffer_note}", file=sys.stderr)
+    return point
+
+
+def _write_run_files(
+    config: TrainConfig, run_dir: Path, description: dict[str, Any], resolved: tuple
+) -> None:
+    """config.json, env.json and hyperparams.json (after removing a killed run's temporaries;
+    the caller holds the run's lock)."""
+    algo_kwargs, n_envs, normalize_kwargs, policy_name = resolved
+    for folder in (run_dir, run_dir / "checkpoints"):
         remove_stale_temporaries(folder)
-    stored = {**config.to_dict(), "resume": None}
-    write_json_atomic(run_dir / "config.json", stored)
+    write_json_atomic(run_dir / "config.json", {**config.to_dict(), "resume": None})
     write_json_atomic(run_dir / "env.json", description)
     write_json_atomic(
         run_dir / "hyperparams.json",
@@ -204,16 +224,24 @@ def _train_in(
             "algo": config.algo,
             "policy": policy_name,
             "n_envs": n_envs,
-            "normalize": normalize_kwargs if normalize else False,
+            "normalize": normalize_kwargs if normalize_kwargs is not None else False,
             **algo_kwargs,
         },
     )
 
+
+def _build_model(config: TrainConfig, run_dir: Path, point, resolved: tuple):
+    """(model, training VecEnv): a new SB3 model, or the one of checkpoint `point` with its
+    VecNormalize statistics and replay buffer (verified against the run's manifest).
+    `resolved` is `config.resolve_hyperparams(config)`."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    algo_kwargs, n_envs, normalize_kwargs, policy_name = resolved
     venv = make_training_env(config, n_envs)
     cls = algorithm_class(config.algo)
     tb_log = str(run_dir / "tb") if config.tensorboard else None
     if point is None:
-        if normalize:
+        if normalize_kwargs is not None:
             venv = VecNormalize(venv, **normalize_kwargs)
         action_dim = int(np.prod(venv.action_space.shape))
         model = cls(
@@ -225,101 +253,116 @@ def _train_in(
             tensorboard_log=tb_log,
             **sb3_kwargs(algo_kwargs, action_dim),
         )
-        done = 0
-    else:
-        if point.vecnormalize is not None:  # verified against the run's manifest
-            venv = VecNormalize.load(str(point.vecnormalize), venv)
-            venv.training = True
-        model = cls.load(point.model, env=venv, device=config.device, tensorboard_log=tb_log)
-        model.verbose = config.verbose
-        if point.replay_buffer is not None:
-            model.load_replay_buffer(point.replay_buffer)
-        done = int(model.num_timesteps)
-        # a fresh, reproducible seeding of the resumed part
-        model.set_random_seed(config.seed + done)
-        print(f"resuming {run_dir.name} from {point.model.name} ({done} timesteps done)")
+        return model, venv
+    if point.vecnormalize is not None:
+        venv = VecNormalize.load(str(point.vecnormalize), venv)
+        venv.training = True
+    model = cls.load(point.model, env=venv, device=config.device, tensorboard_log=tb_log)
+    model.verbose = config.verbose
+    if point.replay_buffer is not None:
+        model.load_replay_buffer(point.replay_buffer)
+    done = int(model.num_timesteps)
+    model.set_random_seed(config.seed + done)  # a fresh, reproducible seeding of the rest
+    print(f"resuming {run_dir.name} from {point.model.name} ({done} timesteps done)")
+    return model, venv
 
-    sb3_envs = venv.num_envs
-    shape = (description["n_agents"], description["dim"]) if is_multiagent(config.env_id) else None
 
-    def policy_factory(m: Any) -> Any:
-        return live_policy(m, shape)
+def _callbacks(config, run_dir: Path, sb3_envs: int, description: dict[str, Any], done: int):
+    """(the run's SB3 callbacks, its evaluation callback or None): checkpoints every
+    `checkpoint_freq` timesteps, validation every `eval_freq` with the reference controllers
+    logged on the same seeds (the learning curve continues from `done` timesteps)."""
+    from agent_envs.baselines import ProportionalController, TurnpikeController, ZeroController
+    from agent_envs.training.callbacks import SwarmEvalCallback, read_learning_curve
+    from agent_envs.training.checkpoints import checkpoint_callback
+    from agent_envs.training.policies import live_policy
 
+    off_policy = config.algo in OFF_POLICY
     callbacks: list[Any] = []
     if config.checkpoint_freq > 0:
         callbacks.append(
             checkpoint_callback(max(config.checkpoint_freq // sb3_envs, 1), run_dir, off_policy)
         )
-    eval_callback = None
-    if config.eval_freq > 0:
-        eval_vec = make_eval_vec_env(eval_id, config.env_kwargs, config.eval_episodes)
-        reference_env = eval_vec.envs[0]
-        references = {
-            "turnpike": TurnpikeController(
-                reference_env, beta=config.turnpike_beta, delta=config.turnpike_delta
-            ),
-            "proportional": ProportionalController(reference_env, beta=config.turnpike_beta),
-            "zero": ZeroController(reference_env),
-        }
-        eval_callback = SwarmEvalCallback(
-            eval_vec,
-            policy_factory,
-            references,
-            eval_seed=config.eval_seed,
-            eval_freq=max(config.eval_freq // sb3_envs, 1),
-            run_dir=run_dir,
-            history=read_learning_curve(run_dir / "learning_curve.csv", max(done, 0))
-            if done
-            else None,
-            verbose=config.verbose,
-        )
-        callbacks.append(eval_callback)
-    callbacks.extend(extra_callbacks)
+    if config.eval_freq <= 0:
+        return callbacks, None
+    shape = (description["n_agents"], description["dim"]) if is_multiagent(config.env_id) else None
+    eval_vec = make_eval_vec_env(eval_env_id(config), config.env_kwargs, config.eval_episodes)
+    reference_env = eval_vec.envs[0]
+    references = {
+        "turnpike": TurnpikeController(
+            reference_env, beta=config.turnpike_beta, delta=config.turnpike_delta
+        ),
+        "proportional": ProportionalController(reference_env, beta=config.turnpike_beta),
+        "zero": ZeroController(reference_env),
+    }
+    eval_callback = SwarmEvalCallback(
+        eval_vec,
+        lambda m: live_policy(m, shape),
+        references,
+        eval_seed=config.eval_seed,
+        eval_freq=max(config.eval_freq // sb3_envs, 1),
+        run_dir=run_dir,
+        history=read_learning_curve(run_dir / "learning_curve.csv", done) if done else None,
+        verbose=config.verbose,
+    )
+    return [*callbacks, eval_callback], eval_callback
 
-    remaining = config.timesteps - done
-    start = time.perf_counter()
-    if remaining > 0:
-        try:
-            model.learn(
-                total_timesteps=remaining,
-                callback=CallbackList(callbacks),
-                progress_bar=config.progress_bar,
-                reset_num_timesteps=point is None,
-                tb_log_name="run",
-            )
-        except KeyboardInterrupt:
-            path = save_checkpoint(model, run_dir, off_policy)
-            print(
-                f"\ninterrupted at {model.num_timesteps} timesteps; checkpoint {path}\n"
-                f"continue with: agent-envs train --resume {run_dir}",
-                file=sys.stderr,
-            )
-            raise
-    if eval_callback is not None and (
-        not eval_callback.history or eval_callback.history[-1]["timesteps"] != model.num_timesteps
-    ):
-        eval_callback.evaluate_now()  # the final model is always on the learning curve
-    wall = time.perf_counter() - start
-    save_checkpoint(model, run_dir, off_policy)  # the final state is the newest checkpoint
-    save_model_with_statistics(model, run_dir, FINAL_MODEL)
+
+def _learn(model, config: TrainConfig, callbacks: list[Any], fresh: bool, run_dir: Path) -> None:
+    """`model.learn` for the timesteps left; on Ctrl-C, a checkpoint first, then re-raise."""
+    from stable_baselines3.common.callbacks import CallbackList
+
+    remaining = config.timesteps - (0 if fresh else int(model.num_timesteps))
+    if remaining <= 0:
+        return
+    try:
+        model.learn(
+            total_timesteps=remaining,
+            callback=CallbackList(callbacks),
+            progress_bar=config.progress_bar,
+            reset_num_timesteps=fresh,
+            tb_log_name="run",
+        )
+    except KeyboardInterrupt:
+        path = save_checkpoint_of(model, run_dir, config.algo in OFF_POLICY)
+        print(
+            f"\ninterrupted at {model.num_timesteps} timesteps; checkpoint {path}\n"
+            f"continue with: agent-envs train --resume {run_dir}",
+            file=sys.stderr,
+        )
+        raise
+
+
+def save_checkpoint_of(model: Any, run_dir: Path, off_policy: bool) -> Path:
+    """`checkpoints.save_checkpoint` (imported lazily: it needs SB3)."""
+    from agent_envs.training.checkpoints import save_checkpoint
+
+    return save_checkpoint(model, run_dir, off_policy)
+
+
+def _write_summary(config, run_dir: Path, description, model, wall: float, eval_callback) -> None:
+    """summary.json: timesteps, swarm steps, training wall time (added over resumes), the last
+    validation result."""
     summary_path = run_dir / "summary.json"
     try:
         previous = json.loads(summary_path.read_text()) if summary_path.exists() else {}
     except ValueError:
         previous = {}
-    summary = {
-        "run_name": run_dir.name,
-        "algo": config.algo,
-        "env_id": config.env_id,
-        "timesteps": int(model.num_timesteps),
-        "swarm_steps": int(model.num_timesteps)
-        // (description["n_agents"] if is_multiagent(config.env_id) else 1),
-        "train_wall_time_s": round(float(previous.get("train_wall_time_s", 0.0)) + wall, 2),
-        "last_eval": eval_callback.history[-1] if eval_callback and eval_callback.history else None,
-    }
-    write_json_atomic(summary_path, summary)
-    venv.close()
-    return run_dir
+    steps = int(model.num_timesteps)
+    write_json_atomic(
+        summary_path,
+        {
+            "run_name": run_dir.name,
+            "algo": config.algo,
+            "env_id": config.env_id,
+            "timesteps": steps,
+            "swarm_steps": steps
+            // (description["n_agents"] if is_multiagent(config.env_id) else 1),
+            "train_wall_time_s": round(float(previous.get("train_wall_time_s", 0.0)) + wall, 2),
+            "last_eval": eval_callback.history[-1]
+            if eval_callback and eval_callback.history
+            else None,
+        },
+    )
 
 
 # --------------------------------------------------------------------------------------- CLI

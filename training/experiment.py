@@ -1,0 +1,418 @@
+"""The experiment builder: a preset and the command line's changes -> the runs of an experiment.
+
+In the spirit of rl-zoo3's `ExperimentManager`, one place turns a `presets.Preset` and an
+`ExperimentOptions` into the list of `Trial`s that `agent-envs compare` runs in process (one
+training seed, one setting) and `agent-envs sweep` runs on Ray Tune (the whole grid):
+
+- a *learner trial* per (setting, learner, training seed): one `train.train` run (its usual
+  run folder under ``OUT/runs``), then an evaluation of its best model on the held-out test
+  seeds; its `TrainConfig` comes from `learner_config` (one formula for the validation and
+  checkpoint periods);
+- a *reference trial* per reference controller and distinct evaluation env (the controllers do
+  not train, so the training seed does not apply; settings that evaluate on the same env share
+  them).
+
+`train_learner` is the one way both commands train: a finished run of the same configuration is
+reused, an interrupted one resumed from its last checkpoint. Building the trials imports
+neither Ray nor torch, so the grid is testable on its own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from agent_envs.training.config import MAX_SEED, VEC_ENV_CHOICES, TrainConfig
+from agent_envs.training.defaults import DEFAULT_TEST_SEED, is_multiagent
+from agent_envs.training.presets import EnvSetting, Learner, Preset
+from agent_envs.validation import check_int
+
+LEARNER = "learner"
+REFERENCE = "reference"
+#: a trial's log file (in its run folder, or its reference folder)
+TRIAL_LOG = "sweep_trial.log"
+#: a learner trial's held-out evaluation, in its run folder
+TEST_EVALUATION = "test_evaluation"
+#: Largest --timesteps-scale (the paper preset's budgets times this stay far below 10**12).
+MAX_TIMESTEPS_SCALE = 1000.0
+#: Most held-out test episodes per policy.
+MAX_TEST_EPISODES = 100_000
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One run of an experiment: train + evaluate one learner, or evaluate one reference.
+
+    `train` is the `TrainConfig` of a learner trial as a dict (None for a reference);
+    `eval_env_kwargs` are the full env kwargs of the held-out evaluation; `test_seeds` its
+    reset seeds. `settings` lists the env settings whose report uses this trial (a reference
+    trial serves every setting evaluated on the same env). `policy_kwargs` are the keyword
+    arguments a reference controller is built with (empty: its defaults).
+    """
+
+    trial_id: str
+    kind: str
+    setting: str
+    policy: str
+    seed: int | None
+    eval_env_kwargs: dict[str, Any]
+    test_seeds: tuple[int, ...]
+    settings: tuple[str, ...] = ()
+    train: dict[str, Any] | None = None
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def reference_spec(self) -> Any:
+        """The policy spec `evaluate_policies` takes for this reference trial: its registered
+        name, or a factory building it with `policy_kwargs` (`make_baseline(name, env, **kw)`).
+        """
+        if not self.policy_kwargs:
+            return self.policy
+        from agent_envs.baselines import make_baseline
+
+        return functools.partial(make_baseline, self.policy, **self.policy_kwargs)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Trial:
+        values = dict(data)
+        values["test_seeds"] = tuple(int(s) for s in values["test_seeds"])
+        values["settings"] = tuple(values.get("settings", ()))
+        values["policy_kwargs"] = dict(values.get("policy_kwargs") or {})
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class ExperimentOptions:
+    """The command line's changes to a preset (None / 1.0: the preset's own).
+
+    `seeds`, `learners`, `settings` select part of the grid; `timesteps_scale` multiplies every
+    budget; `env_kwargs` change the env of every setting; `references` replace the preset's;
+    `run_names` names learner runs ``{setting}__{learner}__{seed}`` (a sweep, which finds them
+    again by name) or, when False, ``{env}__{algo}__{seed}__{unix time}`` (compare, which finds a
+    finished run by its configuration); the rest goes into every `TrainConfig`.
+    """
+
+    seeds: tuple[int, ...] | None = None
+    learners: tuple[str, ...] | None = None
+    settings: tuple[str, ...] | None = None
+    timesteps_scale: float = 1.0
+    test_episodes: int | None = None
+    vec_env: str | None = None
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    references: tuple[str, ...] | None = None
+    run_names: bool = True
+    progress_bar: bool = False
+    verbose: int = 0
+    torch_threads: int = 1
+
+    def check(self, preset: Preset) -> None:
+        """ValueError / TypeError naming the option for anything `preset` cannot run."""
+        scale = self.timesteps_scale
+        if not (
+            isinstance(scale, (int, float))
+            and not isinstance(scale, bool)
+            and math.isfinite(scale)
+            and 0 < scale <= MAX_TIMESTEPS_SCALE
+        ):
+            raise ValueError(
+                f"--timesteps-scale must be a number in (0, {MAX_TIMESTEPS_SCALE}], got {scale!r}"
+            )
+        if self.test_episodes is not None:
+            check_int("--test-episodes", self.test_episodes, 2, MAX_TEST_EPISODES)
+        for seed in self.training_seeds(preset):
+            check_int("--seeds", seed, 0, MAX_SEED)
+        if len(set(self.training_seeds(preset))) != len(self.training_seeds(preset)):
+            raise ValueError(f"--seeds lists a seed twice: {self.seeds!r}")
+        vec_env = self.vec_env or preset.vec_env
+        if vec_env not in VEC_ENV_CHOICES:
+            raise ValueError(
+                f"--vec-env must be one of {', '.join(VEC_ENV_CHOICES)}, got {vec_env!r}"
+            )
+        select([lr.name for lr in preset.learners], self.learners, "--learners")
+        select([s.name for s in preset.settings], self.settings, "--settings")
+
+    def training_seeds(self, preset: Preset) -> tuple[int, ...]:
+        seeds = tuple(self.seeds) if self.seeds is not None else preset.seeds
+        if not seeds:
+            raise ValueError("--seeds: no seed given")
+        return seeds
+
+    def test_seeds(self, preset: Preset) -> tuple[int, ...]:
+        """The held-out test seeds 10000, 10001, ... (`defaults.DEFAULT_TEST_SEED`)."""
+        n_test = self.test_episodes or preset.test_episodes
+        return tuple(range(DEFAULT_TEST_SEED, DEFAULT_TEST_SEED + n_test))
+
+
+# ---------------------------------------------------------------------------------- building
+
+
+def select(names: Sequence[str], wanted: Sequence[str] | None, option: str) -> list[str]:
+    """`names` in order, restricted to `wanted` (None: all); ValueError naming `option` for an
+    unknown or repeated name."""
+    if wanted is None:
+        return list(names)
+    unknown = [w for w in wanted if w not in names]
+    if unknown or not wanted or len(set(wanted)) != len(wanted):
+        raise ValueError(
+            f"{option} must list distinct names of this preset ({', '.join(names)}), "
+            f"comma-separated; got {', '.join(wanted) or 'none'}"
+            + (f" (unknown: {', '.join(unknown)})" if unknown else "")
+        )
+    return [n for n in names if n in wanted]
+
+
+def _safe(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text)
+
+
+def run_name(setting: str, learner: str, seed: int) -> str:
+    """The run folder of a learner trial in a sweep: ``{setting}__{learner}__{seed}`` (no time
+    stamp, so an interrupted sweep finds its runs again)."""
+    return f"{_safe(setting)}__{_safe(learner)}__{seed}"
+
+
+def setting_env_kwargs(
+    preset: Preset, setting: EnvSetting, options: ExperimentOptions
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(training env kwargs, held-out evaluation env kwargs) of one setting."""
+    train_kwargs = {**preset.env_kwargs, **setting.env_kwargs, **options.env_kwargs}
+    return train_kwargs, {**train_kwargs, **setting.eval_env_kwargs}
+
+
+def learner_config(
+    preset: Preset,
+    setting: EnvSetting,
+    learner: Learner,
+    seed: int,
+    options: ExperimentOptions,
+    runs_dir: str | Path,
+) -> TrainConfig:
+    """The validated `TrainConfig` of one learner trial: the learner's budget times the scale,
+    `preset.evaluations` validations of `preset.validation_episodes` episodes, a checkpoint
+    every quarter of the budget."""
+    timesteps = max(round(learner.timesteps * options.timesteps_scale), 1)
+    train_kwargs, _ = setting_env_kwargs(preset, setting, options)
+    return TrainConfig(
+        algo=learner.algo,
+        env_id=learner.env_id,
+        env_kwargs=train_kwargs,
+        timesteps=timesteps,
+        seed=seed,
+        out=str(runs_dir),
+        run_name=run_name(setting.name, learner.name, seed) if options.run_names else None,
+        n_envs=learner.n_envs,
+        hyperparams=dict(learner.hyperparams),
+        eval_freq=max(timesteps // preset.evaluations, 1),
+        eval_episodes=preset.validation_episodes,
+        checkpoint_freq=max(timesteps // 4, 1),
+        # the PettingZoo learner trains on SuperSuit's vector env
+        vec_env="dummy" if is_multiagent(learner.env_id) else options.vec_env or preset.vec_env,
+        progress_bar=options.progress_bar,
+        verbose=options.verbose,
+        torch_threads=options.torch_threads,
+    ).validate()
+
+
+def available_references(
+    preset: Preset, wanted: Sequence[str] | None = None
+) -> tuple[list[str], list[str]]:
+    """(references of `preset` (or `wanted`) this install has, those it lacks) per
+    `agent_envs.baselines.BASELINES`."""
+    from agent_envs.baselines import BASELINES
+
+    names = preset.references if wanted is None else tuple(wanted)
+    return [r for r in names if r in BASELINES], [r for r in names if r not in BASELINES]
+
+
+def _learner_trials(
+    preset: Preset, setting: EnvSetting, options: ExperimentOptions, runs_dir: str | Path
+) -> list[Trial]:
+    names = select([lr.name for lr in preset.learners], options.learners, "--learners")
+    _, eval_kwargs = setting_env_kwargs(preset, setting, options)
+    trials = []
+    for learner in preset.learners:
+        if learner.name not in names:
+            continue
+        if setting.learners is not None and learner.name not in setting.learners:
+            continue
+        for seed in options.training_seeds(preset):
+            config = learner_config(preset, setting, learner, seed, options, runs_dir)
+            trials.append(
+                Trial(
+                    trial_id=run_name(setting.name, learner.name, seed),
+                    kind=LEARNER,
+                    setting=setting.name,
+                    policy=learner.name,
+                    seed=seed,
+                    eval_env_kwargs=eval_kwargs,
+                    test_seeds=options.test_seeds(preset),
+                    settings=(setting.name,),
+                    train=config.to_dict(),
+                )
+            )
+    return trials
+
+
+def _add_reference_trials(
+    preset: Preset,
+    setting: EnvSetting,
+    options: ExperimentOptions,
+    by_env: dict[str, Trial],
+) -> None:
+    """Add the reference trials of `setting` to `by_env` (key: evaluation env + reference);
+    a reference already evaluated on the same env serves this setting too."""
+    _, eval_kwargs = setting_env_kwargs(preset, setting, options)
+    references, _ = available_references(preset, options.references)
+    for reference in references:
+        if setting.references is not None and reference not in setting.references:
+            continue
+        key = repr(sorted(eval_kwargs.items())) + reference
+        if key in by_env:
+            shared = by_env[key]
+            by_env[key] = dataclasses.replace(shared, settings=(*shared.settings, setting.name))
+            continue
+        by_env[key] = Trial(
+            trial_id=f"{_safe(setting.name)}__{reference}",
+            kind=REFERENCE,
+            setting=setting.name,
+            policy=reference,
+            seed=None,
+            eval_env_kwargs=eval_kwargs,
+            test_seeds=options.test_seeds(preset),
+            settings=(setting.name,),
+            policy_kwargs=dict(preset.reference_kwargs.get(reference, {})),
+        )
+
+
+def build_trials(
+    preset: Preset, options: ExperimentOptions | None = None, runs_dir: str | Path = "runs"
+) -> list[Trial]:
+    """The trials of `preset` with `options`: learners x seeds x settings, then the references.
+
+    Raises ValueError naming the option for an unknown learner / setting, a bad scale, seed or
+    test episode count, or a `vec_env` that `agent-envs train` does not offer (every learner's
+    `TrainConfig` is validated).
+    """
+    options = options or ExperimentOptions()
+    options.check(preset)
+    settings = select([s.name for s in preset.settings], options.settings, "--settings")
+    learners: list[Trial] = []
+    references: dict[str, Trial] = {}
+    for setting in preset.settings:
+        if setting.name in settings:
+            learners += _learner_trials(preset, setting, options, runs_dir)
+            _add_reference_trials(preset, setting, options, references)
+    return learners + list(references.values())
+
+
+# ---------------------------------------------------------------------------- where trials write
+
+
+def learner_run_dir(trial: Trial, out: Path) -> Path:
+    """The run folder of a sweep's learner trial under the sweep's output folder `out`."""
+    return out / "runs" / str(trial.train["run_name"])
+
+
+def reference_dir(trial: Trial, out: Path) -> Path:
+    """The folder of a reference trial's evaluation."""
+    return out / "references" / trial.setting / trial.policy
+
+
+def evaluation_dir(trial: Trial, out: Path) -> Path:
+    """Where a trial's held-out evaluation is saved."""
+    if trial.kind == LEARNER:
+        return learner_run_dir(trial, out) / TEST_EVALUATION
+    return reference_dir(trial, out)
+
+
+# ------------------------------------------------------------------------------------ training
+
+#: A run is reused or resumed only when all of these match, the budget included: a run resumed
+#: with another budget would keep its old evaluation and checkpoint schedule.
+SAME_RUN_FIELDS = (
+    "algo",
+    "env_id",
+    "env_kwargs",
+    "seed",
+    "n_envs",
+    "hyperparams",
+    "eval_seed",
+    "timesteps",
+)
+
+
+def find_run(wanted: TrainConfig) -> tuple[Path, bool] | None:
+    """The newest run of `wanted`'s configuration in ``wanted.out``: (run dir, finished).
+
+    With a `run_name`, only that folder is a candidate; without, every run folder there.
+    A run is finished when its summary counts at least `wanted.timesteps` timesteps.
+    """
+    runs_dir = Path(wanted.out)
+    paths = (
+        [runs_dir / wanted.run_name / "config.json"]
+        if wanted.run_name
+        else list(runs_dir.glob("*/config.json"))
+    )
+    candidates = []
+    for cfg_path in paths:
+        try:
+            saved = json.loads(cfg_path.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue
+        if any(saved.get(k) != getattr(wanted, k) for k in SAME_RUN_FIELDS):
+            continue
+        summary_path = cfg_path.parent / "summary.json"
+        finished = False
+        if summary_path.exists():
+            summary = json.loads(summary_path.read_text())
+            finished = int(summary.get("timesteps", 0)) >= wanted.timesteps
+        candidates.append((cfg_path.stat().st_mtime, cfg_path.parent, finished))
+    if not candidates:
+        return None
+    _, run_dir, finished = max(candidates)
+    return run_dir, finished
+
+
+def train_learner(config: TrainConfig, *, retrain: bool = False) -> Path:
+    """Train one learner, or reuse / resume its run; return the run directory.
+
+    A finished run of the same configuration (`SAME_RUN_FIELDS`, `find_run`) is reused, an
+    unfinished one continues from its last checkpoint (`train --resume`); `retrain` starts a
+    new run whatever is there.
+    """
+    from agent_envs.training.train import train
+
+    existing = None if retrain else find_run(config)
+    if existing is None:
+        return train(config)
+    run_dir, finished = existing
+    if finished:
+        print(f"  reusing finished run {run_dir}")
+        return run_dir
+    print(f"  resuming {run_dir} from its last checkpoint")
+    return train(dataclasses.replace(config, resume=str(run_dir)))
+
+
+__all__ = [
+    "LEARNER",
+    "REFERENCE",
+    "ExperimentOptions",
+    "Trial",
+    "available_references",
+    "build_trials",
+    "evaluation_dir",
+    "find_run",
+    "learner_config",
+    "learner_run_dir",
+    "run_name",
+    "train_learner",
+]
