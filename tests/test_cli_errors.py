@@ -242,6 +242,8 @@ BATTERY: list[tuple[list[str], str]] = [
     # sweep: --preset --out --num-cpus --address --cpus-per-trial --resume --seeds --learners
     # --settings --timesteps-scale --test-episodes --vec-env --dry-run --bootstrap-seed
     (["sweep", "--out", "{out}", "--preset", "bogus"], "--preset"),
+    (["sweep", "--out", "{out}", "--env-kwargs", '{"n_agents": 0}'], "n_agents"),
+    (["sweep", "--out", "{out}", "--env-kwargs", "[1]"], "--env-kwargs"),
     (["sweep", "--out", "{file}"], "--out"),
     (["sweep", "--out", "{out}", "--num-cpus", "0"], "--num-cpus"),
     (["sweep", "--out", "{out}", "--address", ""], "--address"),
@@ -257,6 +259,7 @@ BATTERY: list[tuple[list[str], str]] = [
     (["sweep", "--out", "{out}", "--bootstrap-seed", "-1"], "--bootstrap-seed"),
     (["compare", "--out", "{out}", "--preset", "bogus"], "--preset"),
     (["compare", "--out", "{out}", "--setting", "eps1"], "--setting"),  # quick has only main
+    (["compare", "--out", "{out}", "--vec-env", "threads"], "--vec-env"),
     (["compare", "--out", "{out}", "--preset", "paper", "--setting", "bogus"], "--setting"),
     (["compare", "--out", "{out}", "--optimum", "optimal,bogus"], "--optimum"),
     (["compare", "--out", "{out}", "--optimum", "mpc,mpc"], "--optimum"),

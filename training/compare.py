@@ -32,13 +32,13 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agent_envs.training.config import MAX_SEED, command_line, option_field
+from agent_envs.training.config import MAX_SEED, command_line, json_field, option_field
 from agent_envs.training.defaults import (
     BASELINE_POLICIES,
     GYM_ENV_ID,
@@ -47,9 +47,11 @@ from agent_envs.training.defaults import (
 )
 from agent_envs.training.experiment import (
     LEARNER,
+    ExperimentArguments,
     ExperimentOptions,
     Trial,
     build_trials,
+    check_envs,
     select,
     train_learner,
 )
@@ -58,8 +60,9 @@ from agent_envs.validation import check_int
 
 
 @dataclass
-class CompareConfig:
-    """Options of `agent-envs compare` (one field = one option)."""
+class CompareConfig(ExperimentArguments):
+    """Options of `agent-envs compare` (one field = one option): the shared experiment options
+    (`ExperimentArguments`) and compare's own."""
 
     preset: str = option_field("quick", "the experiment setting", choices=tuple(PRESETS))
     setting: str | None = option_field(
@@ -69,34 +72,12 @@ class CompareConfig:
         + ")",
     )
     out: str | None = option_field(None, "output directory (default compare-{preset})")
-    learners: str | None = option_field(
-        None,
-        "comma-separated learners to train (default: all of the preset's setting: "
-        + "; ".join(f"{k}: {','.join(x.name for x in p.learners)}" for k, p in PRESETS.items())
-        + ")",
-    )
     seed: int | None = option_field(
         None, "training seed of every learner (default: the preset's first training seed)"
     )
-    env_kwargs: dict = field(
-        default_factory=dict,
-        metadata={
-            "help": "JSON object of env kwargs overriding the preset's, for training and "
-            'evaluation, e.g. \'{"integrator": "em"}\''
-        },
-    )
-    eval_env_kwargs: dict = field(
-        default_factory=dict,
-        metadata={
-            "help": "JSON object: also evaluate every policy on the env with these kwargs "
-            'changed (train on one, evaluate on another), e.g. \'{"integrator": "serb"}\''
-        },
-    )
-    timesteps_scale: float = option_field(
-        1.0, "multiply every learner's training timesteps (e.g. 0.1 for a smoke run)"
-    )
-    test_episodes: int | None = option_field(
-        None, "held-out test episodes per policy (seeds 10000 + i; default: the preset's)"
+    eval_env_kwargs: dict = json_field(
+        "JSON object: also evaluate every policy on the env with these kwargs "
+        'changed (train on one, evaluate on another), e.g. \'{"integrator": "serb"}\''
     )
     retrain: bool = option_field(
         False, "train anew even when a finished run of the same setting exists"
@@ -113,7 +94,7 @@ class CompareConfig:
     )
 
     def __post_init__(self) -> None:
-        self.env_kwargs = parse_env_kwargs(self.env_kwargs)
+        super().__post_init__()
         self.eval_env_kwargs = parse_env_kwargs(self.eval_env_kwargs, "--eval-env-kwargs")
         get_preset(self.preset).setting(self.setting)  # ValueError naming --preset / --setting
         if self.seed is not None:
@@ -140,8 +121,8 @@ class CompareConfig:
 
         check_output_dir(self.out_dir, "--out")
         trials = self.trials()
+        check_envs(trials)
         env_kwargs = trials[0].eval_env_kwargs
-        env_description(GYM_ENV_ID, env_kwargs)
         if self.eval_env_kwargs:
             env_description(GYM_ENV_ID, {**env_kwargs, **self.eval_env_kwargs}, "--eval-env-kwargs")
         return self
@@ -161,21 +142,12 @@ class CompareConfig:
         """The experiment builder's options: one seed, one setting, the references asked for."""
         preset = get_preset(self.preset)
         setting = preset.setting(self.setting)
-        learners = None
-        if self.learners is not None:
-            learners = tuple(n.strip() for n in self.learners.split(",") if n.strip())
-            offered = setting.learners or [lr.name for lr in preset.learners]
-            select(offered, learners, "--learners")
         references = [
             r for r in preset.references if r not in OPTIMUM_POLICIES
         ] + self.optimum_policies
-        options = ExperimentOptions(
+        options = self.experiment_options(
             seeds=(preset.seeds[0] if self.seed is None else self.seed,),
-            learners=learners,
             settings=(setting.name,),
-            timesteps_scale=self.timesteps_scale,
-            test_episodes=self.test_episodes,
-            env_kwargs=self.env_kwargs,
             references=tuple(references),
             run_names=False,
             progress_bar=self.progress_bar,
@@ -183,6 +155,12 @@ class CompareConfig:
             torch_threads=self.torch_threads,
         )
         options.check(preset)
+        if options.learners is not None:  # only the setting's learners
+            select(
+                setting.learners or [lr.name for lr in preset.learners],
+                options.learners,
+                "--learners",
+            )
         return options
 
     def trials(self) -> list[Trial]:

@@ -94,6 +94,12 @@ def option_field(default: Any, help: str, **kwargs: Any) -> Any:
     return field(default=default, metadata={"help": help, **kwargs})
 
 
+def json_field(help: str) -> Any:
+    """A dataclass field holding a JSON object (default {}), with its --help text; the CLI
+    takes it as one JSON string."""
+    return field(default_factory=dict, metadata={"help": help})
+
+
 def command_line(prog: str, config: Any) -> str:
     """The `agent-envs PROG` command line of an options dataclass: non-default options only
     (`preset` always), ``--no-x`` for a false flag, dicts as quoted JSON."""
@@ -124,12 +130,9 @@ class TrainConfig:
         f"{PETTINGZOO_ENV_ID!r} (PettingZoo, one agent per swarm member, parameter-shared "
         "policy trained through SuperSuit)",
     )
-    env_kwargs: dict = field(
-        default_factory=dict,
-        metadata={
-            "help": 'env keyword arguments as a JSON object, e.g. \'{"n_agents": 10, '
-            '"n_steps": 20, "integrator": "em"}\' (default: the paper\'s stiff setting)'
-        },
+    env_kwargs: dict = json_field(
+        'env keyword arguments as a JSON object, e.g. \'{"n_agents": 10, '
+        '"n_steps": 20, "integrator": "em"}\' (default: the paper\'s stiff setting)'
     )
     timesteps: int = option_field(
         100_000,
@@ -146,12 +149,9 @@ class TrainConfig:
         "parallel training envs (default: the hyperparameter file's n_envs; for the PettingZoo "
         "env, copies of the swarm)",
     )
-    hyperparams: dict = field(
-        default_factory=dict,
-        metadata={
-            "help": "JSON object overriding SB3 keyword arguments of the algorithm, e.g. "
-            '\'{"learning_rate": 0.001, "policy_kwargs": {"net_arch": [32, 32]}}\''
-        },
+    hyperparams: dict = json_field(
+        "JSON object overriding SB3 keyword arguments of the algorithm, e.g. "
+        '\'{"learning_rate": 0.001, "policy_kwargs": {"net_arch": [32, 32]}}\''
     )
     normalize: bool | None = option_field(
         None,

@@ -29,8 +29,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from agent_envs.training.config import MAX_SEED, VEC_ENV_CHOICES, TrainConfig
-from agent_envs.training.defaults import DEFAULT_TEST_SEED, is_multiagent
+from agent_envs.training.config import (
+    MAX_SEED,
+    VEC_ENV_CHOICES,
+    TrainConfig,
+    json_field,
+    option_field,
+)
+from agent_envs.training.defaults import DEFAULT_TEST_SEED, is_multiagent, parse_env_kwargs
 from agent_envs.training.presets import EnvSetting, Learner, Preset
 from agent_envs.validation import check_int
 
@@ -150,6 +156,53 @@ class ExperimentOptions:
         """The held-out test seeds 10000, 10001, ... (`defaults.DEFAULT_TEST_SEED`)."""
         n_test = self.test_episodes or preset.test_episodes
         return tuple(range(DEFAULT_TEST_SEED, DEFAULT_TEST_SEED + n_test))
+
+
+def split_names(text: str | None) -> tuple[str, ...] | None:
+    """``a, b,c`` -> ("a", "b", "c"); None stays None (the preset's own)."""
+    if text is None:
+        return None
+    return tuple(s.strip() for s in str(text).split(",") if s.strip())
+
+
+@dataclass
+class ExperimentArguments:
+    """The options every experiment command takes (`compare`, `sweep`): its changes to the
+    preset's learners, env and budgets. Each command's config adds its own fields; the CLI makes
+    one option of every field (`--field-name`, the metadata's help as its --help)."""
+
+    learners: str | None = option_field(
+        None, "comma-separated learners of the preset to run (default: all of each setting's)"
+    )
+    env_kwargs: dict = json_field(
+        "JSON object of env kwargs overriding the preset's (every setting's), for "
+        'training and evaluation, e.g. \'{"integrator": "em"}\''
+    )
+    timesteps_scale: float = option_field(
+        1.0, "multiply every learner's training timesteps (e.g. 0.1 for a smoke run)"
+    )
+    test_episodes: int | None = option_field(
+        None, "held-out test episodes per policy (seeds 10000 + i; default: the preset's)"
+    )
+    vec_env: str | None = option_field(
+        None,
+        "vectorization of the single-controller learners' training envs (native, dummy, "
+        "subproc; default: the preset's; see agent-envs train --help)",
+    )
+
+    def __post_init__(self) -> None:
+        self.env_kwargs = parse_env_kwargs(self.env_kwargs)
+
+    def experiment_options(self, **changes: Any) -> ExperimentOptions:
+        """These options for the experiment builder, with the command's own `changes`."""
+        return ExperimentOptions(
+            learners=split_names(self.learners),
+            env_kwargs=self.env_kwargs,
+            timesteps_scale=self.timesteps_scale,
+            test_episodes=self.test_episodes,
+            vec_env=self.vec_env,
+            **changes,
+        )
 
 
 # ---------------------------------------------------------------------------------- building
@@ -314,6 +367,21 @@ def build_trials(
     return learners + list(references.values())
 
 
+def check_envs(trials: Sequence[Trial], option: str = "--env-kwargs") -> None:
+    """Build every distinct training and evaluation env of `trials` once, so that bad env
+    kwargs are a ValueError naming `option` before anything trains (`env_description`)."""
+    from agent_envs.training.defaults import GYM_ENV_ID
+    from agent_envs.training.environments import env_description
+
+    seen: set[str] = set()
+    for trial in trials:
+        for kwargs in (trial.eval_env_kwargs, (trial.train or {}).get("env_kwargs")):
+            key = json.dumps(kwargs, sort_keys=True)
+            if kwargs is not None and key not in seen:
+                seen.add(key)
+                env_description(GYM_ENV_ID, kwargs, option)
+
+
 # ---------------------------------------------------------------------------- where trials write
 
 
@@ -405,10 +473,12 @@ def train_learner(config: TrainConfig, *, retrain: bool = False) -> Path:
 __all__ = [
     "LEARNER",
     "REFERENCE",
+    "ExperimentArguments",
     "ExperimentOptions",
     "Trial",
     "available_references",
     "build_trials",
+    "check_envs",
     "evaluation_dir",
     "find_run",
     "learner_config",

@@ -55,11 +55,14 @@ from agent_envs.training.config import command_line, option_field
 from agent_envs.training.experiment import (
     LEARNER,
     TRIAL_LOG,
+    ExperimentArguments,
     ExperimentOptions,
     Trial,
     build_trials,
+    check_envs,
     evaluation_dir,
     learner_run_dir,
+    split_names,
 )
 from agent_envs.training.presets import PRESETS, get_preset
 
@@ -78,15 +81,10 @@ def _ints(text: str | None, option: str) -> tuple[int, ...] | None:
         raise ValueError(f"{option} must be comma-separated integers, got {text!r}") from None
 
 
-def _names(text: str | None) -> tuple[str, ...] | None:
-    if text is None:
-        return None
-    return tuple(s.strip() for s in str(text).split(",") if s.strip())
-
-
 @dataclass
-class SweepConfig:
-    """Options of `agent-envs sweep` (one field = one option)."""
+class SweepConfig(ExperimentArguments):
+    """Options of `agent-envs sweep` (one field = one option): the shared experiment options
+    (`ExperimentArguments`) and the sweep's own."""
 
     preset: str = option_field("smoke", "the sweep", choices=tuple(PRESETS))
     out: str | None = option_field(None, "output directory (default sweep-{preset})")
@@ -101,23 +99,14 @@ class SweepConfig:
         False, "continue the interrupted sweep in OUT (Tune's Tuner.restore; the saved grid)"
     )
     seeds: str | None = option_field(None, "comma-separated training seeds (default: the preset's)")
-    learners: str | None = option_field(
-        None, "comma-separated learners of the preset to run (default: all)"
-    )
     settings: str | None = option_field(
         None, "comma-separated env settings of the preset to run (default: all)"
-    )
-    timesteps_scale: float = option_field(1.0, "multiply every learner's training timesteps")
-    test_episodes: int | None = option_field(
-        None, "held-out test episodes per policy (seeds 10000 + i; default: the preset's)"
-    )
-    vec_env: str | None = option_field(
-        None, "vectorization of the training envs (default: the preset's; see --help of train)"
     )
     dry_run: bool = option_field(False, "print the trials and exit (starts no Ray)")
     bootstrap_seed: int = option_field(0, "seed of the bootstrap's generator in the report")
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         get_preset(self.preset)  # ValueError naming --preset
         if self.num_cpus is not None and self.num_cpus < 1:
             raise ValueError(f"--num-cpus must be >= 1, got {self.num_cpus}")
@@ -136,7 +125,7 @@ class SweepConfig:
 
         check_output_dir(self.out_dir, "--out")
         if not self.resume:
-            self.trials()
+            check_envs(self.trials())
         return self
 
     @property
@@ -148,13 +137,8 @@ class SweepConfig:
         return build_trials(get_preset(self.preset), self.options(), self.out_dir / "runs")
 
     def options(self) -> ExperimentOptions:
-        return ExperimentOptions(
-            seeds=_ints(self.seeds, "--seeds"),
-            learners=_names(self.learners),
-            settings=_names(self.settings),
-            timesteps_scale=self.timesteps_scale,
-            test_episodes=self.test_episodes,
-            vec_env=self.vec_env,
+        return self.experiment_options(
+            seeds=_ints(self.seeds, "--seeds"), settings=split_names(self.settings)
         )
 
     def command(self) -> str:
