@@ -25,12 +25,18 @@ import numpy as np
 from agent_envs import arrays
 from agent_envs.dynamics.operators import check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
-from agent_envs.integrators import DEFAULT_JACOBIAN, Integrator, make_integrator
+from agent_envs.integrators import (
+    DEFAULT_INTEGRATOR,
+    DEFAULT_JACOBIAN,
+    Integrator,
+    make_integrator,
+)
 from agent_envs.integrators.base import DriftModel
 from agent_envs.params import SwarmParams
 from agent_envs.validation import (
     DIVERGENCE_THRESHOLD_RANGE,
     MAX_BATCH_SIZE,
+    MAX_CONTROL_RANGE,
     MAX_PATHS,
     MAX_STEPS,
     check_int,
@@ -42,8 +48,77 @@ from agent_envs.validation import (
 
 #: A state is flagged as diverged when it is non-finite or max |x| exceeds this.
 DEFAULT_DIVERGENCE_THRESHOLD = 1e4
+#: Default number of time steps m (the paper's turnpike experiments; tau = T / m).
+DEFAULT_N_STEPS = 50
+#: Default bound on each coordinate of u_k: an env action a in [-1, 1] is the control
+#: u = 150 a. It leaves the turnpike cheap control (eq:cheap_ctr, beta = 12) unclipped in the
+#: paper's settings: benchmarks/max_control.py measures its largest |u|, README.md ("Why
+#: max_control = 150") has the figures.
+DEFAULT_MAX_CONTROL = 150.0
+#: Default phi-function strategy of the exponential integrators (`phi_functions`).
+DEFAULT_PHI_METHOD = "auto"
+#: Brownian paths of an env episode: one path, one sample of the SDE per step, by default.
+ENV_N_PATHS = 1
+#: Brownian paths of a sample average (the paper's K = 20): `simulate`, the optimal-control
+#: solver and its controllers estimate the expectation in eq:discrete_cost_functional over this
+#: many paths by default. It differs from `ENV_N_PATHS` on purpose: an env gives a learner one
+#: sample per step, a solver needs the average.
+SAMPLE_AVERAGE_PATHS = 20
 
 ControlSpec = Any  # None | array | Callable[[float, array], array]
+
+
+def check_steps_and_paths(params: SwarmParams, n_steps: Any, n_paths: Any) -> tuple[int, int]:
+    """(m, K) checked: 1 <= m <= 1e9, 1 <= K <= 1e6 with K N d <= 1e8; errors name them."""
+    n_steps = check_int("n_steps", n_steps, 1, MAX_STEPS)
+    n_paths = check_int("n_paths", n_paths, 1, MAX_PATHS)
+    state_size = params.n_agents * params.dim
+    check_size("n_paths", n_paths, n_paths * state_size, MAX_BATCH_SIZE, "n_paths * N * d")
+    return n_steps, n_paths
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    """How a swarm simulation is discretized, sampled and controlled: the one spec shared by
+    `simulate`, `baselines.solve_optimal_control`, the controllers and the envs'
+    `EpisodeConfig` (each default defined once, above).
+
+    Fields: `integrator` ("em", "ee", "heun", "erb", "serb"), `jacobian` ("frozen" | "exact",
+    for erb/serb), `phi_method` (`phi_functions`), `n_steps` m (tau = T / m), `n_paths` K
+    (Brownian paths; an env's default is `ENV_N_PATHS`, a sample average's
+    `SAMPLE_AVERAGE_PATHS`), `max_control` (the bound on every coordinate of u), `seed` (None
+    or an int >= 0: the start and the noise of `simulate`, the paths of a solve). A bad value
+    raises `ValueError`/`TypeError` naming the field; `for_params` adds the checks that need
+    the model (K N d <= 1e8, "eigh" only on a symmetric kernel).
+    """
+
+    integrator: str = DEFAULT_INTEGRATOR
+    jacobian: str = DEFAULT_JACOBIAN
+    phi_method: str = DEFAULT_PHI_METHOD
+    n_steps: int = DEFAULT_N_STEPS
+    n_paths: int = ENV_N_PATHS
+    max_control: float = DEFAULT_MAX_CONTROL
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        make_integrator(self.integrator, jacobian=self.jacobian, phi_method=self.phi_method)
+        set_ = object.__setattr__
+        set_(self, "n_steps", check_int("n_steps", self.n_steps, 1, MAX_STEPS))
+        set_(self, "n_paths", check_int("n_paths", self.n_paths, 1, MAX_PATHS))
+        set_(
+            self, "max_control", check_positive("max_control", self.max_control, MAX_CONTROL_RANGE)
+        )
+        set_(self, "seed", check_seed(self.seed))
+
+    def for_params(self, params: SwarmParams) -> SimulationSpec:
+        """This spec after the checks that need the model; returns self."""
+        check_steps_and_paths(params, self.n_steps, self.n_paths)
+        check_phi_method_fits_kernel(params, self.integrator, self.jacobian, self.phi_method)
+        return self
+
+    def time_step(self, params: SwarmParams) -> float:
+        """tau = T / m."""
+        return params.horizon / self.n_steps
 
 
 def real_input(name: str, value: Any) -> Any:
@@ -201,11 +276,11 @@ def _generators(seed: int | np.random.Generator | None):
 
 def simulate(
     params: SwarmParams,
-    integrator: str | Integrator = "serb",
+    integrator: str | Integrator = DEFAULT_INTEGRATOR,
     *,
     jacobian: str | None = None,
-    n_steps: int = 50,
-    n_paths: int = 20,
+    n_steps: int = DEFAULT_N_STEPS,
+    n_paths: int = SAMPLE_AVERAGE_PATHS,
     seed: int | np.random.Generator | None = None,
     initial_positions: Any = None,
     control: ControlSpec = None,
@@ -255,10 +330,7 @@ def simulate(
     """
     if not isinstance(params, SwarmParams):
         raise TypeError(f"params must be a SwarmParams, got {type(params).__name__}")
-    n_steps = check_int("n_steps", n_steps, 1, MAX_STEPS)
-    n_paths = check_int("n_paths", n_paths, 1, MAX_PATHS)
-    state_size = params.n_agents * params.dim
-    check_size("n_paths", n_paths, n_paths * state_size, MAX_BATCH_SIZE, "n_paths * N * d")
+    n_steps, n_paths = check_steps_and_paths(params, n_steps, n_paths)
     divergence_threshold = check_positive(
         "divergence_threshold", divergence_threshold, DIVERGENCE_THRESHOLD_RANGE
     )
@@ -273,7 +345,7 @@ def simulate(
                 )
     else:
         jacobian = DEFAULT_JACOBIAN if jacobian is None else jacobian
-        phi_method = "auto" if phi_method is None else phi_method
+        phi_method = DEFAULT_PHI_METHOD if phi_method is None else phi_method
         scheme = make_integrator(integrator, jacobian=jacobian, phi_method=phi_method)
         if model is None:
             check_phi_method_fits_kernel(params, integrator, jacobian, phi_method)

@@ -42,9 +42,15 @@ import numpy as np
 
 from agent_envs.costs import discrete_cost
 from agent_envs.dynamics.swarm import kernel_from_params
-from agent_envs.envs.episode import DEFAULT_MAX_CONTROL
 from agent_envs.params import SwarmParams, check_int, check_positive
-from agent_envs.simulator import simulate
+from agent_envs.simulator import (
+    DEFAULT_INTEGRATOR,
+    DEFAULT_JACOBIAN,
+    DEFAULT_MAX_CONTROL,
+    DEFAULT_N_STEPS,
+    SAMPLE_AVERAGE_PATHS,
+    simulate,
+)
 
 #: default tolerance on the relative projected gradient norm
 DEFAULT_GTOL = 1e-6
@@ -312,12 +318,12 @@ def _initial_controls(initial_controls: Any, shape: tuple[int, ...], bound: floa
 
 def solve_optimal_control(
     params: SwarmParams,
-    integrator: str = "serb",
+    integrator: str = DEFAULT_INTEGRATOR,
     *,
-    jacobian: str = "frozen",
+    jacobian: str = DEFAULT_JACOBIAN,
     phi_method: str | None = None,
-    n_steps: int = 50,
-    n_paths: int = 20,
+    n_steps: int = DEFAULT_N_STEPS,
+    n_paths: int = SAMPLE_AVERAGE_PATHS,
     seed: int = 0,
     initial_positions: Any = None,
     max_control: float = DEFAULT_MAX_CONTROL,

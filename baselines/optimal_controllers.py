@@ -47,6 +47,7 @@ from agent_envs.baselines.optimal_control import (
 )
 from agent_envs.envs.observation import observation_size, split_observation
 from agent_envs.params import SwarmParams, check_int
+from agent_envs.simulator import SAMPLE_AVERAGE_PATHS
 
 #: iteration cap of each MPC re-solve after the first (keeps an evaluation affordable)
 DEFAULT_MPC_ITERATIONS = 15
@@ -69,7 +70,7 @@ class PlanningController:
         self,
         env: Any = None,
         *,
-        n_paths: int = 20,
+        n_paths: int = SAMPLE_AVERAGE_PATHS,
         seed: int = 0,
         noise_free: bool = False,
         gtol: float = DEFAULT_GTOL,
@@ -95,7 +96,7 @@ class PlanningController:
                 return env_attribute(env, "params")
             if config is None:
                 raise ValueError(f"{type(self).__name__} needs {name}= without a swarm env")
-            return getattr(config, name)
+            return getattr(config.simulation, name)
 
         self.env = env
         self.params: SwarmParams = pick(params, "params")

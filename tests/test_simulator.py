@@ -149,3 +149,74 @@ def test_hot_path_limits_blas_threads_and_restores_them():
         after = [lib["num_threads"] for lib in controller.select(user_api="blas").info()]
     assert inside == [1] * len(inside)
     assert after == before
+
+
+# ----------------------------------------------------------------------- one simulation spec
+
+
+def test_one_simulation_spec_holds_every_default():
+    """`simulate`, the solver, the MPC/optimal controllers and the envs take their defaults
+    from `SimulationSpec`'s constants; the one deliberate difference is the number of paths
+    (an env episode: 1; a sample average: the paper's K = 20)."""
+    import inspect
+
+    from agent_envs.baselines.optimal_control import solve_optimal_control
+    from agent_envs.baselines.optimal_controllers import PlanningController
+    from agent_envs.envs.episode import EpisodeConfig
+    from agent_envs.params import SwarmParams
+    from agent_envs.simulator import (
+        ENV_N_PATHS,
+        SAMPLE_AVERAGE_PATHS,
+        SimulationSpec,
+        simulate,
+    )
+
+    spec = SimulationSpec()
+    assert (spec.integrator, spec.jacobian, spec.n_steps, spec.max_control) == (
+        "serb",
+        "frozen",
+        50,
+        150.0,
+    )
+    assert ENV_N_PATHS == spec.n_paths == 1 and SAMPLE_AVERAGE_PATHS == 20
+    env = EpisodeConfig.from_kwargs(n_agents=4)
+    assert env.simulation == spec
+    for function in (simulate, solve_optimal_control):
+        defaults = {k: p.default for k, p in inspect.signature(function).parameters.items()}
+        assert defaults["n_steps"] == spec.n_steps and defaults["integrator"] == spec.integrator
+        assert defaults["n_paths"] == SAMPLE_AVERAGE_PATHS
+    assert solve_optimal_control.__kwdefaults__["max_control"] == spec.max_control
+    planner = inspect.signature(PlanningController).parameters
+    assert planner["n_paths"].default == SAMPLE_AVERAGE_PATHS
+    # the env's own spec is what a planner reads
+    params = SwarmParams(n_agents=4)
+    config = EpisodeConfig.from_kwargs(n_agents=4, n_steps=7, max_control=3.0, integrator="em")
+    assert config.simulation.for_params(params).time_step(params) == 1 / 7
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"integrator": "rk4"}, "integrator"),
+        ({"jacobian": "dense"}, "jacobian"),
+        ({"n_steps": 0}, "n_steps"),
+        ({"n_paths": 0}, "n_paths"),
+        ({"max_control": float("nan")}, "max_control"),
+        ({"max_control": -1.0}, "max_control"),
+        ({"seed": -1}, "seed"),
+        ({"seed": 1.5}, "seed"),
+    ],
+)
+def test_simulation_spec_names_a_bad_field(kwargs, name):
+    from agent_envs.simulator import SimulationSpec
+
+    with pytest.raises((ValueError, TypeError), match=name):
+        SimulationSpec(**kwargs)
+
+
+def test_simulation_spec_checks_the_batch_size_against_the_model():
+    from agent_envs.params import SwarmParams
+    from agent_envs.simulator import SimulationSpec
+
+    with pytest.raises(ValueError, match="n_paths"):
+        SimulationSpec(n_paths=10**6).for_params(SwarmParams(n_agents=1000))

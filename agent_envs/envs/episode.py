@@ -48,31 +48,25 @@ from agent_envs.integrators import (
 from agent_envs.params import SwarmParams
 from agent_envs.simulator import (
     DEFAULT_DIVERGENCE_THRESHOLD,
+    DEFAULT_MAX_CONTROL,
+    DEFAULT_N_STEPS,
+    DEFAULT_PHI_METHOD,
+    ENV_N_PATHS,
+    SimulationSpec,
     as_positions,
     brownian_increments,
-    check_phi_method_fits_kernel,
     diverged_paths,
     uniform_positions,
 )
 from agent_envs.validation import (
     DIVERGENCE_THRESHOLD_RANGE,
-    MAX_BATCH_SIZE,
-    MAX_CONTROL_RANGE,
-    MAX_PATHS,
-    MAX_STEPS,
-    check_int,
     check_positive,
-    check_size,
     real_array,
 )
 
-#: Default number of time steps m (the paper's turnpike experiments).
-DEFAULT_N_STEPS = 50
-#: Default bound on each coordinate of u_k: an action a in [-1, 1] is the control u = 150 a.
-#: It leaves the turnpike cheap control (eq:cheap_ctr, beta = 12) unclipped in the paper's
-#: settings: benchmarks/max_control.py measures its largest |u|, README.md ("Why
-#: max_control = 150") has the figures.
-DEFAULT_MAX_CONTROL = 150.0
+# The simulation defaults (DEFAULT_N_STEPS, DEFAULT_MAX_CONTROL, ...) are `SimulationSpec`'s,
+# defined once in `agent_envs.simulator` and imported above (agent_envs.envs re-exports
+# DEFAULT_MAX_CONTROL).
 
 #: Keys of `reset(options=...)` the swarm envs understand.
 RESET_OPTION_NAMES = ("initial_positions", "target")
@@ -142,15 +136,17 @@ class EpisodeConfig:
 
     Ranges: 1 <= n_steps <= 1e9; 1 <= n_paths <= 1e6 with n_paths N d <= 1e8;
     0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it;
-    linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`).
+    linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`). The first six
+    fields are the env's `SimulationSpec` (`simulation`), checked by it, with its defaults (one
+    Brownian path per episode: `ENV_N_PATHS`).
     """
 
     params: SwarmParams
     integrator: str = DEFAULT_INTEGRATOR
     jacobian: str = DEFAULT_JACOBIAN
-    phi_method: str = "auto"
+    phi_method: str = DEFAULT_PHI_METHOD
     n_steps: int = DEFAULT_N_STEPS
-    n_paths: int = 1
+    n_paths: int = ENV_N_PATHS
     max_control: float = DEFAULT_MAX_CONTROL
     divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD
     linear_operator: str = "auto"
@@ -158,16 +154,17 @@ class EpisodeConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.params, SwarmParams):
             raise TypeError(f"params must be a SwarmParams, got {type(self.params).__name__}")
-        make_integrator(self.integrator, jacobian=self.jacobian, phi_method=self.phi_method)
-        check_phi_method_fits_kernel(self.params, self.integrator, self.jacobian, self.phi_method)
+        spec = SimulationSpec(
+            self.integrator,
+            self.jacobian,
+            self.phi_method,
+            self.n_steps,
+            self.n_paths,
+            self.max_control,
+        ).for_params(self.params)
         set_ = object.__setattr__
-        set_(self, "n_steps", check_int("n_steps", self.n_steps, 1, MAX_STEPS))
-        n_paths = check_int("n_paths", self.n_paths, 1, MAX_PATHS)
-        state_size = self.params.n_agents * self.params.dim
-        check_size("n_paths", n_paths, n_paths * state_size, MAX_BATCH_SIZE, "n_paths * N * d")
-        set_(self, "n_paths", n_paths)
-        max_control = check_positive("max_control", self.max_control, MAX_CONTROL_RANGE)
-        set_(self, "max_control", max_control)
+        for name in ("n_steps", "n_paths", "max_control"):
+            set_(self, name, getattr(spec, name))
         threshold = check_positive(
             "divergence_threshold", self.divergence_threshold, DIVERGENCE_THRESHOLD_RANGE
         )
@@ -196,6 +193,19 @@ class EpisodeConfig:
     def dt(self) -> float:
         """The time step tau = T / m."""
         return self.params.horizon / self.n_steps
+
+    @property
+    def simulation(self) -> SimulationSpec:
+        """The env's discretization as the core's one `SimulationSpec` (seed: None; the env
+        draws from its own generator)."""
+        return SimulationSpec(
+            self.integrator,
+            self.jacobian,
+            self.phi_method,
+            self.n_steps,
+            self.n_paths,
+            self.max_control,
+        )
 
 
 def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
