@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from agent_envs import arrays
+from agent_envs.dynamics.kernels import check_kernel_library
 from agent_envs.dynamics.operators import check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
 from agent_envs.integrators import (
@@ -362,6 +363,10 @@ def simulate(
             )
     if model is None:
         model = SwarmModel(params, "auto" if linear_operator is None else linear_operator)
+    if not arrays.is_numpy_namespace(xp) and not isinstance(params.kernel, str):
+        # a user kernel on a torch path: probe it once (one clear error, not one deep inside)
+        probe = arrays.asarray(np.zeros(1), xp=xp, device=dev, dtype=dtype)
+        check_kernel_library(getattr(model, "kernel", params.kernel), probe, params.dim)
     init_rng, noise_rng = _generators(seed)
     if initial_positions is None:
         x0 = uniform_positions(init_rng, n, d)

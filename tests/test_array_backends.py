@@ -279,3 +279,64 @@ def test_krylov_gradient_is_finite_when_some_columns_break_down():
     traj.positions.pow(2).sum().backward()
     assert u.grad is not None
     assert bool(torch.all(torch.isfinite(u.grad)))
+
+
+# --------------------------------------------------------------- user kernels on the torch path
+
+
+class NumpyGaussianKernel:
+    """Written the natural numpy way: works on numpy, not on torch."""
+
+    symmetric = True
+
+    def value(self, xk, xl):
+        return np.exp(-np.sum((xk - xl) ** 2, axis=-1))
+
+    def grad_x(self, xk, xl):
+        return 2.0 * (xl - xk) * self.value(xk, xl)[..., None]
+
+    def grad_y(self, xk, xl):
+        return -self.grad_x(xk, xl)
+
+
+class ArrayGenericGaussianKernel(NumpyGaussianKernel):
+    """The same kernel written array-generically (the docs' example): numpy and torch."""
+
+    def value(self, xk, xl):
+        from agent_envs import arrays
+
+        xp = arrays.namespace(xk)
+        return xp.exp(-xp.sum((xk - xl) ** 2, axis=-1))
+
+
+class AnswersNumpyKernel(NumpyGaussianKernel):
+    """Runs on torch input but answers a numpy array (converts its input)."""
+
+    def value(self, xk, xl):
+        return super().value(np.asarray(xk), np.asarray(xl))
+
+
+@pytest.mark.parametrize("kernel", [NumpyGaussianKernel(), AnswersNumpyKernel()])
+def test_numpy_style_kernel_on_torch_is_one_clear_type_error(kernel):
+    pytest.importorskip("torch")
+    params = SwarmParams(n_agents=4, kernel=kernel)
+    simulate(params, "serb", n_steps=3, n_paths=2, seed=0)  # fine on numpy
+    with pytest.raises(TypeError, match=f"kernel {type(kernel).__name__}.value.*arrays.namespace"):
+        simulate(params, "serb", n_steps=3, n_paths=2, seed=0, backend="torch")
+
+
+def test_numpy_style_kernel_in_the_solver_is_one_clear_type_error():
+    pytest.importorskip("torch")
+    from agent_envs.baselines.optimal_control import solve_optimal_control
+
+    params = SwarmParams(n_agents=3, kernel=NumpyGaussianKernel())
+    with pytest.raises(TypeError, match="kernel NumpyGaussianKernel"):
+        solve_optimal_control(params, "serb", n_steps=2, n_paths=1, max_iterations=1)
+
+
+def test_array_generic_kernel_runs_on_both_libraries_alike():
+    pytest.importorskip("torch")
+    params = SwarmParams(n_agents=5, kernel=ArrayGenericGaussianKernel(), sigma=0.1)
+    a = simulate(params, "serb", n_steps=4, n_paths=2, seed=3)
+    b = simulate(params, "serb", n_steps=4, n_paths=2, seed=3, backend="torch")
+    np.testing.assert_allclose(np.asarray(b.positions), a.positions, rtol=0, atol=1e-12)

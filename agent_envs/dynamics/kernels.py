@@ -121,3 +121,41 @@ class CuckerSmaleKernel:
 
     def __repr__(self) -> str:
         return f"CuckerSmaleKernel(alpha={self.alpha}, symmetric={self.symmetric})"
+
+
+#: How to write a kernel that works on numpy and torch (shown when a kernel answers in the
+#: wrong library).
+ARRAY_GENERIC_HINT = (
+    "write it with array operators and methods, or take the namespace of its input: "
+    "`xp = arrays.namespace(xk); d2 = xp.sum((xk - xl) ** 2, axis=-1); return xp.exp(-d2)` "
+    "(agent_envs.arrays), not np.sum / np.exp"
+)
+
+
+def check_kernel_library(kernel: InteractionKernel, like: object, dim: int) -> None:
+    """Probe `kernel` once on a tiny input of `like`'s array library (numpy or torch, with its
+    device and dtype): `value`, `grad_x` and `grad_y` must run and answer in that library.
+
+    The core's torch paths (`simulate(..., backend="torch")`, the optimal-control solver, the
+    learners trained through it) call this at model construction, so that a kernel written with
+    numpy functions fails with one `TypeError` naming the kernel class and the fix, instead of
+    deep inside a step. Shapes: xk (2, 1, d), xl (1, 2, d), as the dynamics call it.
+    """
+    xk = arrays.asarray(np.array([[[0.0] * dim], [[0.5] * dim]]), like=like)
+    xl = arrays.asarray(np.array([[[0.0] * dim, [0.5] * dim]]), like=like)
+    library = "torch" if arrays.is_torch(like) else "numpy"
+    name = type(kernel).__name__
+    for method in ("value", "grad_x", "grad_y"):
+        try:
+            answer = getattr(kernel, method)(xk, xl)
+        except Exception as exc:  # any failure of user code on this library is the same error
+            raise TypeError(
+                f"kernel {name}.{method} failed on {library} input ({type(exc).__name__}: "
+                f"{exc}); kernels receive numpy arrays or torch tensors and must answer in "
+                f"the same library: {ARRAY_GENERIC_HINT}"
+            ) from exc
+        if arrays.is_torch(answer) != arrays.is_torch(like):
+            raise TypeError(
+                f"kernel {name}.{method} answered a {type(answer).__name__} for {library} "
+                f"input; kernels must answer in their input's library: {ARRAY_GENERIC_HINT}"
+            )
