@@ -67,6 +67,7 @@ __all__ = [
     "parse_env_kwargs",
     "parse_json_object",
     "parse_seeds",
+    "seed_text",
 ]
 
 
@@ -160,12 +161,12 @@ def _seed_span(part: str, option: str) -> range:
     return span
 
 
-def seed_text(seeds: Sequence[int]) -> str:
-    """Seeds as a user writes them: ``A-B`` for a run of three or more, else ``A,B``."""
+def seed_text(seeds: Sequence[int], through: str = "-", separator: str = ",") -> str:
+    """Seeds as a user writes them: ``A-B`` for a run of three or more, else ``A,B,...``."""
     seeds = [int(s) for s in seeds]
     if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}-{seeds[-1]}"
-    return ",".join(map(str, seeds))
+        return f"{seeds[0]}{through}{seeds[-1]}"
+    return separator.join(map(str, seeds))
 
 
 def parse_seeds(
