@@ -300,6 +300,46 @@ def _run_policy(
     return episodes
 
 
+def _run_all(
+    resolved: dict[str, Any],
+    envs: dict[str, Any],
+    seeds: list[int],
+    reset_options: Mapping[str, Any] | None,
+    deterministic: bool,
+    progress: bool,
+) -> tuple[list[dict[str, Any]], dict[str, dict[str, np.ndarray]], dict[str, Any]]:
+    """Every policy on every seed, under one progress bar: (episode rows, trajectories per
+    policy, the env's description)."""
+    from tqdm.auto import tqdm
+
+    rows: list[dict[str, Any]] = []
+    trajectories: dict[str, dict[str, np.ndarray]] = {}
+    env_info: dict[str, Any] = {}
+    bar = tqdm(total=len(resolved) * len(seeds), desc="evaluate", unit="ep", disable=not progress)
+    try:
+        for name, policy in resolved.items():
+            episodes = _run_policy(
+                name, policy, envs[name], seeds, reset_options, deterministic, bar
+            )
+            rows += [{"policy": name, **ep.summary()} for ep in episodes]
+            trajectories[name] = stack_episodes(episodes)
+            env_info = _env_info(envs[name])
+    finally:
+        bar.close()
+    return rows, trajectories, env_info
+
+
+def _named(policies: Mapping[str, PolicySpec] | Sequence[str]) -> dict[str, PolicySpec]:
+    """{name: spec}: a list of baseline names / model paths is named by itself."""
+    if not isinstance(policies, Mapping):
+        policies = {
+            os.fspath(p) if isinstance(p, (str, os.PathLike)) else repr(p): p for p in policies
+        }
+    if not policies:
+        raise ValueError("no policies to evaluate")
+    return dict(policies)
+
+
 def _episodes_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """The per-episode rows as the results' table (None -> NaN, as after a CSV round trip)."""
     episodes_df = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
@@ -335,25 +375,15 @@ def evaluate_policies(
         progress: show a tqdm bar over the episodes.
         out_dir: when given, `save` the results there.
     """
-    from tqdm.auto import tqdm
-
     from agent_envs.validation import check_seed
 
-    if not isinstance(policies, Mapping):
-        policies = {
-            os.fspath(p) if isinstance(p, (str, os.PathLike)) else repr(p): p for p in policies
-        }
-    if not policies:
-        raise ValueError("no policies to evaluate")
+    policies = _named(policies)
     seeds = [check_seed(s) for s in seeds]
     if not seeds:
         raise ValueError("no seeds to evaluate on")
     env_kwargs = dict(env_kwargs or {})
     if out_dir is not None:
         check_output_dir(out_dir, "out_dir")
-    rows: list[dict[str, Any]] = []
-    trajectories: dict[str, dict[str, np.ndarray]] = {}
-    env_info: dict[str, Any] = {}
     # Every input is checked before the first episode: the env (id, kwargs, reset options),
     # every policy (built or loaded for its own env) and the seeds.
     envs: dict[str, Any] = {}
@@ -361,18 +391,9 @@ def evaluate_policies(
         resolved, descriptions = _open_policies(policies, env_id, env_kwargs, baseline_kwargs, envs)
         first = next(iter(envs.values()))
         first.reset(seed=seeds[0], options=dict(reset_options) if reset_options else None)
-        total = len(policies) * len(seeds)
-        bar = tqdm(total=total, desc="evaluate", unit="ep", disable=not progress)
-        try:
-            for name, policy in resolved.items():
-                episodes = _run_policy(
-                    name, policy, envs[name], seeds, reset_options, deterministic, bar
-                )
-                rows += [{"policy": name, **ep.summary()} for ep in episodes]
-                trajectories[name] = stack_episodes(episodes)
-                env_info = _env_info(envs[name])
-        finally:
-            bar.close()
+        rows, trajectories, env_info = _run_all(
+            resolved, envs, seeds, reset_options, deterministic, progress
+        )
     finally:
         for env in envs.values():
             env.close()
@@ -386,9 +407,7 @@ def evaluate_policies(
         "env": env_info,
         "created": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
-    results = EvaluationResults(
-        episodes=_episodes_table(rows), trajectories=trajectories, meta=meta
-    )
+    results = EvaluationResults(_episodes_table(rows), trajectories, meta)
     if out_dir is not None:
         results.save(out_dir)
     return results
