@@ -421,18 +421,15 @@ def _markdown(
     return "\n".join(md)
 
 
-_DEFAULTS = TurnpikeReproductionConfig()
-
-
 def reproduce(
     out_dir: str | Path,
-    seeds: tuple[int, ...] = _DEFAULTS.seeds,
+    seeds: tuple[int, ...] = TurnpikeReproductionConfig.seeds,
     *,
     runs: tuple[TurnpikeRun, ...] = PAPER_RUNS,
     modes: tuple[str, ...] = MODES,
-    n_agents: int = _DEFAULTS.n_agents,
-    n_steps: int = _DEFAULTS.n_steps,
-    n_paths: int = _DEFAULTS.n_paths,
+    n_agents: int = TurnpikeReproductionConfig.n_agents,
+    n_steps: int = TurnpikeReproductionConfig.n_steps,
+    n_paths: int = TurnpikeReproductionConfig.n_paths,
     progress: bool = True,
 ) -> pd.DataFrame:
     """Run every (run, mode, seed), write the table and figures into `out_dir`; return the table.
