@@ -233,13 +233,10 @@ class TurnpikePropertyConfig:
                     f"--tau must divide every horizon (--horizons); {horizon} / {self.tau} = "
                     f"{steps:g}"
                 )
-        unknown = sorted(set(self.kernels) - set(KERNELS))
-        if unknown or not all((self.horizons, self.sigmas, self.epsilons, self.kernels)):
-            raise ValueError(
-                f"--kernels must be among {KERNELS}, got {list(self.kernels)}"
-                if unknown
-                else "--horizons, --sigmas, --epsilons and --kernels need one value at least"
-            )
+        if sorted(set(self.kernels) - set(KERNELS)):
+            raise ValueError(f"--kernels must be among {KERNELS}, got {list(self.kernels)}")
+        if not all((self.horizons, self.sigmas, self.epsilons, self.kernels)):
+            raise ValueError("--horizons, --sigmas, --epsilons and --kernels need a value each")
 
     @property
     def settings(self) -> list[Setting]:
