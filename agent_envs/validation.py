@@ -87,6 +87,10 @@ MAX_STATE_SIZE = 10**7  # N d
 MAX_BATCH_SIZE = 10**8  # n_paths N d
 MAX_STEPS = 10**9
 MAX_PATHS = 10**6
+#: Largest seed a command line accepts (every seed option: 0 <= seed <= MAX_SEED). SB3 seeds
+#: numpy's legacy global generator, which takes 32-bit seeds; the envs themselves accept any
+#: int >= 0 (`check_seed`).
+MAX_SEED = 2**32 - 1
 
 _REAL_TYPES = (int, float, np.integer, np.floating)
 _NUMERIC_KINDS = "iuf"  # signed int, unsigned int, float: numpy's real numeric dtypes

@@ -1,8 +1,15 @@
 """The `agent-envs` command line: all argparse of the project, and its one error path.
 
-Each subcommand is a `Subcommand`: a help line, ``add_arguments(parser)`` and
-``run(args) -> int``. The modules doing the work are imported inside ``run`` (and, for options
-read from a dataclass, inside ``add_arguments`` of the chosen subcommand only), so
+Each subcommand is a `Subcommand`: a help line, its options dataclass and ``run(config) ->
+int``. There is one route from the command line to a config: the options are generated from
+the dataclass's fields (`add_dataclass_arguments`: name, type, default and --help from the field
+and its `config.option_field` metadata), the namespace becomes the dataclass
+(`config_from_namespace`), and the dataclass checks its values on construction with the checks
+of `agent_envs.validation`. The dataclasses live next to the code they configure
+(`experiments.uncontrolled.UncontrolledConfig`, `experiments.turnpike_controlled.
+TurnpikeReproductionConfig`, `experiments.turnpike_property.TurnpikePropertyConfig`,
+`evaluate.EvaluateConfig`, `report.ReportConfig`, `config.TrainConfig`, `compare.CompareConfig`,
+`sweep.SweepConfig`) and are imported only when their subcommand is chosen, so
 `agent-envs reproduce uncontrolled` does not pay for importing torch.
 
 Conventions shared by every subcommand:
@@ -10,6 +17,8 @@ Conventions shared by every subcommand:
 - ``--env-kwargs`` (and every other JSON-object option) is one JSON object, e.g.
   ``--env-kwargs '{"n_agents": 20, "integrator": "em"}'``
   (`agent_envs.training.defaults.parse_env_kwargs`);
+- ``--seeds`` is a seed list of items ``N``, ``A-B`` (inclusive) or ``A:B`` (half-open),
+  separated by commas or spaces, e.g. ``--seeds 0-4,10`` (`defaults.parse_seeds`);
 - every subcommand checks all its inputs before it does any work (trains, simulates, writes);
 - a bad input (an argparse error, a ValueError / TypeError / OSError, a gymnasium error) prints
   one line ``agent-envs COMMAND: error: ...`` on stderr and exits with 2, never a traceback;
@@ -21,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
 import re
 import sys
@@ -33,8 +43,22 @@ from typing import Any
 TRAIN_EXTRA_MODULES = frozenset(
     {"torch", "stable_baselines3", "pandas", "tqdm", "supersuit", "tensorboard", "rich"}
 )
-#: The most seeds one command line may list (a typo like 0:10**12 is an error, not an OOM).
-MAX_SEEDS = 100_000
+
+
+#: Names kept importable from here, each from its home (imported when asked for):
+#: ``cli.parse_seeds`` and ``cli.parse_policy_specs`` were defined here before.
+_MOVED = {
+    "parse_seeds": "agent_envs.training.defaults",
+    "parse_policy_specs": "agent_envs.training.evaluate",
+    "MAX_SEEDS": "agent_envs.training.defaults",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """`_MOVED` names, imported from their home on first use (PEP 562)."""
+    if name in _MOVED:
+        return getattr(importlib.import_module(_MOVED[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class UsageError(Exception):
@@ -55,14 +79,97 @@ class ArgumentParser(argparse.ArgumentParser):
 
 @dataclass(frozen=True)
 class Subcommand:
-    """One `agent-envs` subcommand: its help line, its options and what it runs."""
+    """One `agent-envs` subcommand: its help line, its options dataclass and what it runs.
+
+    The options are generated from the dataclass `config` (``"module:Class"``, imported only
+    when the subcommand is chosen) by `add_dataclass_arguments`; `run` is called with the
+    dataclass built from them (which validates them), or, with `given_only`, with the dict of
+    the options given on the command line (`train`: options left out come from a resumed run).
+    """
 
     help: str
-    add_arguments: Callable[[argparse.ArgumentParser], None]
-    run: Callable[[argparse.Namespace], int]
+    config: str
+    run: Callable[[Any], int]
+    description: str = ""
+    given_only: bool = False
+
+    def config_class(self) -> type:
+        """The options dataclass (its module is imported here)."""
+        module, name = self.config.split(":")
+        return getattr(importlib.import_module(module), name)
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        """One option per field of the options dataclass."""
+        if self.description:
+            parser.description = self.description
+        add_dataclass_arguments(parser, self.config_class(), suppress_defaults=self.given_only)
+
+    def options(self, args: argparse.Namespace) -> Any:
+        """What `run` is called with: the options dataclass, or the dict of given options."""
+        cls = self.config_class()
+        if self.given_only:
+            names = {f.name for f in dataclasses.fields(cls)}
+            return {k: v for k, v in vars(args).items() if k in names}
+        return config_from_namespace(cls, args)
 
 
 # ------------------------------------------------------------------ options from dataclasses
+
+#: Field metadata read by `add_dataclass_arguments` only (every other key goes to argparse):
+#: ``help``: the --help text; ``flags``: the option strings instead of ``--field-name`` (an
+#: alias such as ``("--policy", "-p")``, or ``("--no-progress",)`` with
+#: ``action="store_false"``); ``positional``: a positional argument named like the field.
+_OWN_METADATA = ("help", "flags", "positional")
+#: Element types of the fields, by annotation.
+_TYPES: dict[str, type] = {"int": int, "float": float, "str": str, "Path": Path}
+
+
+def _annotation(f: dataclasses.Field) -> tuple[str, bool]:
+    """(element type name, list-valued) of a field: ``tuple[float, ...] | None`` -> float, True."""
+    text = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
+    text = text.removesuffix(" | None")
+    match = re.fullmatch(r"(?:tuple|list)\[(\w+)(?:, \.\.\.)?\]", text)
+    return (match.group(1), True) if match else (text, False)
+
+
+def _shown(default: Any) -> str:
+    """A default as --help shows it: dicts as JSON, lists as their items."""
+    if isinstance(default, dict):
+        return json.dumps(default)
+    if isinstance(default, (tuple, list)):
+        return " ".join(map(str, default))
+    return str(default)
+
+
+def _argument_kwargs(f: dataclasses.Field, suppress_defaults: bool) -> dict[str, Any]:
+    """argparse keyword arguments of a field (its metadata's argparse keys added last)."""
+    meta = {k: v for k, v in f.metadata.items() if k not in _OWN_METADATA}
+    help_text = f.metadata.get("help", "")
+    if f.default is not dataclasses.MISSING:
+        default = f.default
+    elif f.default_factory is not dataclasses.MISSING:
+        default = f.default_factory()
+    else:
+        default = dataclasses.MISSING
+    kwargs: dict[str, Any] = {"dest": f.name, "help": help_text}
+    if default is dataclasses.MISSING:
+        kwargs["required"] = True
+    else:
+        kwargs["default"] = argparse.SUPPRESS if suppress_defaults else default
+        if "default" not in help_text.lower() and "action" not in meta:
+            kwargs["help"] = f"{help_text} (default: {_shown(default)})"
+    name, many = _annotation(f)
+    if name == "bool":
+        if "action" not in meta:
+            kwargs["action"] = argparse.BooleanOptionalAction
+    elif name == "dict":
+        kwargs.update(metavar="JSON", type=str)
+    else:
+        kwargs["type"] = _TYPES.get(name, str)
+        if many and "action" not in meta:
+            kwargs["nargs"] = "+"
+    kwargs.update(meta)
+    return kwargs
 
 
 def add_dataclass_arguments(
@@ -74,41 +181,41 @@ def add_dataclass_arguments(
 ) -> None:
     """Add one `--field-name` option per dataclass field, with the field's metadata help.
 
-    Booleans accept `--flag/--no-flag`; dict fields take a JSON object (parsed and checked by
-    the dataclass). With `suppress_defaults`, options left out do not appear in the namespace
-    (so a caller can tell "not given" from "given the default").
+    By the field's annotation: booleans accept `--flag/--no-flag` (or, with ``action`` in the
+    metadata, are a `store_true`/`store_false` flag); dict fields take a JSON object (parsed
+    and checked by the dataclass); ``int``, ``float``, ``Path`` and ``str`` fields are typed
+    as annotated; ``tuple[X, ...]`` / ``list[X]`` fields take one or more X (``nargs="+"``); a
+    field without a default is a required option. Metadata keys other than ``help``, ``flags``
+    and ``positional`` (see `_OWN_METADATA`) are passed to argparse (``choices``, ``nargs``,
+    ``type``, ``action``, ``metavar``). With `suppress_defaults`, options left out do not
+    appear in the namespace (so a caller can tell "not given" from "given the default").
     """
     for f in dataclasses.fields(cls):
-        if f.name in exclude:
+        if f.name in exclude or not f.init:
             continue
-        flag = "--" + f.name.replace("_", "-")
-        meta = dict(f.metadata)
-        help_text = meta.pop("help", "")
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
-        kwargs: dict[str, Any] = {"dest": f.name}
-        kwargs["default"] = argparse.SUPPRESS if suppress_defaults else default
-        shown = json.dumps(default) if isinstance(default, dict) else default
-        mentioned = "default" in help_text
-        kwargs["help"] = help_text if mentioned else f"{help_text} (default: {shown})"
-        if f.type in ("bool", "bool | None", bool):
-            kwargs["action"] = argparse.BooleanOptionalAction
-        elif f.type in ("dict", dict):
-            kwargs["metavar"] = "JSON"
-            kwargs["type"] = str
-        elif f.type in ("int", "int | None"):
-            kwargs["type"] = int
-        elif f.type == "float":
-            kwargs["type"] = float
+        kwargs = _argument_kwargs(f, suppress_defaults)
+        if f.metadata.get("positional"):
+            del kwargs["dest"]
+            kwargs.pop("required", None)
+            parser.add_argument(f.name, **kwargs)
         else:
-            kwargs["type"] = str
-        kwargs.update(meta)
-        parser.add_argument(flag, **kwargs)
+            flags = f.metadata.get("flags", ("--" + f.name.replace("_", "-"),))
+            parser.add_argument(*flags, **kwargs)
 
 
 def config_from_namespace(cls: type, args: argparse.Namespace, **overrides: Any) -> Any:
-    """Build a dataclass from the namespace filled by `add_dataclass_arguments`."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    values = {k: v for k, v in vars(args).items() if k in names}
+    """Build a dataclass from the namespace filled by `add_dataclass_arguments`.
+
+    Lists given to a tuple-valued field become tuples; the dataclass validates the values.
+    """
+    values: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if not f.init or f.name not in vars(args):
+            continue
+        value = getattr(args, f.name)
+        if isinstance(value, list) and _annotation(f)[1]:
+            value = tuple(value)
+        values[f.name] = value
     values.update(overrides)
     return cls(**values)
 
@@ -116,339 +223,66 @@ def config_from_namespace(cls: type, args: argparse.Namespace, **overrides: Any)
 # ------------------------------------------------------------------------ reproduce (paper)
 
 
-def _uncontrolled_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=Path("out/uncontrolled"),
-        help="output folder (default: out/uncontrolled)",
-    )
-    parser.add_argument("--n-agents", type=int, default=100, help="number of agents N (100)")
-    parser.add_argument("--n-paths", type=int, default=20, help="Brownian paths (20)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the start and noise (0)")
-
-
-def _check_sizes(args: argparse.Namespace) -> None:
-    """--n-agents, --n-paths (and --n-steps) within the core's accepted sizes."""
-    from agent_envs.validation import MAX_AGENTS, MAX_BATCH_SIZE, MAX_PATHS, MAX_STEPS, check_int
-
-    check_int("--n-agents", args.n_agents, 1, MAX_AGENTS)
-    check_int("--n-paths", args.n_paths, 1, MAX_PATHS)
-    if getattr(args, "n_steps", None) is not None:
-        check_int("--n-steps", args.n_steps, 1, MAX_STEPS)
-    if args.n_agents * args.n_paths > MAX_BATCH_SIZE:
-        raise ValueError(
-            f"--n-agents times --n-paths must be <= {MAX_BATCH_SIZE}, got "
-            f"{args.n_agents} x {args.n_paths}"
-        )
-
-
-def _run_uncontrolled(args: argparse.Namespace) -> int:
-    from agent_envs.training.storage import check_output_dir
-
-    _check_sizes(args)
-    if args.seed < 0:
-        raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
-    check_output_dir(args.out)
+def _run_uncontrolled(config: Any) -> int:
     from agent_envs.training.experiments.uncontrolled import markdown_table, reproduce
+    from agent_envs.training.storage import check_output_dir
 
-    rows = reproduce(args.out, args.n_agents, args.n_paths, args.seed)
+    check_output_dir(config.out)
+    rows = reproduce(config.out, config.n_agents, config.n_paths, config.seed)
     print(markdown_table(rows))
-    print(f"wrote {args.out}/results.md, results.json and the figures")
+    print(f"wrote {config.out}/results.md, results.json and the figures")
     return 0
 
 
-def _turnpike_arguments(parser: argparse.ArgumentParser) -> None:
-    from agent_envs.training.experiments.turnpike_controlled import (
-        MODES,
-        N_AGENTS,
-        N_PATHS,
-        N_STEPS,
-    )
-
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=Path("reproduction_turnpike"),
-        help="output folder (default: reproduction_turnpike)",
-    )
-    parser.add_argument(
-        "--seeds",
-        type=int,
-        nargs="+",
-        default=[0],
-        help="seeds of the initial positions and noise (default: 0)",
-    )
-    parser.add_argument(
-        "--modes",
-        nargs="+",
-        choices=MODES,
-        default=list(MODES),
-        help="env (public API, zero-order hold) and/or closed-loop (paper)",
-    )
-    parser.add_argument("--n-agents", type=int, default=N_AGENTS)
-    parser.add_argument("--n-paths", type=int, default=N_PATHS)
-    parser.add_argument("--n-steps", type=int, default=N_STEPS)
-    parser.add_argument("--no-progress", action="store_true")
-
-
-def _turnpike_property_arguments(parser: argparse.ArgumentParser) -> None:
-    from agent_envs.training.experiments.turnpike_property import (
-        DELTA,
-        EPSILONS,
-        HORIZONS,
-        KERNELS,
-        SIGMAS,
-    )
-
-    parser.add_argument("--out", type=Path, default=Path("reproduction_turnpike_property"))
-    parser.add_argument("--n-agents", type=int, default=20, help="N (paper: 100)")
-    parser.add_argument("--n-paths", type=int, default=10, help="K for sigma > 0 (paper: 20)")
-    parser.add_argument("--tau", type=float, default=0.05, help="time step (paper: 0.02)")
-    parser.add_argument("--horizons", type=float, nargs="+", default=list(HORIZONS))
-    parser.add_argument("--sigmas", type=float, nargs="+", default=list(SIGMAS))
-    parser.add_argument("--epsilons", type=float, nargs="+", default=list(EPSILONS))
-    parser.add_argument("--kernels", nargs="+", choices=KERNELS, default=list(KERNELS))
-    parser.add_argument("--delta", type=float, default=DELTA, help="turnpike band (eq:tptime)")
-    parser.add_argument("--seed", type=int, default=0, help="x^0 and the noise")
-    parser.add_argument("--max-control", type=float, default=150.0)
-    parser.add_argument("--gtol", type=float, default=1e-6, help="relative gradient tolerance")
-    parser.add_argument("--max-iterations", type=int, default=500)
-    parser.add_argument("--no-progress", dest="progress", action="store_false")
-
-
-def _run_turnpike_property(args: argparse.Namespace) -> int:
-    import time
-
-    from agent_envs.training.experiments.turnpike_property import (
-        TurnpikePropertyConfig,
-        reproduce,
-    )
-    from agent_envs.training.storage import check_output_dir
-    from agent_envs.validation import (
-        EPSILON_RANGE,
-        HORIZON_RANGE,
-        MAX_CONTROL_RANGE,
-        SIGMA_RANGE,
-        check_positive,
-        check_real,
-    )
-
-    _check_sizes(args)
-    if args.n_agents < 2:
-        raise ValueError(f"--n-agents must be an integer >= 2, got {args.n_agents}")
-    if args.seed < 0:
-        raise ValueError(f"--seed must be an integer >= 0, got {args.seed}")
-    for h in args.horizons:
-        check_positive("--horizons", h, HORIZON_RANGE)
-    check_positive("--tau", args.tau, HORIZON_RANGE)
-    for s in args.sigmas:
-        check_real("--sigmas", s, SIGMA_RANGE)
-    for e in args.epsilons:
-        check_positive("--epsilons", e, EPSILON_RANGE)
-    check_positive("--delta", args.delta)
-    check_positive("--max-control", args.max_control, MAX_CONTROL_RANGE)
-    check_positive("--gtol", args.gtol)
-    if not 1 <= args.max_iterations <= 1_000_000:
-        raise ValueError(f"--max-iterations must be in [1, 1000000], got {args.max_iterations}")
-    names = {f.name for f in dataclasses.fields(TurnpikePropertyConfig)}
-    values = {k: v for k, v in vars(args).items() if k in names}
-    config = TurnpikePropertyConfig(
-        **{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-    )  # ValueError naming tau when it does not divide a horizon
-    check_output_dir(args.out)
-    start = time.perf_counter()
-    reproduce(args.out, config)
-    seconds = time.perf_counter() - start
-    print(f"wrote {args.out}/turnpike_property.png, .csv, .md ({seconds:.0f} s)")
-    return 0
-
-
-def _run_turnpike(args: argparse.Namespace) -> int:
+def _run_turnpike(config: Any) -> int:
     from agent_envs.training.storage import check_output_dir
 
-    _check_sizes(args)
-    for seed in args.seeds:
-        if seed < 0:
-            raise ValueError(f"--seeds must be integers >= 0, got {seed}")
-    if len(set(args.seeds)) != len(args.seeds):
-        raise ValueError(f"--seeds lists a seed twice: {args.seeds}")
-    check_output_dir(args.out)
+    check_output_dir(config.out)
     import pandas as pd
 
     from agent_envs.training.experiments.turnpike_controlled import TABLE_COLUMNS, reproduce
 
     table = reproduce(
-        args.out,
-        tuple(args.seeds),
-        modes=tuple(args.modes),
-        n_agents=args.n_agents,
-        n_steps=args.n_steps,
-        n_paths=args.n_paths,
-        progress=not args.no_progress,
+        config.out,
+        config.seeds,
+        modes=config.modes,
+        n_agents=config.n_agents,
+        n_steps=config.n_steps,
+        n_paths=config.n_paths,
+        progress=config.progress,
     )
     cols = [c for c in TABLE_COLUMNS if c in table.columns]
     with pd.option_context(
         "display.width", 200, "display.max_columns", 30, "display.float_format", "{:.3g}".format
     ):
         print(table[cols].to_string(index=False))
-    print(f"written: {args.out}/results.md, results.csv, results.json and PNGs")
+    print(f"written: {config.out}/results.md, results.csv, results.json and PNGs")
     return 0
 
 
-# -------------------------------------------------------------------------------- evaluate
+def _run_turnpike_property(config: Any) -> int:
+    import time
 
-
-def parse_seeds(items: Sequence[str] | None) -> list[int]:
-    """Seeds from items like ``0 1 2``, ``0-19`` (inclusive) or ``0:20`` (half-open).
-
-    None or no items: the held-out test seeds `defaults.DEFAULT_TEST_SEEDS`. Raises ValueError
-    naming --seeds for anything else, a negative seed, an empty range or more than `MAX_SEEDS`.
-    """
-    from agent_envs.training.defaults import DEFAULT_TEST_SEEDS
-
-    if items is None:
-        return list(DEFAULT_TEST_SEEDS)
-    seeds: list[int] = []
-    for item in items:
-        for part in str(item).split(","):
-            part = part.strip()
-            if not part:
-                continue
-            match = re.fullmatch(r"(\d+)(?:([-:])(\d+))?", part)
-            if match is None:
-                raise ValueError(
-                    f"--seeds: {part!r} is not a seed (an integer >= 0), a range A-B (inclusive) "
-                    "or A:B (half-open)"
-                )
-            low = int(match.group(1))
-            if match.group(2) is None:
-                span = range(low, low + 1)
-            else:
-                high = int(match.group(3)) + (1 if match.group(2) == "-" else 0)
-                span = range(low, high)
-                if not span:
-                    raise ValueError(f"--seeds: the range {part!r} is empty")
-            if len(seeds) + len(span) > MAX_SEEDS:
-                raise ValueError(f"--seeds: more than {MAX_SEEDS} seeds")
-            seeds.extend(span)
-    if not seeds:
-        raise ValueError("--seeds: no seed given (leave the option out for 10000-10019)")
-    if len(set(seeds)) != len(seeds):
-        raise ValueError("--seeds lists a seed twice")
-    return seeds
-
-
-def parse_policy_specs(items: Sequence[str] | None) -> dict[str, str]:
-    """``NAME=SPEC`` or ``SPEC`` items -> {name: spec} (a bare path is named by its file stem).
-
-    A SPEC is a baseline name or ``[ALGO:]MODEL.zip[:STATS.pkl]``. None or no items: the three
-    reference controllers.
-    """
-    from agent_envs.training.defaults import BASELINE_POLICIES, FEEDBACK_BASELINES
-    from agent_envs.training.policies import ModelSpec
-
-    if not items:
-        return {name: name for name in FEEDBACK_BASELINES}
-    out: dict[str, str] = {}
-    for item in items:
-        if "=" in item:
-            name, spec = item.split("=", 1)
-        else:
-            spec = item
-            name = item if item in BASELINE_POLICIES else ModelSpec.parse(item).path.stem
-        if not name or not spec:
-            raise ValueError(f"--policy {item!r}: write NAME=SPEC or SPEC")
-        if name in out:
-            raise ValueError(f"--policy name {name!r} given twice; use NAME=SPEC to rename")
-        out[name] = spec
-    return out
-
-
-def _evaluate_arguments(parser: argparse.ArgumentParser) -> None:
-    from agent_envs.training.defaults import DEFAULT_BETA, DEFAULT_DELTA, GYM_ENV_ID
-
-    parser.add_argument(
-        "--policy",
-        "-p",
-        action="append",
-        dest="policies",
-        metavar="[NAME=]SPEC",
-        help="a baseline (turnpike | proportional | zero | optimal | mpc) or a saved SB3 model "
-        "PATH.zip "
-        "(ALGO:PATH to name the algorithm, PATH.zip:STATS.pkl to name its VecNormalize "
-        "statistics; statistics are found by themselves only in a run folder of agent-envs "
-        "train, checked against its manifest.json, or of rl-zoo3); repeat for several. Default: "
-        "turnpike, proportional, zero.",
-    )
-    parser.add_argument("--env-id", default=GYM_ENV_ID, help="Gymnasium env id")
-    parser.add_argument(
-        "--env-kwargs",
-        default=None,
-        metavar="JSON",
-        help='env keyword arguments as a JSON object, e.g. \'{"n_agents": 20, "integrator": '
-        "\"em\"}' (default: the env's defaults)",
-    )
-    parser.add_argument(
-        "--seeds",
-        nargs="*",
-        default=None,
-        help="reset seeds: '0 1 2', '0-19' or '0:20' (default 10000-10019)",
-    )
-    parser.add_argument("--target", type=float, default=None, help="reset option: the target")
-    parser.add_argument(
-        "--beta", type=float, default=DEFAULT_BETA, help=f"baselines' beta ({DEFAULT_BETA:g})"
-    )
-    parser.add_argument(
-        "--delta", type=float, default=DEFAULT_DELTA, help=f"baselines' delta ({DEFAULT_DELTA:g})"
-    )
-    parser.add_argument("--out", required=True, type=Path, help="output folder")
-    parser.add_argument("--report", action="store_true", help="also write a report in OUT/report")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-
-
-def _run_evaluate(args: argparse.Namespace) -> int:
-    from agent_envs.training.defaults import BASELINE_POLICIES, check_env_id, parse_env_kwargs
+    from agent_envs.training.experiments.turnpike_property import reproduce
     from agent_envs.training.storage import check_output_dir
-    from agent_envs.validation import check_positive, check_real
 
-    policies = parse_policy_specs(args.policies)
-    env_kwargs = parse_env_kwargs(args.env_kwargs)
-    seeds = parse_seeds(args.seeds)
-    check_env_id(args.env_id)
-    if args.target is not None:
-        check_real("--target", args.target)
-    check_positive("--beta", args.beta)
-    check_positive("--delta", args.delta)
-    check_output_dir(args.out)
-    if any(spec not in BASELINE_POLICIES for spec in policies.values()):
-        from agent_envs.training.policies import check_model
+    check_output_dir(config.out)
+    start = time.perf_counter()
+    reproduce(config.out, config)
+    seconds = time.perf_counter() - start
+    print(f"wrote {config.out}/turnpike_property.png, .csv, .md ({seconds:.0f} s)")
+    return 0
 
-        for spec in policies.values():
-            if spec not in BASELINE_POLICIES:
-                check_model(spec)  # the file, its algorithm, its statistics (nothing unpickled)
-    import pandas as pd
 
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.report import build_report, display_table
-    from agent_envs.training.results import summarize
+# ------------------------------------------------------------------------ evaluate, report
 
-    options = {"target": args.target} if args.target is not None else None
-    # evaluate_policies resolves every policy and makes every env before the first episode
-    results = evaluate_policies(
-        policies,
-        args.env_id,
-        env_kwargs,
-        seeds,
-        reset_options=options,
-        baseline_kwargs={"beta": args.beta, "delta": args.delta},
-        progress=not args.no_progress,
-        out_dir=args.out,
-    )
-    for name, desc in results.meta["policies"].items():
+
+def _print_statistics_sources(meta: dict[str, Any]) -> None:
+    """Which VecNormalize statistics each saved model was evaluated with, and why."""
+    from agent_envs.training.policies import STATISTICS_SOURCES
+
+    for name, desc in meta["policies"].items():
         if desc.get("kind") == "sb3":
-            from agent_envs.training.policies import STATISTICS_SOURCES
-
             used = desc.get("vecnormalize")
             source = STATISTICS_SOURCES.get(desc.get("vecnormalize_source"), "")
             print(
@@ -456,62 +290,66 @@ def _run_evaluate(args: argparse.Namespace) -> int:
                 if used
                 else f"{name}: no VecNormalize statistics (observations used as they are)"
             )
+
+
+def _run_evaluate(config: Any) -> int:
+    from agent_envs.training.storage import check_output_dir
+
+    check_output_dir(config.out)
+    config.check_models()  # the file, its algorithm, its statistics (nothing unpickled)
+    import pandas as pd
+
+    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.report import build_report, display_table
+    from agent_envs.training.results import summarize
+
+    policies = config.policy_specs()
+    # evaluate_policies resolves every policy and makes every env before the first episode
+    results = evaluate_policies(
+        policies,
+        config.env_id,
+        config.env_kwargs,
+        list(config.seeds),
+        reset_options=config.reset_options(),
+        baseline_kwargs={"beta": config.beta, "delta": config.delta},
+        progress=config.progress,
+        out_dir=config.out,
+    )
+    _print_statistics_sources(results.meta)
     reference = "turnpike" if "turnpike" in policies else None
     table = display_table(summarize(results.episodes, reference), reference)
     with pd.option_context("display.width", 200, "display.max_columns", 20):
         print(table.to_string(index=False))
-    print(f"results written to {args.out}")
-    if args.report:
-        paths = build_report([results], args.out / "report")
+    print(f"results written to {config.out}")
+    if config.report:
+        paths = build_report([results], config.out / "report")
         print(f"report: {paths['markdown']} and {paths['html']}")
     return 0
 
 
-# ---------------------------------------------------------------------------------- report
-
-
-def _report_arguments(parser: argparse.ArgumentParser) -> None:
-    from agent_envs.training.results import DEFAULT_REFERENCE
-
-    parser.add_argument("results", nargs="+", type=Path, help="evaluation folder(s)")
-    parser.add_argument("--out", required=True, type=Path, help="report folder")
-    parser.add_argument("--title", default="Swarm control: policy evaluation")
-    parser.add_argument(
-        "--reference",
-        default=None,
-        help=f"policy the cost ratios refer to (default: {DEFAULT_REFERENCE} when evaluated)",
-    )
-    parser.add_argument(
-        "--seed-index",
-        type=int,
-        default=0,
-        help="which of the evaluated seeds (0 = the first) the trajectory plot shows",
-    )
-
-
-def _run_report(args: argparse.Namespace) -> int:
+def _run_report(config: Any) -> int:
     from agent_envs.training.storage import check_output_dir
 
-    check_output_dir(args.out)
+    check_output_dir(config.out)
     import pandas as pd
 
     from agent_envs.training.report import build_report, display_table
     from agent_envs.training.results import DEFAULT_REFERENCE, EvaluationResults, merge_results
 
-    loaded = [EvaluationResults.load(path) for path in args.results]
+    loaded = [EvaluationResults.load(path) for path in config.results]
     merged = merge_results(loaded)
-    if args.reference is not None and args.reference not in merged.policies:
+    if config.reference is not None and config.reference not in merged.policies:
         raise ValueError(
-            f"--reference {args.reference!r} is not an evaluated policy; the results hold "
+            f"--reference {config.reference!r} is not an evaluated policy; the results hold "
             f"{', '.join(merged.policies)}"
         )
-    reference = args.reference or DEFAULT_REFERENCE
+    reference = config.reference or DEFAULT_REFERENCE
     paths = build_report(
         loaded,
-        args.out,
-        title=args.title,
+        config.out,
+        title=config.title,
         reference=reference,
-        seed_index=args.seed_index,
+        seed_index=config.seed_index,
     )
     summary = pd.read_csv(paths["summary"])
     shown = reference if reference in merged.policies else None
@@ -520,25 +358,13 @@ def _run_report(args: argparse.Namespace) -> int:
     return 0
 
 
-# ----------------------------------------------------------------------------------- train
+# ------------------------------------------------------------------- train, compare, sweep
 
 
-def _train_arguments(parser: argparse.ArgumentParser) -> None:
-    from agent_envs.training.config import TrainConfig
-
-    parser.description = (
-        "Train a Stable-Baselines3 agent on a swarm env. The validation cost is logged next to "
-        "the turnpike controller's on the same seeds (learning_curve.csv, TensorBoard)."
-    )
-    add_dataclass_arguments(parser, TrainConfig, suppress_defaults=True)
-
-
-def _run_train(args: argparse.Namespace) -> int:
-    from agent_envs.training.config import TrainConfig
+def _run_train(options: dict[str, Any]) -> int:
     from agent_envs.training.train import config_from_options, train
 
-    names = {f.name for f in dataclasses.fields(TrainConfig)}
-    run_dir = train(config_from_options({k: v for k, v in vars(args).items() if k in names}))
+    run_dir = train(config_from_options(options))
     summary = json.loads((run_dir / "summary.json").read_text())
     print(f"run directory: {run_dir}")
     last = summary.get("last_eval")
@@ -551,24 +377,9 @@ def _run_train(args: argparse.Namespace) -> int:
     return 0
 
 
-# --------------------------------------------------------------------------------- compare
+def _run_compare(config: Any) -> int:
+    from agent_envs.training.compare import compare
 
-
-def _compare_arguments(parser: argparse.ArgumentParser) -> None:
-    from agent_envs.training.compare import CompareConfig
-
-    parser.description = (
-        "Train the preset's learners (PPO and SAC on the single-controller env, parameter-shared "
-        "PPO on the PettingZoo env) and compare them with the turnpike, proportional and zero "
-        "controllers on the same held-out seeds; writes OUT/report/report.md and .html."
-    )
-    add_dataclass_arguments(parser, CompareConfig)
-
-
-def _run_compare(args: argparse.Namespace) -> int:
-    from agent_envs.training.compare import CompareConfig, compare
-
-    config = config_from_namespace(CompareConfig, args)
     try:  # compare() validates every option, the learners' configs and both envs first
         compare(config)
     except KeyboardInterrupt:
@@ -577,24 +388,9 @@ def _run_compare(args: argparse.Namespace) -> int:
     return 0
 
 
-# ----------------------------------------------------------------------------------- sweep
+def _run_sweep(config: Any) -> int:
+    from agent_envs.training.sweep import sweep
 
-
-def _sweep_arguments(parser: argparse.ArgumentParser) -> None:
-    from agent_envs.training.sweep import SweepConfig
-
-    parser.description = (
-        "Run a grid of (learner x training seed x env setting) as Ray Tune trials (each one "
-        "train + evaluation on the held-out test seeds) and write OUT/report/report.md with "
-        "across-seed statistics (needs the 'sweep' extra: pip install 'agent-envs[sweep]')."
-    )
-    add_dataclass_arguments(parser, SweepConfig)
-
-
-def _run_sweep(args: argparse.Namespace) -> int:
-    from agent_envs.training.sweep import SweepConfig, sweep
-
-    config = config_from_namespace(SweepConfig, args)
     try:
         sweep(config)
     except RuntimeError as exc:  # trials that did not finish: not a bad input
@@ -606,43 +402,60 @@ def _run_sweep(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------------------------ main
 
 #: name -> subcommand, in the order `agent-envs --help` lists them
+_T = "agent_envs.training."
 SUBCOMMANDS: dict[str, Subcommand] = {
     "reproduce-uncontrolled": Subcommand(
         "paper Section 5.1 (Figs. 1-4 and the m = 1500 runs): uncontrolled runs, figures, table",
-        _uncontrolled_arguments,
+        _T + "experiments.uncontrolled:UncontrolledConfig",
         _run_uncontrolled,
     ),
     "reproduce-turnpike": Subcommand(
         "paper Section 5.2 (Figs. 5-6): turnpike-controlled runs, figures and a results table",
-        _turnpike_arguments,
+        _T + "experiments.turnpike_controlled:TurnpikeReproductionConfig",
         _run_turnpike,
     ),
     "reproduce-turnpike-property": Subcommand(
         "thm:turnpike_stochastic measured: optimal solutions for T = 0.5..8, arcs, rates, bounds",
-        _turnpike_property_arguments,
+        _T + "experiments.turnpike_property:TurnpikePropertyConfig",
         _run_turnpike_property,
     ),
     "evaluate": Subcommand(
         "run policies on an env over fixed seeds, store results",
-        _evaluate_arguments,
+        _T + "evaluate:EvaluateConfig",
         _run_evaluate,
     ),
     "report": Subcommand(
-        "write a Markdown/HTML report with plots from results", _report_arguments, _run_report
+        "write a Markdown/HTML report with plots from results",
+        _T + "report:ReportConfig",
+        _run_report,
     ),
     "train": Subcommand(
-        "train a Stable-Baselines3 agent on a swarm env", _train_arguments, _run_train
+        "train a Stable-Baselines3 agent on a swarm env",
+        _T + "config:TrainConfig",
+        _run_train,
+        description="Train a Stable-Baselines3 agent on a swarm env. The validation cost is "
+        "logged next to the turnpike controller's on the same seeds (learning_curve.csv, "
+        "TensorBoard).",
+        given_only=True,
     ),
     "compare": Subcommand(
         "train learners and compare them with the turnpike controller",
-        _compare_arguments,
+        _T + "compare:CompareConfig",
         _run_compare,
+        description="Train the preset's learners (PPO and SAC on the single-controller env, "
+        "parameter-shared PPO on the PettingZoo env) and compare them with the turnpike, "
+        "proportional and zero controllers on the same held-out seeds; writes "
+        "OUT/report/report.md and .html.",
     ),
     "sweep": Subcommand(
         "a grid of learners x training seeds x env settings on Ray Tune, with across-seed "
         "statistics",
-        _sweep_arguments,
+        _T + "sweep:SweepConfig",
         _run_sweep,
+        description="Run a grid of (learner x training seed x env setting) as Ray Tune trials "
+        "(each one train + evaluation on the held-out test seeds) and write "
+        "OUT/report/report.md with across-seed statistics (needs the 'sweep' extra: pip "
+        "install 'agent-envs[sweep]').",
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.
@@ -713,7 +526,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.print_help()
             return 2
         command = args.command.replace("reproduce-", "reproduce ")
-        return int(SUBCOMMANDS[args.command].run(args) or 0)
+        subcommand = SUBCOMMANDS[args.command]
+        return int(subcommand.run(subcommand.options(args)) or 0)
     except UsageError as exc:
         print(one_line(exc), file=sys.stderr)
         return 2

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.training.config import MAX_SEED, command_line, json_field, option_field
+from agent_envs.training.config import command_line, json_field, option_field
 from agent_envs.training.defaults import (
     BASELINE_POLICIES,
     GYM_ENV_ID,
@@ -56,7 +56,7 @@ from agent_envs.training.experiment import (
     train_learner,
 )
 from agent_envs.training.presets import OPTIMUM_POLICIES, PRESETS, Learner, get_preset
-from agent_envs.validation import check_int
+from agent_envs.validation import MAX_SEED, check_int
 
 
 @dataclass

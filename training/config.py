@@ -38,6 +38,7 @@ from agent_envs.training.defaults import (
     parse_json_object,
 )
 from agent_envs.training.sb3_arguments import NOISE_KEYS, check_hyperparams
+from agent_envs.validation import MAX_SEED, check_int
 
 #: Keys of a hyperparameter entry that are not keyword arguments of the SB3 algorithm
 #: (rl-zoo3 reads them itself).
@@ -46,8 +47,6 @@ ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "env_w
 VEC_ENV_CHOICES = ("native", "dummy", "subproc")
 #: Largest --timesteps (and evaluation / checkpoint period) accepted.
 MAX_TIMESTEPS = 10**12
-#: Largest seed: SB3 seeds numpy's legacy global generator, which takes 32-bit seeds.
-MAX_SEED = 2**32 - 1
 
 #: The hyperparameter files shipped in ``training/hyperparams``: one per algorithm (the
 #: training layer's own, rl-zoo3 format, entries per env id) and ``zoo_pendulum`` (rl-zoo3's
@@ -215,16 +214,16 @@ class TrainConfig:
                 f"--env-id {self.env_id!r} is not a swarm env; agent-envs train trains on "
                 f"{GYM_ENV_ID!r} (one controller) or {PETTINGZOO_ENV_ID!r} (one agent per member)"
             )
-        _check_int("timesteps", self.timesteps, 1, MAX_TIMESTEPS)
-        for name in ("eval_freq", "checkpoint_freq"):
-            _check_int(name, getattr(self, name), 0, MAX_TIMESTEPS)
-        for name in ("seed", "eval_seed"):
-            _check_int(name, getattr(self, name), 0, MAX_SEED)
-        _check_int("verbose", self.verbose, 0, 2)
-        _check_int("torch_threads", self.torch_threads, 0, 1024)
-        _check_int("eval_episodes", self.eval_episodes, 1, 10_000)
+        check_int("--timesteps", self.timesteps, 1, MAX_TIMESTEPS)
+        check_int("--eval-freq", self.eval_freq, 0, MAX_TIMESTEPS)
+        check_int("--checkpoint-freq", self.checkpoint_freq, 0, MAX_TIMESTEPS)
+        check_int("--seed", self.seed, 0, MAX_SEED)
+        check_int("--eval-seed", self.eval_seed, 0, MAX_SEED)
+        check_int("--verbose", self.verbose, 0, 2)
+        check_int("--torch-threads", self.torch_threads, 0, 1024)
+        check_int("--eval-episodes", self.eval_episodes, 1, 10_000)
         if self.n_envs is not None:
-            _check_int("n_envs", self.n_envs, 1, 1024)
+            check_int("--n-envs", self.n_envs, 1, 1024)
         if self.vec_env not in VEC_ENV_CHOICES:
             raise ValueError(f"--vec-env must be one of {VEC_ENV_CHOICES}, got {self.vec_env!r}")
         for name in ("turnpike_beta", "turnpike_delta"):
@@ -264,15 +263,6 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown TrainConfig fields {sorted(unknown)}")
         return cls(**data)
-
-
-def _check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -> None:
-    flag = "--" + name.replace("_", "-")
-    allowed = f"in [{minimum}, {maximum}]" if maximum is not None else f">= {minimum}"
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TypeError(f"{flag} must be an integer {allowed}, got {value!r}")
-    if value < minimum or (maximum is not None and value > maximum):
-        raise ValueError(f"{flag} must be an integer {allowed}, got {value!r}")
 
 
 def check_run_name(name: str) -> str:

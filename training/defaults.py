@@ -6,7 +6,8 @@
 - the Stable-Baselines3 algorithms, by name, for training and for loading saved models;
 - the seeds: validation seeds during training, held-out test seeds for the comparisons;
 - the one parser of ``--env-kwargs`` (and every other JSON-object option): a JSON object, for
-  every subcommand.
+  every subcommand;
+- the one parser of seed lists (``--seeds`` of every subcommand): `parse_seeds`.
 
 Nothing here imports torch or Stable-Baselines3 at import time.
 """
@@ -15,10 +16,14 @@ from __future__ import annotations
 
 import difflib
 import json
+import re
+from collections import Counter
+from collections.abc import Sequence
 from typing import Any
 
 from agent_envs.baselines import BASELINES, DEFAULT_BETA, DEFAULT_DELTA
 from agent_envs.envs import ENV_ID as GYM_ENV_ID
+from agent_envs.validation import MAX_SEED, check_int
 
 #: The PettingZoo parallel env (one agent per swarm member), named by its module.
 PETTINGZOO_ENV_ID = "agent_envs.swarm_v0"
@@ -39,6 +44,8 @@ DEFAULT_EVAL_SEED = 1_000
 DEFAULT_TEST_SEED = 10_000
 #: The held-out test seeds used when none are given (training seeds are usually small ints).
 DEFAULT_TEST_SEEDS = tuple(range(DEFAULT_TEST_SEED, DEFAULT_TEST_SEED + 20))
+#: The most seeds one seed list may hold (a typo like 0:10**12 is an error, not an OOM).
+MAX_SEEDS = 100_000
 
 __all__ = [
     "ALGORITHMS",
@@ -50,6 +57,7 @@ __all__ = [
     "DEFAULT_TEST_SEEDS",
     "FEEDBACK_BASELINES",
     "GYM_ENV_ID",
+    "MAX_SEEDS",
     "OFF_POLICY",
     "PETTINGZOO_ENV_ID",
     "algorithm_class",
@@ -58,6 +66,8 @@ __all__ = [
     "is_multiagent",
     "parse_env_kwargs",
     "parse_json_object",
+    "parse_seeds",
+    "seed_text",
 ]
 
 
@@ -125,3 +135,77 @@ def parse_json_object(text: str | dict | None, option: str) -> dict[str, Any]:
 def parse_env_kwargs(text: str | dict | None, option: str = "--env-kwargs") -> dict[str, Any]:
     """The env keyword arguments of every subcommand: one JSON object (`parse_json_object`)."""
     return parse_json_object(text, option)
+
+
+#: One item of a seed list: N, A-B (inclusive) or A:B (half-open).
+_SEED_ITEM = re.compile(r"(\d+)(?:([-:])(\d+))?")
+_SEED_SYNTAX = "a seed N, a range A-B (inclusive) or A:B (half-open), separated by commas or spaces"
+
+
+def _seed_span(part: str, option: str) -> range:
+    """The seeds of one item ``N``, ``A-B`` or ``A:B``; ValueError naming `option` otherwise."""
+    match = _SEED_ITEM.fullmatch(part)
+    if match is None:
+        raise ValueError(f"{option}: {part!r} is not {_SEED_SYNTAX}, each in [0, {MAX_SEED}]")
+    if max(len(match.group(1)), len(match.group(3) or "")) > len(str(MAX_SEED)) + 1:
+        raise ValueError(f"{option}: {part[:40]!r}... goes past the largest seed {MAX_SEED}")
+    low = int(match.group(1))
+    if match.group(2) is None:
+        span = range(low, low + 1)
+    else:
+        span = range(low, int(match.group(3)) + (1 if match.group(2) == "-" else 0))
+        if not span:
+            raise ValueError(f"{option}: the range {part!r} is empty")
+    if span[-1] > MAX_SEED:
+        raise ValueError(f"{option}: {part!r} goes past the largest seed {MAX_SEED}")
+    return span
+
+
+def seed_text(seeds: Sequence[int], through: str = "-", separator: str = ",") -> str:
+    """Seeds as a user writes them: ``A-B`` for a run of three or more, else ``A,B,...``."""
+    seeds = [int(s) for s in seeds]
+    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}{through}{seeds[-1]}"
+    return separator.join(map(str, seeds))
+
+
+def parse_seeds(
+    items: str | int | Sequence[str | int] | None,
+    option: str = "--seeds",
+    default: Sequence[int] | None = DEFAULT_TEST_SEEDS,
+) -> list[int] | None:
+    """The seed list of every ``--seeds`` option: items ``N``, ``A-B`` or ``A:B``.
+
+    `items` is one string or a sequence of them (argparse's ``nargs``), each holding one or
+    more comma-separated items: ``N`` (a seed), ``A-B`` (A to B inclusive) or ``A:B`` (A to B-1),
+    so ``"0-2,7"``, ``["0-2", "7"]`` and ``["0", "1", "2", "7"]`` are the same list. Library
+    callers may pass ints. Every seed lies in [0, `MAX_SEED`], no seed twice, at most
+    `MAX_SEEDS` of them.
+
+    None (the option left out) gives `default` as a list, or None when `default` is None (the
+    caller then uses its own default, e.g. a preset's). Raises ValueError (TypeError for a
+    value of another type) naming `option` for anything else: a malformed item, a negative or
+    too large seed, an empty range, a seed listed twice, no seed at all.
+    """
+    if items is None:
+        return None if default is None else list(default)
+    if isinstance(items, (str, int)):
+        items = [items]
+    seeds: list[int] = []
+    for item in items:
+        if isinstance(item, str):
+            spans = [_seed_span(p.strip(), option) for p in item.split(",") if p.strip()]
+        else:  # an int from a library caller (bools and other types rejected)
+            seed = check_int(option, item, 0, MAX_SEED)
+            spans = [range(seed, seed + 1)]
+        for span in spans:
+            if len(seeds) + len(span) > MAX_SEEDS:
+                raise ValueError(f"{option}: more than {MAX_SEEDS} seeds")
+            seeds.extend(span)
+    if not seeds:
+        hint = f" (leave the option out for {seed_text(default)})" if default else ""
+        raise ValueError(f"{option}: no seed given{hint}")
+    if len(set(seeds)) != len(seeds):
+        twice = sorted(seed for seed, count in Counter(seeds).items() if count > 1)
+        raise ValueError(f"{option} lists a seed twice: {', '.join(map(str, twice[:5]))}")
+    return seeds

@@ -26,20 +26,125 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import MISSING, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from agent_envs.training.config import option_field
 from agent_envs.training.defaults import (
+    BASELINE_POLICIES,
+    DEFAULT_BETA,
+    DEFAULT_DELTA,
     DEFAULT_TEST_SEEDS,
+    FEEDBACK_BASELINES,
     GYM_ENV_ID,
     check_env_id,
     is_multiagent,
+    parse_env_kwargs,
+    parse_seeds,
 )
-from agent_envs.training.policies import PolicySpec, resolve_policy
+from agent_envs.training.policies import ModelSpec, PolicySpec, check_model, resolve_policy
 from agent_envs.training.results import EPISODE_COLUMNS, Episode, EvaluationResults, stack_episodes
 from agent_envs.training.storage import check_output_dir
+from agent_envs.validation import TARGET_RANGE, check_positive, check_real
+
+
+def parse_policy_specs(items: Sequence[str] | None) -> dict[str, str]:
+    """``NAME=SPEC`` or ``SPEC`` items -> {name: spec} (a bare path is named by its file stem).
+
+    A SPEC is a baseline name or ``[ALGO:]MODEL.zip[:STATS.pkl]``. None or no items: the three
+    reference controllers.
+    """
+    if not items:
+        return {name: name for name in FEEDBACK_BASELINES}
+    out: dict[str, str] = {}
+    for item in items:
+        if "=" in item:
+            name, spec = item.split("=", 1)
+        else:
+            spec = item
+            name = item if item in BASELINE_POLICIES else ModelSpec.parse(item).path.stem
+        if not name or not spec:
+            raise ValueError(f"--policy {item!r}: write NAME=SPEC or SPEC")
+        if name in out:
+            raise ValueError(f"--policy name {name!r} given twice; use NAME=SPEC to rename")
+        out[name] = spec
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvaluateConfig:
+    """The options of `agent-envs evaluate`; validated on construction (the saved models named
+    by --policy are checked by `check_models`, the output folder by the command).
+
+    `seeds` may be given as ints or as seed-list strings (`defaults.parse_seeds`) and is stored
+    as a tuple of ints; `env_kwargs` as a JSON object or a dict.
+    """
+
+    policies: tuple[str, ...] | None = option_field(
+        None,
+        "a baseline (turnpike | proportional | zero | optimal | mpc) or a saved SB3 model "
+        "PATH.zip (ALGO:PATH to name the algorithm, PATH.zip:STATS.pkl to name its VecNormalize "
+        "statistics; statistics are found by themselves only in a run folder of agent-envs "
+        "train, checked against its manifest.json, or of rl-zoo3); repeat for several. Default: "
+        "turnpike, proportional, zero.",
+        flags=("--policy", "-p"),
+        action="append",
+        metavar="[NAME=]SPEC",
+    )
+    env_id: str = option_field(GYM_ENV_ID, "Gymnasium env id")
+    env_kwargs: dict = field(
+        default_factory=dict,
+        metadata={
+            "help": 'env keyword arguments as a JSON object, e.g. \'{"n_agents": 20, '
+            '"integrator": "em"}\' (default: the env\'s defaults)'
+        },
+    )
+    seeds: tuple[int, ...] = option_field(
+        DEFAULT_TEST_SEEDS,
+        "reset seeds: '0 1 2', '0-19', '0:20' or '0,1,2' (default 10000-10019)",
+        nargs="*",
+        type=str,
+    )
+    target: float | None = option_field(None, "reset option: the target (default: the env's)")
+    beta: float = option_field(DEFAULT_BETA, "baselines' beta")
+    delta: float = option_field(DEFAULT_DELTA, "baselines' delta")
+    out: Path = option_field(MISSING, "output folder")
+    report: bool = option_field(False, "also write a report in OUT/report", action="store_true")
+    progress: bool = option_field(
+        True, "no progress bar", flags=("--no-progress",), action="store_false"
+    )
+
+    def __post_init__(self) -> None:
+        if self.policies is not None:
+            object.__setattr__(self, "policies", tuple(self.policies))
+        self.policy_specs()  # ValueError naming --policy
+        object.__setattr__(self, "env_kwargs", parse_env_kwargs(self.env_kwargs))
+        object.__setattr__(self, "seeds", tuple(parse_seeds(self.seeds)))
+        object.__setattr__(self, "out", Path(self.out))
+        check_env_id(self.env_id)
+        if self.target is not None:
+            check_real("--target", self.target, TARGET_RANGE)
+        check_positive("--beta", self.beta)
+        check_positive("--delta", self.delta)
+
+    def policy_specs(self) -> dict[str, str]:
+        """{name: spec} of the --policy items (`parse_policy_specs`)."""
+        return parse_policy_specs(self.policies)
+
+    def check_models(self) -> None:
+        """Check every saved model named: its file, algorithm and statistics (nothing is
+        unpickled)."""
+        for spec in self.policy_specs().values():
+            if spec not in BASELINE_POLICIES:
+                check_model(spec)
+
+    def reset_options(self) -> dict[str, Any] | None:
+        """The options of every reset: the target when given."""
+        return {"target": self.target} if self.target is not None else None
 
 
 def rollout(
@@ -142,6 +247,107 @@ def make_swarm_env(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> 
     return env
 
 
+def _env_info(env: Any) -> dict[str, Any]:
+    """What the results' meta.json records of the env a policy ran on."""
+    inner = env.unwrapped
+    return {
+        "dt": float(inner.dt),
+        "n_steps": int(inner.n_steps),
+        "n_paths": int(inner.n_paths),
+        "max_control": float(inner.max_control),
+        "integrator": str(inner.integrator_name),
+        "jacobian": str(getattr(inner, "jacobian", "")),
+        "params": {k: getattr(inner.params, k) for k in inner.params.field_names()},
+    }
+
+
+def _open_policies(
+    policies: Mapping[str, PolicySpec],
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    baseline_kwargs: Mapping[str, Any] | None,
+    envs: dict[str, Any],
+) -> tuple[dict[str, Any], dict[str, dict]]:
+    """One env per policy (into `envs`, which the caller closes) and the policy built or loaded
+    for it: (policies by name, their descriptions). Raises on the first bad env or policy."""
+    resolved: dict[str, Any] = {}
+    descriptions: dict[str, dict] = {}
+    for name, spec in policies.items():
+        env = envs[name] = make_swarm_env(env_id, env_kwargs)
+        resolved[name], descriptions[name] = resolve_policy(spec, env, baseline_kwargs)
+    return resolved, descriptions
+
+
+def _run_policy(
+    name: str,
+    policy: Any,
+    env: Any,
+    seeds: list[int],
+    reset_options: Mapping[str, Any] | None,
+    deterministic: bool,
+    bar: Any,
+) -> list[Episode]:
+    """One episode of `policy` per seed on `env`, advancing the progress `bar`."""
+    from agent_envs.baselines import FeedbackController
+
+    episodes = []
+    for seed in seeds:
+        bar.set_postfix_str(f"{name} seed={seed}")
+        if isinstance(policy, FeedbackController):
+            policy.reset()
+        episodes.append(rollout(policy, env, seed, reset_options, deterministic))
+        bar.update(1)
+    return episodes
+
+
+def _run_all(
+    resolved: dict[str, Any],
+    envs: dict[str, Any],
+    seeds: list[int],
+    reset_options: Mapping[str, Any] | None,
+    deterministic: bool,
+    progress: bool,
+) -> tuple[list[dict[str, Any]], dict[str, dict[str, np.ndarray]], dict[str, Any]]:
+    """Every policy on every seed, under one progress bar: (episode rows, trajectories per
+    policy, the env's description)."""
+    from tqdm.auto import tqdm
+
+    rows: list[dict[str, Any]] = []
+    trajectories: dict[str, dict[str, np.ndarray]] = {}
+    env_info: dict[str, Any] = {}
+    bar = tqdm(total=len(resolved) * len(seeds), desc="evaluate", unit="ep", disable=not progress)
+    try:
+        for name, policy in resolved.items():
+            episodes = _run_policy(
+                name, policy, envs[name], seeds, reset_options, deterministic, bar
+            )
+            rows += [{"policy": name, **ep.summary()} for ep in episodes]
+            trajectories[name] = stack_episodes(episodes)
+            env_info = _env_info(envs[name])
+    finally:
+        bar.close()
+    return rows, trajectories, env_info
+
+
+def _named(policies: Mapping[str, PolicySpec] | Sequence[str]) -> dict[str, PolicySpec]:
+    """{name: spec}: a list of baseline names / model paths is named by itself."""
+    if not isinstance(policies, Mapping):
+        policies = {
+            os.fspath(p) if isinstance(p, (str, os.PathLike)) else repr(p): p for p in policies
+        }
+    if not policies:
+        raise ValueError("no policies to evaluate")
+    return dict(policies)
+
+
+def _episodes_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """The per-episode rows as the results' table (None -> NaN, as after a CSV round trip)."""
+    episodes_df = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
+    for col in ("divergence_step", "turnpike_time"):
+        episodes_df[col] = pd.to_numeric(episodes_df[col], errors="coerce").astype(float)
+    return episodes_df
+
+
 def evaluate_policies(
     policies: Mapping[str, PolicySpec] | Sequence[str],
     env_id: str = GYM_ENV_ID,
@@ -169,64 +375,25 @@ def evaluate_policies(
         progress: show a tqdm bar over the episodes.
         out_dir: when given, `save` the results there.
     """
-    from tqdm.auto import tqdm
-
-    from agent_envs.baselines import FeedbackController
     from agent_envs.validation import check_seed
 
-    if not isinstance(policies, Mapping):
-        policies = {
-            os.fspath(p) if isinstance(p, (str, os.PathLike)) else repr(p): p for p in policies
-        }
-    if not policies:
-        raise ValueError("no policies to evaluate")
+    policies = _named(policies)
     seeds = [check_seed(s) for s in seeds]
     if not seeds:
         raise ValueError("no seeds to evaluate on")
     env_kwargs = dict(env_kwargs or {})
     if out_dir is not None:
         check_output_dir(out_dir, "out_dir")
-    rows: list[dict[str, Any]] = []
-    trajectories: dict[str, dict[str, np.ndarray]] = {}
-    descriptions: dict[str, dict] = {}
-    env_info: dict[str, Any] = {}
     # Every input is checked before the first episode: the env (id, kwargs, reset options),
     # every policy (built or loaded for its own env) and the seeds.
     envs: dict[str, Any] = {}
     try:
-        resolved = {}
-        for name, spec in policies.items():
-            env = envs[name] = make_swarm_env(env_id, env_kwargs)
-            resolved[name], descriptions[name] = resolve_policy(spec, env, baseline_kwargs)
+        resolved, descriptions = _open_policies(policies, env_id, env_kwargs, baseline_kwargs, envs)
         first = next(iter(envs.values()))
         first.reset(seed=seeds[0], options=dict(reset_options) if reset_options else None)
-        total = len(policies) * len(seeds)
-        bar = tqdm(total=total, desc="evaluate", unit="ep", disable=not progress)
-        try:
-            for name, policy in resolved.items():
-                env = envs[name]
-                episodes = []
-                for seed in seeds:
-                    bar.set_postfix_str(f"{name} seed={seed}")
-                    if isinstance(policy, FeedbackController):
-                        policy.reset()
-                    ep = rollout(policy, env, seed, reset_options, deterministic)
-                    episodes.append(ep)
-                    rows.append({"policy": name, **ep.summary()})
-                    bar.update(1)
-                trajectories[name] = stack_episodes(episodes)
-                inner = env.unwrapped
-                env_info = {
-                    "dt": float(inner.dt),
-                    "n_steps": int(inner.n_steps),
-                    "n_paths": int(inner.n_paths),
-                    "max_control": float(inner.max_control),
-                    "integrator": str(inner.integrator_name),
-                    "jacobian": str(getattr(inner, "jacobian", "")),
-                    "params": {k: getattr(inner.params, k) for k in inner.params.field_names()},
-                }
-        finally:
-            bar.close()
+        rows, trajectories, env_info = _run_all(
+            resolved, envs, seeds, reset_options, deterministic, progress
+        )
     finally:
         for env in envs.values():
             env.close()
@@ -240,13 +407,16 @@ def evaluate_policies(
         "env": env_info,
         "created": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
-    episodes_df = pd.DataFrame(rows, columns=list(EPISODE_COLUMNS))
-    for col in ("divergence_step", "turnpike_time"):  # None -> NaN, as after a CSV round trip
-        episodes_df[col] = pd.to_numeric(episodes_df[col], errors="coerce").astype(float)
-    results = EvaluationResults(episodes=episodes_df, trajectories=trajectories, meta=meta)
+    results = EvaluationResults(_episodes_table(rows), trajectories, meta)
     if out_dir is not None:
         results.save(out_dir)
     return results
 
 
-__all__ = ["evaluate_policies", "make_swarm_env", "rollout"]
+__all__ = [
+    "EvaluateConfig",
+    "evaluate_policies",
+    "make_swarm_env",
+    "parse_policy_specs",
+    "rollout",
+]

@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Any
 
 from agent_envs.training.config import (
-    MAX_SEED,
     VEC_ENV_CHOICES,
     TrainConfig,
     json_field,
@@ -38,7 +37,7 @@ from agent_envs.training.config import (
 )
 from agent_envs.training.defaults import DEFAULT_TEST_SEED, is_multiagent, parse_env_kwargs
 from agent_envs.training.presets import EnvSetting, Learner, Preset
-from agent_envs.validation import check_int
+from agent_envs.validation import MAX_SEED, check_int
 
 LEARNER = "learner"
 REFERENCE = "reference"

@@ -28,7 +28,7 @@ import html
 import os
 import shutil
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,8 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from agent_envs.training.config import option_field
+from agent_envs.training.defaults import seed_text
 from agent_envs.training.results import (
     DEFAULT_REFERENCE,
     EvaluationResults,
@@ -43,6 +45,36 @@ from agent_envs.training.results import (
     summarize,
 )
 from agent_envs.training.storage import check_output_dir
+from agent_envs.validation import check_int
+
+#: The title of a report when none is given.
+DEFAULT_TITLE = "Swarm control: policy evaluation"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReportConfig:
+    """The options of `agent-envs report`; validated on construction (the folders' contents,
+    --reference and the upper bound of --seed-index are checked when the results are loaded)."""
+
+    results: tuple[Path, ...] = option_field(
+        MISSING, "evaluation folder(s)", positional=True, nargs="+"
+    )
+    out: Path = option_field(MISSING, "report folder")
+    title: str = option_field(DEFAULT_TITLE, "the report's title")
+    reference: str | None = option_field(
+        None, f"policy the cost ratios refer to (default: {DEFAULT_REFERENCE} when evaluated)"
+    )
+    seed_index: int = option_field(
+        0, "which of the evaluated seeds (0 = the first) the trajectory plot shows"
+    )
+
+    def __post_init__(self) -> None:
+        results = (self.results,) if isinstance(self.results, (str, os.PathLike)) else self.results
+        object.__setattr__(self, "results", tuple(Path(r) for r in results))
+        object.__setattr__(self, "out", Path(self.out))
+        if not self.results:
+            raise ValueError("report: name at least one evaluation folder (RESULTS)")
+        check_int("--seed-index", self.seed_index, 0)
 
 
 @dataclass
@@ -306,11 +338,133 @@ def _as_results(item: Any) -> EvaluationResults:
     return EvaluationResults.load(item)
 
 
+def _merged_results(
+    results: EvaluationResults | str | os.PathLike | Sequence[Any],
+    reference: str | None,
+    seed_index: int,
+) -> tuple[EvaluationResults, str | None]:
+    """The merged results and the reference actually used (None: the default one is absent).
+
+    Raises ValueError for a reference that is not an evaluated policy (other than the default)
+    and for a `seed_index` out of the results' range.
+    """
+    items = [results] if isinstance(results, (EvaluationResults, str, os.PathLike)) else results
+    merged = merge_results([_as_results(r) for r in items])
+    if reference is not None and reference not in merged.policies:
+        if reference != DEFAULT_REFERENCE:
+            raise ValueError(
+                f"reference {reference!r} is not an evaluated policy; the results hold "
+                f"{', '.join(merged.policies)}"
+            )
+        reference = None
+    if merged.trajectories:
+        check_seed_index(seed_index, min(len(t["seeds"]) for t in merged.trajectories.values()))
+    return merged, reference
+
+
+def _write_plots(merged: EvaluationResults, out: Path, seed_index: int) -> dict[str, Path]:
+    """The three PNGs (when the results hold trajectories); returns the paths of all outputs."""
+    paths = {
+        "summary": out / "summary.csv",
+        "trajectories": out / "trajectories.png",
+        "running_cost": out / "running_cost.png",
+        "turnpike_distance": out / "turnpike_distance.png",
+    }
+    if merged.trajectories:
+        plot_trajectories(merged, paths["trajectories"], seed_index)
+        plot_running_cost(merged, paths["running_cost"])
+        plot_turnpike_distance(merged, paths["turnpike_distance"])
+    return paths
+
+
+def _setting_text(merged: EvaluationResults) -> str:
+    """The "Setting" paragraph: env, kwargs, integrator, sizes and the seeds."""
+    meta = merged.meta
+    seeds = meta.get("seeds", sorted(set(merged.episodes["seed"])))
+    env = meta.get("env", {})
+    setting = [
+        f"Env `{meta.get('env_id', '?')}` with kwargs `{meta.get('env_kwargs', {})}`"
+        + (f", reset options `{meta['reset_options']}`" if meta.get("reset_options") else "")
+        + ".",
+        f"Integrator {env.get('integrator', '?')} (Jacobian {env.get('jacobian', '?')}), "
+        f"m = {env.get('n_steps', '?')} steps, {env.get('n_paths', '?')} Brownian path(s), "
+        f"max_control = {env.get('max_control', '?')}.",
+        f"{len(seeds)} seeds, the same for every policy: {seed_text(seeds, '..', ', ')}.",
+    ]
+    if meta.get("consistent") is False:
+        setting.append("WARNING: the merged evaluations differ in env, kwargs or seeds.")
+    return " ".join(setting)
+
+
+def _results_text(summary: pd.DataFrame, reference: str | None, confidence: float) -> str:
+    """The paragraph that explains the per-policy table's columns."""
+    return (
+        f"Total cost = minus the episode return = tau sum_n c(x^n, u^n) on the env's paths "
+        f"(eq:discrete_cost_functional); lower is better. Mean over episodes with a "
+        f"{100 * confidence:.0f}% t-interval. "
+        + (
+            f"'ratio to {reference}' divides mean costs; 'paired ratio' averages the per-seed "
+            f"ratios (same seeds). "
+            if reference
+            else ""
+        )
+        + (
+            "'gap to optimal' is the per-seed (cost - V) / V, V = the cost of the optimal "
+            "open-loop plan (policy 'optimal', solved from each episode's start) on the same "
+            "seed, mean and t-interval; a feedback policy can beat it (negative gap). "
+            if "gap_to_optimal" in summary
+            else ""
+        )
+        + "A diverged episode stops early, so its cost covers only the steps it ran: read the "
+        "costs with the divergence rate. Final RMS distance: sqrt(mean_k |E x_k(T) - xbar|^2) "
+        "over non-diverged episodes; control energy: tau sum_n (1/N) sum_k |u_k^n|^2; "
+        "saturated: share of controls at max_control; tbar: turnpike time (eq:tptime) where the "
+        "policy uses one."
+    )
+
+
+def _add_plots(doc: _Document, paths: dict[str, Path]) -> None:
+    """The "Plots" section: the three PNGs with their captions."""
+    doc.heading("Plots")
+    doc.image(
+        paths["trajectories"].name,
+        "Path-mean position of every agent (coordinate 0) against time, one seed per policy; "
+        "dashed: target, dotted red: turnpike time tbar.",
+    )
+    doc.image(
+        paths["running_cost"].name,
+        "Running cost c(x^n, u^n) against time (log scale): mean over seeds, 10-90% band.",
+    )
+    doc.image(
+        paths["turnpike_distance"].name,
+        "Turnpike distance ||E x^n - xbar||^2 + ||u^n||^2 against time (log scale; u^m := 0): "
+        "small in the interior of the horizon = turnpike shape.",
+    )
+
+
+def _add_section(doc: _Document, section: ReportSection, out: Path) -> None:
+    """One extra section; its images are copied into the report folder `out`."""
+    doc.heading(section.title)
+    if section.text:
+        doc.paragraph(section.text)
+    if section.table is not None:
+        doc.table(section.table)
+    for i, img in enumerate(section.images):
+        src = Path(img)
+        dest = out / src.name
+        if src.resolve() != dest.resolve():
+            shutil.copyfile(src, dest)
+        cap = section.captions[i] if i < len(section.captions) else src.stem
+        doc.image(dest.name, cap)
+    if section.code:
+        doc.code(section.code)
+
+
 def build_report(
     results: EvaluationResults | str | os.PathLike | Sequence[Any],
     out_dir: str | os.PathLike,
     *,
-    title: str = "Swarm control: policy evaluation",
+    title: str = DEFAULT_TITLE,
     reference: str | None = DEFAULT_REFERENCE,
     extra_sections: Sequence[ReportSection] = (),
     command: str | None = None,
@@ -335,108 +489,25 @@ def build_report(
         {"markdown": ..., "html": ..., "summary": ..., "trajectories": ..., "running_cost": ...,
         "turnpike_distance": ...} paths.
     """
-    items = [results] if isinstance(results, (EvaluationResults, str, os.PathLike)) else results
-    merged = merge_results([_as_results(r) for r in items])
-    if reference is not None and reference not in merged.policies:
-        if reference != DEFAULT_REFERENCE:
-            raise ValueError(
-                f"reference {reference!r} is not an evaluated policy; the results hold "
-                f"{', '.join(merged.policies)}"
-            )
-        reference = None
-    if merged.trajectories:
-        check_seed_index(seed_index, min(len(t["seeds"]) for t in merged.trajectories.values()))
+    merged, reference = _merged_results(results, reference, seed_index)
     out = check_output_dir(out_dir, "--out")
     out.mkdir(parents=True, exist_ok=True)
     summary = summarize(merged.episodes, reference, confidence)
     summary.to_csv(out / "summary.csv", index=False)
-    paths = {
-        "summary": out / "summary.csv",
-        "trajectories": out / "trajectories.png",
-        "running_cost": out / "running_cost.png",
-        "turnpike_distance": out / "turnpike_distance.png",
-    }
-    has_traj = bool(merged.trajectories)
-    if has_traj:
-        plot_trajectories(merged, paths["trajectories"], seed_index)
-        plot_running_cost(merged, paths["running_cost"])
-        plot_turnpike_distance(merged, paths["turnpike_distance"])
+    paths = _write_plots(merged, out, seed_index)
 
     doc = _Document(title)
-    meta = merged.meta
-    seeds = meta.get("seeds", sorted(set(merged.episodes["seed"])))
-    env = meta.get("env", {})
-    setting = [
-        f"Env `{meta.get('env_id', '?')}` with kwargs `{meta.get('env_kwargs', {})}`"
-        + (f", reset options `{meta['reset_options']}`" if meta.get("reset_options") else "")
-        + ".",
-        f"Integrator {env.get('integrator', '?')} (Jacobian {env.get('jacobian', '?')}), "
-        f"m = {env.get('n_steps', '?')} steps, {env.get('n_paths', '?')} Brownian path(s), "
-        f"max_control = {env.get('max_control', '?')}.",
-        f"{len(seeds)} seeds, the same for every policy: {_seed_text(seeds)}.",
-    ]
-    if meta.get("consistent") is False:
-        setting.append("WARNING: the merged evaluations differ in env, kwargs or seeds.")
     doc.heading("Setting")
-    doc.paragraph(" ".join(setting))
+    doc.paragraph(_setting_text(merged))
     if command:
         doc.code(command)
     doc.heading("Results per policy")
-    doc.paragraph(
-        f"Total cost = minus the episode return = tau sum_n c(x^n, u^n) on the env's paths "
-        f"(eq:discrete_cost_functional); lower is better. Mean over episodes with a "
-        f"{100 * confidence:.0f}% t-interval. "
-        + (
-            f"'ratio to {reference}' divides mean costs; 'paired ratio' averages the per-seed "
-            f"ratios (same seeds). "
-            if reference
-            else ""
-        )
-        + (
-            "'gap to optimal' is the per-seed (cost - V) / V, V = the cost of the optimal "
-            "open-loop plan (policy 'optimal', solved from each episode's start) on the same "
-            "seed, mean and t-interval; a feedback policy can beat it (negative gap). "
-            if "gap_to_optimal" in summary
-            else ""
-        )
-        + "A diverged episode stops early, so its cost covers only the steps it ran: read the "
-        "costs with the divergence rate. Final RMS distance: sqrt(mean_k |E x_k(T) - xbar|^2) "
-        "over non-diverged episodes; control energy: tau sum_n (1/N) sum_k |u_k^n|^2; "
-        "saturated: share of controls at max_control; tbar: turnpike time (eq:tptime) where the "
-        "policy uses one."
-    )
+    doc.paragraph(_results_text(summary, reference, confidence))
     doc.table(display_table(summary, reference))
-    if has_traj:
-        doc.heading("Plots")
-        doc.image(
-            paths["trajectories"].name,
-            "Path-mean position of every agent (coordinate 0) against time, one seed per policy; "
-            "dashed: target, dotted red: turnpike time tbar.",
-        )
-        doc.image(
-            paths["running_cost"].name,
-            "Running cost c(x^n, u^n) against time (log scale): mean over seeds, 10-90% band.",
-        )
-        doc.image(
-            paths["turnpike_distance"].name,
-            "Turnpike distance ||E x^n - xbar||^2 + ||u^n||^2 against time (log scale; u^m := 0): "
-            "small in the interior of the horizon = turnpike shape.",
-        )
+    if merged.trajectories:
+        _add_plots(doc, paths)
     for section in extra_sections:
-        doc.heading(section.title)
-        if section.text:
-            doc.paragraph(section.text)
-        if section.table is not None:
-            doc.table(section.table)
-        for i, img in enumerate(section.images):
-            src = Path(img)
-            dest = out / src.name
-            if src.resolve() != dest.resolve():
-                shutil.copyfile(src, dest)
-            cap = section.captions[i] if i < len(section.captions) else src.stem
-            doc.image(dest.name, cap)
-        if section.code:
-            doc.code(section.code)
+        _add_section(doc, section, out)
     md_path, html_path = out / "report.md", out / "report.html"
     md_path.write_text(doc.markdown())
     html_path.write_text(doc.html(out))
@@ -444,14 +515,9 @@ def build_report(
     return paths
 
 
-def _seed_text(seeds: Sequence[int]) -> str:
-    seeds = [int(s) for s in seeds]
-    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
-        return f"{seeds[0]}..{seeds[-1]}"
-    return ", ".join(map(str, seeds))
-
-
 __all__ = [
+    "DEFAULT_TITLE",
+    "ReportConfig",
     "ReportSection",
     "build_report",
     "check_seed_index",

@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import Any
 
 from agent_envs.training.config import command_line, option_field
+from agent_envs.training.defaults import parse_seeds
 from agent_envs.training.experiment import (
     LEARNER,
     TRIAL_LOG,
@@ -65,20 +66,12 @@ from agent_envs.training.experiment import (
     split_names,
 )
 from agent_envs.training.presets import PRESETS, get_preset
+from agent_envs.validation import MAX_SEED, check_int
 
 #: what `OUT/sweep.json` holds: the options and the expanded grid of the first start
 SWEEP_FILE = "sweep.json"
 #: Tune's experiment folder under OUT
 TUNE_NAME = "tune"
-
-
-def _ints(text: str | None, option: str) -> tuple[int, ...] | None:
-    if text is None:
-        return None
-    try:
-        return tuple(int(s) for s in str(text).split(",") if s.strip())
-    except ValueError:
-        raise ValueError(f"{option} must be comma-separated integers, got {text!r}") from None
 
 
 @dataclass
@@ -98,7 +91,9 @@ class SweepConfig(ExperimentArguments):
     resume: bool = option_field(
         False, "continue the interrupted sweep in OUT (Tune's Tuner.restore; the saved grid)"
     )
-    seeds: str | None = option_field(None, "comma-separated training seeds (default: the preset's)")
+    seeds: str | None = option_field(
+        None, "training seeds: '0,1,2', '0-2' or '0:3' (default: the preset's)"
+    )
     settings: str | None = option_field(
         None, "comma-separated env settings of the preset to run (default: all)"
     )
@@ -116,8 +111,8 @@ class SweepConfig(ExperimentArguments):
             raise ValueError("--num-cpus sizes a local Ray instance; leave it out with --address")
         if self.address is not None and not self.address.strip():
             raise ValueError("--address must name a Ray cluster ('auto' or HOST:PORT), got ''")
-        if self.bootstrap_seed < 0:
-            raise ValueError(f"--bootstrap-seed must be an integer >= 0, got {self.bootstrap_seed}")
+        check_int("--bootstrap-seed", self.bootstrap_seed, 0, MAX_SEED)
+        self.training_seeds()  # ValueError naming --seeds
 
     def validate(self) -> SweepConfig:
         """Check the output folder and the whole grid before Ray starts; returns self."""
@@ -136,9 +131,14 @@ class SweepConfig(ExperimentArguments):
         """The grid of this sweep (the experiment builder's trials; every config checked)."""
         return build_trials(get_preset(self.preset), self.options(), self.out_dir / "runs")
 
+    def training_seeds(self) -> tuple[int, ...] | None:
+        """--seeds in the one seed syntax (`defaults.parse_seeds`; None: the preset's)."""
+        seeds = parse_seeds(self.seeds, "--seeds", default=None)
+        return None if seeds is None else tuple(seeds)
+
     def options(self) -> ExperimentOptions:
         return self.experiment_options(
-            seeds=_ints(self.seeds, "--seeds"), settings=split_names(self.settings)
+            seeds=self.training_seeds(), settings=split_names(self.settings)
         )
 
     def command(self) -> str:

@@ -4,7 +4,32 @@
   SERB, with a Jacobian study.
 - `turnpike_controlled`: Section 5.2 (Figs. 5-6): the turnpike-controlled swarm, through the
   Gymnasium env and as the paper's closed loop.
+- `turnpike_property`: the turnpike theorem measured on optimal solutions.
 
-Each module has ``reproduce(out_dir, ...)`` (writes tables and figures); the command line is
-`agent-envs reproduce uncontrolled|turnpike` (`agent_envs.training.cli`).
+Each module has a frozen config dataclass (one field per option of `agent-envs reproduce NAME`,
+validated on construction) and ``reproduce(out_dir, ...)`` (writes tables and figures); the
+command line is `agent-envs reproduce uncontrolled|turnpike|turnpike-property`
+(`agent_envs.training.cli`).
 """
+
+from __future__ import annotations
+
+from agent_envs.validation import MAX_AGENTS, MAX_BATCH_SIZE, MAX_PATHS, MAX_STEPS, check_int
+
+
+def check_sizes(
+    n_agents: int, n_paths: int, n_steps: int | None = None, min_agents: int = 1
+) -> None:
+    """--n-agents, --n-paths (and --n-steps) within the core's accepted sizes.
+
+    Raises TypeError/ValueError naming the option and its range, and naming --n-paths when
+    --n-agents times --n-paths exceeds the core's batch size (`validation.MAX_BATCH_SIZE`).
+    """
+    check_int("--n-agents", n_agents, min_agents, MAX_AGENTS)
+    check_int("--n-paths", n_paths, 1, MAX_PATHS)
+    if n_steps is not None:
+        check_int("--n-steps", n_steps, 1, MAX_STEPS)
+    if n_agents * n_paths > MAX_BATCH_SIZE:
+        raise ValueError(
+            f"--n-agents times --n-paths must be <= {MAX_BATCH_SIZE}, got {n_agents} x {n_paths}"
+        )

@@ -1,6 +1,6 @@
 """Reproduction of the paper's turnpike-controlled experiments (Section 5.2, Figs. 5-6).
 
-    agent-envs reproduce turnpike --out DIR [--seeds 0 1 2]
+    agent-envs reproduce turnpike --out DIR [--seeds 0-2]
 
 Setting (paper): N = 100 agents uniform on [-1, 1], T = 1, m = 50, 20 Brownian paths,
 sigma = 0.01, alpha = 0.1, beta = 12, delta = 2e-4; tbar from `eq:tptime` per run.
@@ -45,16 +45,52 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from agent_envs.baselines import CheapClosedLoopModel, TurnpikeController, turnpike_time
-from agent_envs.training.defaults import DEFAULT_BETA, DEFAULT_DELTA, GYM_ENV_ID
+from agent_envs.training.config import option_field
+from agent_envs.training.defaults import DEFAULT_BETA, DEFAULT_DELTA, GYM_ENV_ID, parse_seeds
+from agent_envs.training.experiments import check_sizes
 from agent_envs.training.results import Episode
 
-BETA = DEFAULT_BETA
-DELTA = DEFAULT_DELTA
-N_AGENTS = 100
-N_STEPS = 50
-N_PATHS = 20
+#: The paper's stiffness of the symmetric kernel (Section 5.2).
 EPSILON = 0.05
+#: `env`: the Gymnasium env and the TurnpikeController; `closed-loop`: the paper's procedure.
 MODES = ("env", "closed-loop")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TurnpikeReproductionConfig:
+    """The options of `agent-envs reproduce turnpike`; validated on construction.
+
+    `seeds` may be given as ints or as seed-list strings (`defaults.parse_seeds`); they are
+    stored as a tuple of ints.
+    """
+
+    out: Path = option_field(Path("reproduction_turnpike"), "output folder")
+    seeds: tuple[int, ...] = option_field(
+        (0,),
+        "seeds of the initial positions and noise: '0 1 2', '0-2', '0:3' or '0,1,2' (default: 0)",
+        nargs="+",
+        type=str,
+    )
+    modes: tuple[str, ...] = option_field(
+        MODES,
+        "env (public API, zero-order hold) and/or closed-loop (paper)",
+        choices=MODES,
+    )
+    n_agents: int = option_field(100, "number of agents N (the paper's)")
+    n_paths: int = option_field(20, "Brownian paths (the paper's)")
+    n_steps: int = option_field(50, "time steps m (the paper's)")
+    progress: bool = option_field(
+        True, "no progress bar", flags=("--no-progress",), action="store_false"
+    )
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "out", Path(self.out))
+        object.__setattr__(self, "seeds", tuple(parse_seeds(self.seeds, "--seeds", (0,))))
+        object.__setattr__(self, "modes", tuple(self.modes))
+        check_sizes(self.n_agents, self.n_paths, self.n_steps)
+        unknown = [mode for mode in self.modes if mode not in MODES]
+        if unknown or not self.modes:
+            raise ValueError(f"--modes must be among {', '.join(MODES)}, got {list(self.modes)}")
 
 
 @dataclass(frozen=True)
@@ -104,7 +140,7 @@ def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_pat
 
     env = gym.make(GYM_ENV_ID, **run.env_kwargs(n_agents, n_steps, n_paths))
     try:
-        ctrl = TurnpikeController(env, beta=BETA, delta=DELTA)
+        ctrl = TurnpikeController(env, beta=DEFAULT_BETA, delta=DEFAULT_DELTA)
         ep = rollout(ctrl, env, seed)
     finally:
         env.close()
@@ -129,8 +165,8 @@ def run_closed_loop_mode(
     kw = run.env_kwargs(x0.shape[0], n_steps, n_paths)
     params = SwarmParams(**{k: kw[k] for k in SwarmParams.field_names() if k in kw})
     target = params.target_vector
-    tbar = turnpike_time(x0, target, BETA, DELTA, params.horizon)
-    closed = CheapClosedLoopModel(SwarmModel(params), target, BETA, until=tbar)
+    tbar = turnpike_time(x0, target, DEFAULT_BETA, DEFAULT_DELTA, params.horizon)
+    closed = CheapClosedLoopModel(SwarmModel(params), target, DEFAULT_BETA, until=tbar)
     dt = params.horizon / n_steps
     n, d = params.n_agents, params.dim
     rng = np.random.default_rng(np.random.SeedSequence([seed, 5, 2]))
@@ -240,7 +276,7 @@ def plot_lyapunov(path: Path, by_mode: dict[str, list[tuple[dict, Episode]]]) ->
             lyap = np.sum((rec.mean_positions - rec.target) ** 2, axis=(-2, -1))
             ax.plot(rec.times, lyap, color=f"C{i}", lw=1.4, label=row["run"])
             ax.axvline(rec.turnpike_time, color=f"C{i}", ls=":", lw=0.9)
-        ax.axhline(DELTA, color="k", ls="--", lw=0.8, label="delta")
+        ax.axhline(DEFAULT_DELTA, color="k", ls="--", lw=0.8, label="delta")
         ax.set_yscale("log")
         ax.set_xlabel("t")
         ax.set_ylabel("||E x^n - xbar||^2")
@@ -283,28 +319,20 @@ def _markdown_table(df: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def reproduce(
-    out_dir: str | Path,
-    seeds: tuple[int, ...] = (0,),
-    *,
-    runs: tuple[TurnpikeRun, ...] = PAPER_RUNS,
-    modes: tuple[str, ...] = MODES,
-    n_agents: int = N_AGENTS,
-    n_steps: int = N_STEPS,
-    n_paths: int = N_PATHS,
-    progress: bool = True,
-) -> pd.DataFrame:
-    """Run every (run, mode, seed), write the table and figures into `out_dir`; return the table.
+def _run_all(
+    seeds: tuple[int, ...],
+    runs: tuple[TurnpikeRun, ...],
+    modes: tuple[str, ...],
+    sizes: tuple[int, int, int],
+    progress: bool,
+) -> tuple[list[dict[str, Any]], dict[str, list[tuple[dict, Episode]]]]:
+    """Every (seed, run, mode): the table rows, and the first seed's (row, episode) per mode.
 
-    Figures show the first seed.
+    `sizes` is (n_agents, n_steps, n_paths).
     """
     from tqdm.auto import tqdm
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    for mode in modes:
-        if mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    n_agents, n_steps, n_paths = sizes
     rows: list[dict[str, Any]] = []
     panels: dict[str, list[tuple[dict, Episode]]] = {m: [] for m in modes}
     bar = tqdm(total=len(runs) * len(seeds), desc="reproduce turnpike", disable=not progress)
@@ -322,42 +350,62 @@ def reproduce(
                     panels[mode].append((row, records[mode]))
             bar.update(1)
     bar.close()
-    table = pd.DataFrame(rows)
-    table.to_csv(out / "results.csv", index=False)
-    settings = {
+    return rows, panels
+
+
+def _settings(
+    seeds: tuple[int, ...], runs: tuple[TurnpikeRun, ...], sizes: tuple[int, int, int]
+) -> dict[str, Any]:
+    """The setting written into results.json."""
+    n_agents, n_steps, n_paths = sizes
+    return {
         "n_agents": n_agents,
         "n_steps": n_steps,
         "n_paths": n_paths,
-        "beta": BETA,
-        "delta": DELTA,
+        "beta": DEFAULT_BETA,
+        "delta": DEFAULT_DELTA,
         "epsilon": EPSILON,
         "sigma": 0.01,
         "alpha": 0.1,
         "seeds": list(seeds),
         "runs": [asdict(r) for r in runs],
     }
-    (out / "results.json").write_text(
-        json.dumps(
-            {"settings": settings, "rows": json.loads(table.to_json(orient="records"))}, indent=1
-        )
-    )
+
+
+def _write_figures(
+    out: Path,
+    panels: dict[str, list[tuple[dict, Episode]]],
+    seed: int,
+    sizes: tuple[int, int, int],
+) -> list[str]:
+    """One PNG of the mean trajectories per mode and lyapunov.png; returns their names."""
+    n_agents, n_steps, n_paths = sizes
     figures = []
-    for mode in modes:
+    for mode, mode_panels in panels.items():
         fname = f"turnpike_{mode.replace('-', '_')}.png"
         plot_runs(
             out / fname,
-            panels[mode],
-            f"Turnpike control, mode '{mode}', seed {seeds[0]}: path-mean positions "
+            mode_panels,
+            f"Turnpike control, mode '{mode}', seed {seed}: path-mean positions "
             f"(N = {n_agents}, m = {n_steps}, {n_paths} paths); dotted red: tbar",
         )
         figures.append(fname)
     plot_lyapunov(out / "lyapunov.png", panels)
     figures.append("lyapunov.png")
+    return figures
+
+
+def _markdown(
+    table: pd.DataFrame, figures: list[str], seeds: tuple[int, ...], sizes: tuple[int, int, int]
+) -> str:
+    """results.md: the setting, the modes, the table and the figures."""
+    n_agents, n_steps, n_paths = sizes
     md = [
         "# Turnpike-controlled experiments (paper Section 5.2)",
         "",
         f"N = {n_agents}, m = {n_steps}, {n_paths} paths, eps = {EPSILON} (non-symmetric: "
-        f"1e-2..1e-1), sigma = 0.01, alpha = 0.1, beta = {BETA:g}, delta = {DELTA:g}; "
+        f"1e-2..1e-1), sigma = 0.01, alpha = 0.1, beta = {DEFAULT_BETA:g}, "
+        f"delta = {DEFAULT_DELTA:g}; "
         f"seeds {list(seeds)}. L = ||E x - xbar||^2 (sum over agents); rms = "
         "sqrt(mean_k (E x_k - xbar)^2); cost = tau sum_n c(x^n, u^n).",
         "",
@@ -370,5 +418,38 @@ def reproduce(
         *[f"![{f}]({f})" for f in figures],
         "",
     ]
-    (out / "results.md").write_text("\n".join(md))
+    return "\n".join(md)
+
+
+def reproduce(
+    out_dir: str | Path,
+    seeds: tuple[int, ...] = TurnpikeReproductionConfig.seeds,
+    *,
+    runs: tuple[TurnpikeRun, ...] = PAPER_RUNS,
+    modes: tuple[str, ...] = MODES,
+    n_agents: int = TurnpikeReproductionConfig.n_agents,
+    n_steps: int = TurnpikeReproductionConfig.n_steps,
+    n_paths: int = TurnpikeReproductionConfig.n_paths,
+    progress: bool = True,
+) -> pd.DataFrame:
+    """Run every (run, mode, seed), write the table and figures into `out_dir`; return the table.
+
+    The defaults are `TurnpikeReproductionConfig`'s (the paper's sizes). Figures show the first
+    seed.
+    """
+    out = Path(out_dir)
+    for mode in modes:
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    out.mkdir(parents=True, exist_ok=True)
+    sizes = (n_agents, n_steps, n_paths)
+    rows, panels = _run_all(tuple(seeds), runs, tuple(modes), sizes, progress)
+    table = pd.DataFrame(rows)
+    table.to_csv(out / "results.csv", index=False)
+    records = json.loads(table.to_json(orient="records"))
+    (out / "results.json").write_text(
+        json.dumps({"settings": _settings(seeds, runs, sizes), "rows": records}, indent=1)
+    )
+    figures = _write_figures(out, panels, seeds[0], sizes)
+    (out / "results.md").write_text(_markdown(table, figures, seeds, sizes))
     return table

@@ -32,7 +32,7 @@ Each T is warm-started from the previous T's solution followed by zeros.
 
 Outputs in --out: `turnpike_property.png`, `turnpike_property.csv` / `.md` (one row per setting
 and T), `curves.npz` (D_n per run) and `meta.json`. Library use:
-`reproduce(out, TurnpikePropertyConfig(...))`; `add_arguments`/`run` are the thin CLI layer.
+`reproduce(out, TurnpikePropertyConfig(...))`; the command line's options are the config's fields.
 """
 
 from __future__ import annotations
@@ -47,6 +47,18 @@ from typing import Any
 import numpy as np
 
 from agent_envs.baselines import DEFAULT_BETA, DEFAULT_DELTA
+from agent_envs.training.config import option_field
+from agent_envs.training.experiments import check_sizes
+from agent_envs.validation import (
+    EPSILON_RANGE,
+    HORIZON_RANGE,
+    MAX_CONTROL_RANGE,
+    MAX_SEED,
+    SIGMA_RANGE,
+    check_int,
+    check_positive,
+    check_real,
+)
 
 #: the paper's decay rate of the cheap control and turnpike threshold (Section 5.2)
 BETA = DEFAULT_BETA
@@ -175,36 +187,56 @@ class Setting:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TurnpikePropertyConfig:
-    """Sizes and settings of the experiment (module docstring); validated on construction."""
+    """Sizes and settings of the experiment (module docstring): the options of `agent-envs
+    reproduce turnpike-property`; validated on construction."""
 
-    n_agents: int = 20
-    n_paths: int = 10
-    tau: float = 0.05
-    horizons: tuple[float, ...] = HORIZONS
-    sigmas: tuple[float, ...] = SIGMAS
-    epsilons: tuple[float, ...] = EPSILONS
-    kernels: tuple[str, ...] = KERNELS
-    delta: float = DELTA
-    seed: int = 0
-    max_control: float = 150.0
-    gtol: float = 1e-6
-    max_iterations: int = 500
-    progress: bool = True
+    out: Path = option_field(Path("reproduction_turnpike_property"), "output folder")
+    n_agents: int = option_field(20, "N (paper: 100)")
+    n_paths: int = option_field(10, "K for sigma > 0 (paper: 20)")
+    tau: float = option_field(0.05, "time step (paper: 0.02); it must divide every horizon")
+    horizons: tuple[float, ...] = option_field(HORIZONS, "horizons T")
+    sigmas: tuple[float, ...] = option_field(SIGMAS, "noise levels sigma")
+    epsilons: tuple[float, ...] = option_field(EPSILONS, "stiffness eps of the kernels")
+    kernels: tuple[str, ...] = option_field(KERNELS, "interaction kernels", choices=KERNELS)
+    delta: float = option_field(DELTA, "turnpike band (eq:tptime)")
+    seed: int = option_field(0, "x^0 and the noise")
+    max_control: float = option_field(150.0, "bound |u| <= max_control of the solver")
+    gtol: float = option_field(1e-6, "relative gradient tolerance")
+    max_iterations: int = option_field(500, "the solver's iterations per horizon, at most")
+    progress: bool = option_field(
+        True, "no progress lines", flags=("--no-progress",), action="store_false"
+    )
 
     def __post_init__(self) -> None:
-        if not self.tau > 0:
-            raise ValueError(f"tau must be > 0, got {self.tau}")
+        object.__setattr__(self, "out", Path(self.out))
+        for name in ("horizons", "sigmas", "epsilons", "kernels"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        check_sizes(self.n_agents, self.n_paths, min_agents=2)
+        check_int("--seed", self.seed, 0, MAX_SEED)
+        for horizon in self.horizons:
+            check_positive("--horizons", horizon, HORIZON_RANGE)
+        check_positive("--tau", self.tau, HORIZON_RANGE)
+        for sigma in self.sigmas:
+            check_real("--sigmas", sigma, SIGMA_RANGE)
+        for epsilon in self.epsilons:
+            check_positive("--epsilons", epsilon, EPSILON_RANGE)
+        check_positive("--delta", self.delta)
+        check_positive("--max-control", self.max_control, MAX_CONTROL_RANGE)
+        check_positive("--gtol", self.gtol)
+        check_int("--max-iterations", self.max_iterations, 1, 1_000_000)
         for horizon in self.horizons:
             steps = horizon / self.tau
-            if not (horizon > 0 and abs(steps - round(steps)) <= 1e-9):
+            if abs(steps - round(steps)) > 1e-9:
                 raise ValueError(
-                    f"tau must divide every horizon (> 0); {horizon} / {self.tau} = {steps:g}"
+                    f"--tau must divide every horizon (--horizons); {horizon} / {self.tau} = "
+                    f"{steps:g}"
                 )
-        unknown = sorted(set(self.kernels) - set(KERNELS))
-        if unknown:
-            raise ValueError(f"kernels must be among {KERNELS}, got {unknown}")
+        if sorted(set(self.kernels) - set(KERNELS)):
+            raise ValueError(f"--kernels must be among {KERNELS}, got {list(self.kernels)}")
+        if not all((self.horizons, self.sigmas, self.epsilons, self.kernels)):
+            raise ValueError("--horizons, --sigmas, --epsilons and --kernels need a value each")
 
     @property
     def settings(self) -> list[Setting]:
@@ -357,5 +389,6 @@ def reproduce(out: Path, config: TurnpikePropertyConfig) -> list[dict]:
     write_tables(rows, out)
     plot(rows, config.settings, config.delta, out / "turnpike_property.png")
     meta = {**asdict(config), "seconds": time.perf_counter() - start}
+    del meta["out"]  # the folder it is written into
     (out / "meta.json").write_text(json.dumps(meta, indent=2, default=str))
     return rows

@@ -28,6 +28,24 @@ from matplotlib.figure import Figure
 
 from agent_envs.params import SwarmParams
 from agent_envs.simulator import Trajectory, simulate
+from agent_envs.training.config import option_field
+from agent_envs.training.experiments import check_sizes
+from agent_envs.validation import MAX_SEED, check_int
+
+
+@dataclass(frozen=True, kw_only=True)
+class UncontrolledConfig:
+    """The options of `agent-envs reproduce uncontrolled`; validated on construction."""
+
+    out: Path = option_field(Path("out/uncontrolled"), "output folder")
+    n_agents: int = option_field(100, "number of agents N")
+    n_paths: int = option_field(20, "Brownian paths (for the runs with sigma > 0)")
+    seed: int = option_field(0, "seed of the start and noise")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "out", Path(self.out))
+        check_sizes(self.n_agents, self.n_paths)
+        check_int("--seed", self.seed, 0, MAX_SEED)
 
 
 @dataclass(frozen=True)
@@ -166,8 +184,16 @@ def _progress(runs: tuple[Run, ...]):
     return tqdm(runs, desc="uncontrolled runs", unit="run")
 
 
-def reproduce(out: Path, n_agents: int = 100, n_paths: int = 20, seed: int = 0) -> list[dict]:
-    """Run every experiment, write figures, results.md and results.json into `out`."""
+def reproduce(
+    out: Path,
+    n_agents: int = UncontrolledConfig.n_agents,
+    n_paths: int = UncontrolledConfig.n_paths,
+    seed: int = UncontrolledConfig.seed,
+) -> list[dict]:
+    """Run every experiment, write figures, results.md and results.json into `out`.
+
+    The defaults are `UncontrolledConfig`'s (the paper's N = 100 and 20 paths, seed 0).
+    """
     out.mkdir(parents=True, exist_ok=True)
     runs = PAPER_RUNS + JACOBIAN_STUDY
     results: list[tuple[dict, Trajectory]] = []
