@@ -5,6 +5,11 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -259,6 +264,106 @@ def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
         "main__ppo__0",
         "main__ppo__1",
     ]
+
+
+def _agent_envs() -> list[str]:
+    """The installed `agent-envs` script of this interpreter's environment."""
+    return [str(Path(sys.executable).parent / "agent-envs")]
+
+
+@pytest.mark.slow
+def test_resume_after_a_killed_driver_finishes_and_leaves_no_ray_process(tmp_path):
+    """SIGKILL the sweep's driver (an OOM kill, a lost terminal) while its trials run: the
+    local Ray instance's processes it leaves behind are ended by the next run in the same OUT,
+    and `--resume` finishes the sweep."""
+    pytest.importorskip("ray")
+    pytest.importorskip("rliable")
+    pytest.importorskip("psutil")
+    from agent_envs.training.ray_session import RAY_SESSION_FILE, session_processes
+
+    out = tmp_path / "sweep"
+    command = [*_agent_envs(), "sweep", "--preset", "smoke", "--out", str(out), "--num-cpus", "2"]
+    driver = subprocess.Popen(
+        [*command, "--timesteps-scale", "40"],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    record = out / RAY_SESSION_FILE
+    deadline = time.monotonic() + 120
+    while not any((out / "runs").glob("*.sweep_trial.log")) and time.monotonic() < deadline:
+        assert driver.poll() is None, "the sweep ended before it could be killed"
+        time.sleep(0.5)
+    assert record.is_file()
+    session_dir = json.loads(record.read_text())["session_dir"]
+    time.sleep(3)  # the trials are running
+    driver.send_signal(signal.SIGKILL)
+    driver.wait(timeout=30)
+    resumed = subprocess.run(
+        [*command, "--timesteps-scale", "40", "--resume"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert (out / "report" / "report.md").is_file()
+    assert session_processes(session_dir) == []  # nothing of the killed run's Ray is left
+    assert not record.exists()  # the resumed run shut its own Ray down
+
+
+@pytest.mark.slow
+def test_smoke_sweep_on_a_two_node_cluster_with_token_auth(tmp_path):
+    """`sweep --address` on a two-node Ray cluster started on the loopback address (head + one
+    worker node, token authentication as Ray 2.60 sets it up: the token in ~/.ray/auth_token of
+    every node and the driver, RAY_AUTH_MODE=token); the trials run on both nodes."""
+    pytest.importorskip("ray")
+    pytest.importorskip("rliable")
+    ray_cli = str(Path(sys.executable).parent / "ray")
+    port = _free_port()
+    env = {**os.environ, "HOME": str(tmp_path), "RAY_AUTH_MODE": "token"}
+    env["RAY_USAGE_STATS_ENABLED"] = "0"
+
+    def ray(*args: str) -> None:
+        subprocess.run([ray_cli, *args], env=env, check=True, capture_output=True, timeout=120)
+
+    ray("get-auth-token", "--generate")
+    try:
+        ray(
+            "start",
+            "--head",
+            "--node-ip-address=127.0.0.1",
+            f"--port={port}",
+            "--num-cpus=1",
+            "--include-dashboard=false",
+            "--disable-usage-stats",
+        )
+        ray("start", f"--address=127.0.0.1:{port}", "--node-ip-address=127.0.0.1", "--num-cpus=1")
+        out = tmp_path / "sweep"
+        address = f"127.0.0.1:{port}"
+        driver = subprocess.run(
+            [*_agent_envs(), "sweep", "--preset", "smoke", "--out", str(out), "--address", address],
+            env=env,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+    finally:
+        subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=120)
+    assert driver.returncode == 0, driver.stderr[-2000:]
+    report = (out / "report" / "report.md").read_text()
+    assert "ppo (seed 0)" in report and "ppo (seed 1)" in report
+    nodes = pd.read_csv(out / "report" / "trial_wall_times.csv")["node"]
+    assert len(nodes) == 5 and nodes.nunique() == 2  # both nodes ran trials
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
 
 
 def test_reference_trial_without_ray_evaluates_once_then_reuses(tmp_path):

@@ -229,10 +229,12 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
 
 def tune_trainable(config: dict[str, Any]) -> None:
     """The Ray Tune function trainable: one trial, its metrics reported once at the end."""
+    import ray
     from ray import tune
 
     trial = Trial.from_dict(config["trial"])
-    tune.report(execute_trial(trial, Path(config["out"])))
+    metrics = execute_trial(trial, Path(config["out"]))
+    tune.report({**metrics, "node_id": ray.get_runtime_context().get_node_id()})
 
 
 def trial_dirname(trial: Any) -> str:
@@ -243,25 +245,29 @@ def trial_dirname(trial: Any) -> str:
 # ---------------------------------------------------------------------------------------- Ray
 
 
-def start_ray(config: SweepConfig) -> bool:
-    """`ray.init`: join `config.address`, or start a local instance with `config.num_cpus`.
+def start_ray(config: SweepConfig, out: Path) -> bool:
+    """`ray.init`: join `config.address`, or start a local instance with `config.num_cpus`
+    (without the dashboard) and record its session in `out` (`ray_session.record_session`).
 
     Returns False when Ray was already initialized in this process (nothing started).
     """
     import ray
+
+    from agent_envs.training.ray_session import record_session
 
     if ray.is_initialized():
         return False
     env = {"env_vars": {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}}
     if config.address:
         ray.init(address=config.address, runtime_env=env, log_to_driver=False)
-    else:
-        ray.init(
-            num_cpus=config.num_cpus or os.cpu_count() or 1,
-            include_dashboard=False,
-            runtime_env=env,
-            log_to_driver=False,
-        )
+        return True
+    context = ray.init(
+        num_cpus=config.num_cpus or os.cpu_count() or 1,
+        include_dashboard=False,
+        runtime_env=env,
+        log_to_driver=False,
+    )
+    record_session(out, context.address_info["session_dir"])
     return True
 
 
@@ -373,7 +379,12 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
         f"{len(trials) - n_learn} reference trials; output {out}",
         flush=True,
     )
-    started_ray = start_ray(config)
+    from agent_envs.training.ray_session import clean_up_after_killed_driver, forget_session
+
+    ended = clean_up_after_killed_driver(out)
+    if ended:
+        print(f"ended {ended} processes left by the Ray instance of a killed sweep in {out}")
+    started_ray = start_ray(config, out)
     ray_started = time.perf_counter()
     try:
         grid = run_tuner(config, trials, out)
@@ -383,6 +394,7 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
             import ray
 
             ray.shutdown()
+            forget_session(out)
     missing = [t.trial_id for t in trials if not _finished_evaluation(evaluation_dir(t, out), t)]
     if grid.num_errors or missing:
         errors = [str(r.error).splitlines()[0] for r in grid if r.error is not None][:3]
@@ -401,10 +413,15 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
         for r in grid
         if r.config and r.metrics and "trial_wall_time_s" in r.metrics
     }
-    paths = write_sweep_report(config, trials, out, timing, command, trial_times)
+    nodes = {
+        str(r.config["trial"]["trial_id"]): str(r.metrics["node_id"])
+        for r in grid
+        if r.config and r.metrics and "node_id" in r.metrics
+    }
+    paths = write_sweep_report(config, trials, out, timing, command, trial_times, nodes)
     total = time.perf_counter() - started
     print(f"report: {paths['markdown']} and {paths['html']} ({total:.0f} s in all)")
-    return {"paths": paths, "trials": trials, "timing": timing}
+    return {"paths": paths, "trials": trials, "timing": timing, "nodes": nodes}
 
 
 __all__ = ["SweepConfig", "execute_trial", "sweep"]

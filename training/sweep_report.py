@@ -177,11 +177,17 @@ def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def trial_time_table(trials: list[Trial], trial_times: Mapping[str, float]) -> pd.DataFrame:
+def trial_time_table(
+    trials: list[Trial], trial_times: Mapping[str, float], nodes: Mapping[str, str] | None = None
+) -> pd.DataFrame:
     """One row per trial with the wall time Tune recorded for it (train + held-out evaluation
-    for a learner; the evaluation for a reference), trials in grid order."""
-    rows = [
-        {
+    for a learner; the evaluation for a reference), trials in grid order; with `nodes` (trial
+    id -> Ray node id), the first 8 hex digits of the node each trial ran on."""
+    rows = []
+    for t in trials:
+        if t.trial_id not in trial_times:
+            continue
+        row = {
             "trial": t.trial_id,
             "kind": t.kind,
             "setting": t.setting,
@@ -189,9 +195,9 @@ def trial_time_table(trials: list[Trial], trial_times: Mapping[str, float]) -> p
             "seed": "" if t.seed is None else t.seed,
             "wall time [s]": round(trial_times[t.trial_id], 1),
         }
-        for t in trials
-        if t.trial_id in trial_times
-    ]
+        if nodes:
+            row["node"] = str(nodes.get(t.trial_id, ""))[:8]
+        rows.append(row)
     return pd.DataFrame(rows)
 
 
@@ -288,17 +294,18 @@ def _setting_sections(trials, out: Path, settings: list, report_dir: Path, rng):
     return sections
 
 
-def _time_section(trials, trial_times: Mapping[str, float], report_dir: Path):
+def _time_section(trials, trial_times: Mapping[str, float], nodes, report_dir: Path):
     from agent_envs.training.report import ReportSection
 
-    times = trial_time_table(trials, trial_times)
+    times = trial_time_table(trials, trial_times, nodes)
     times.to_csv(report_dir / "trial_wall_times.csv", index=False)
     return ReportSection(
         "Wall time per trial",
         text=(
             "As Tune recorded it: a learner trial's training and held-out evaluation, "
             "a reference trial's evaluation. Trials run side by side, one per "
-            "--cpus-per-trial CPUs of the Ray instance, so they share the machine."
+            "--cpus-per-trial CPUs of the Ray instance, so they share the machine; 'node' is "
+            "the Ray node a trial ran on (the first 8 digits of its id)."
         ),
         table=times,
     )
@@ -356,11 +363,13 @@ def write_sweep_report(
     timing: dict[str, float],
     command: str,
     trial_times: Mapping[str, float] | None = None,
+    nodes: Mapping[str, str] | None = None,
 ) -> dict[str, Path]:
     """Write OUT/report/report.md and .html (and the tables as CSV); returns the paths.
 
     `command` is the command line that started the sweep (a resumed sweep shows it too);
-    `trial_times` the wall time of each trial by trial id (Tune's `trial_wall_time_s`).
+    `trial_times` the wall time of each trial by trial id (Tune's `trial_wall_time_s`),
+    `nodes` the Ray node each ran on.
     """
     from agent_envs.training.report import ReportSection, build_report
 
@@ -372,7 +381,7 @@ def write_sweep_report(
     sections = _setting_sections(trials, out, settings, report_dir, rng)
     sections.append(ReportSection("Training runs", table=training_table(trials, out)))
     if trial_times:
-        sections.append(_time_section(trials, trial_times, report_dir))
+        sections.append(_time_section(trials, trial_times, nodes, report_dir))
     sections.append(_run_section(preset, timing, command))
     main = settings[0]
     main_results = setting_results(trials, main.name, out)
