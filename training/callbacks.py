@@ -90,6 +90,8 @@ class SwarmEvalCallback(EvalCallback):
             the vectorized training env).
         run_dir: where ``learning_curve.csv``, ``evaluations.npz`` and the best model go.
         history: rows of an earlier ``learning_curve.csv`` to continue (resume).
+        on_evaluation: called with each evaluation's row after it is logged (e.g. to report
+            the validation cost to a tuner).
     """
 
     def __init__(
@@ -102,6 +104,7 @@ class SwarmEvalCallback(EvalCallback):
         eval_freq: int,
         run_dir: str | os.PathLike,
         history: list[dict[str, Any]] | None = None,
+        on_evaluation: Callable[[dict[str, Any]], None] | None = None,
         verbose: int = 0,
     ) -> None:
         run_dir = Path(run_dir)
@@ -122,6 +125,7 @@ class SwarmEvalCallback(EvalCallback):
         self.curve_path = run_dir / "learning_curve.csv"
         self.reference_costs: dict[str, np.ndarray] = {}
         self.history: list[dict[str, Any]] = list(history or [])
+        self.on_evaluation = on_evaluation
         self._start_time = time.perf_counter()
         self._wall_offset = float(self.history[-1]["wall_time_s"]) if self.history else 0.0
         for row in self.history:
@@ -205,6 +209,8 @@ class SwarmEvalCallback(EvalCallback):
         if -mean > self.best_mean_reward:
             self.best_mean_reward = -mean
             save_model_with_statistics(self.model, self.run_dir, BEST_MODEL)
+        if self.on_evaluation is not None:
+            self.on_evaluation(row)
         return row
 
     def _write_curve(self) -> None:

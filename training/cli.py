@@ -388,6 +388,13 @@ def _run_compare(config: Any) -> int:
     return 0
 
 
+def _run_tune(config: Any) -> int:
+    from agent_envs.training.tune import tune_learner
+
+    tune_learner(config)
+    return 0
+
+
 def _run_sweep(config: Any) -> int:
     from agent_envs.training.sweep import sweep
 
@@ -456,6 +463,15 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         "(each one train + evaluation on the held-out test seeds) and write "
         "OUT/report/report.md with across-seed statistics (needs the 'sweep' extra: pip "
         "install 'agent-envs[sweep]').",
+    ),
+    "tune": Subcommand(
+        "hyperparameter search for one learner of a preset (Ray Tune + Optuna)",
+        _T + "tune:TuneConfig",
+        _run_tune,
+        description="Search the hyperparameters of one learner of a preset with Optuna's TPE "
+        "sampler on Ray Tune (rl-zoo3's search spaces; ASHA or median early stopping on the "
+        "validation cost); writes OUT/tune_summary.md, OUT/trials.csv and "
+        "OUT/best_hyperparams.yml (needs the 'sweep' extra).",
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.

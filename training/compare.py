@@ -47,8 +47,8 @@ from agent_envs.training.defaults import (
 )
 from agent_envs.training.experiment import (
     LEARNER,
-    ExperimentArguments,
     ExperimentOptions,
+    GridArguments,
     Trial,
     build_trials,
     check_envs,
@@ -60,9 +60,9 @@ from agent_envs.validation import MAX_SEED, check_int
 
 
 @dataclass
-class CompareConfig(ExperimentArguments):
+class CompareConfig(GridArguments):
     """Options of `agent-envs compare` (one field = one option): the shared experiment options
-    (`ExperimentArguments`) and compare's own."""
+    (`GridArguments`) and compare's own."""
 
     preset: str = option_field("quick", "the experiment setting", choices=tuple(PRESETS))
     setting: str | None = option_field(

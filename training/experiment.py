@@ -166,22 +166,16 @@ def split_names(text: str | None) -> tuple[str, ...] | None:
 
 @dataclass
 class ExperimentArguments:
-    """The options every experiment command takes (`compare`, `sweep`): its changes to the
-    preset's learners, env and budgets. Each command's config adds its own fields; the CLI makes
-    one option of every field (`--field-name`, the metadata's help as its --help)."""
+    """The options every experiment command takes (`compare`, `sweep`, `tune`): its changes to
+    the preset's env and budgets. Each command's config adds its own fields; the CLI makes one
+    option of every field (`--field-name`, the metadata's help as its --help)."""
 
-    learners: str | None = option_field(
-        None, "comma-separated learners of the preset to run (default: all of each setting's)"
-    )
     env_kwargs: dict = json_field(
         "JSON object of env kwargs overriding the preset's (every setting's), for "
         'training and evaluation, e.g. \'{"integrator": "em"}\''
     )
     timesteps_scale: float = option_field(
         1.0, "multiply every learner's training timesteps (e.g. 0.1 for a smoke run)"
-    )
-    test_episodes: int | None = option_field(
-        None, "held-out test episodes per policy (seeds 10000 + i; default: the preset's)"
     )
     vec_env: str | None = option_field(
         None,
@@ -195,12 +189,28 @@ class ExperimentArguments:
     def experiment_options(self, **changes: Any) -> ExperimentOptions:
         """These options for the experiment builder, with the command's own `changes`."""
         return ExperimentOptions(
-            learners=split_names(self.learners),
             env_kwargs=self.env_kwargs,
             timesteps_scale=self.timesteps_scale,
-            test_episodes=self.test_episodes,
             vec_env=self.vec_env,
             **changes,
+        )
+
+
+@dataclass
+class GridArguments(ExperimentArguments):
+    """The options of the commands that train and evaluate several learners (`compare`,
+    `sweep`): which learners, and how many held-out test episodes."""
+
+    learners: str | None = option_field(
+        None, "comma-separated learners of the preset to run (default: all of each setting's)"
+    )
+    test_episodes: int | None = option_field(
+        None, "held-out test episodes per policy (seeds 10000 + i; default: the preset's)"
+    )
+
+    def experiment_options(self, **changes: Any) -> ExperimentOptions:
+        return super().experiment_options(
+            learners=split_names(self.learners), test_episodes=self.test_episodes, **changes
         )
 
 
@@ -474,6 +484,7 @@ __all__ = [
     "REFERENCE",
     "ExperimentArguments",
     "ExperimentOptions",
+    "GridArguments",
     "Trial",
     "available_references",
     "build_trials",

@@ -242,7 +242,8 @@ def display_table(summary: pd.DataFrame, reference: str | None) -> pd.DataFrame:
     return out
 
 
-def _md_table(df: pd.DataFrame) -> str:
+def markdown_table(df: pd.DataFrame) -> str:
+    """A DataFrame as a Markdown table (numbers as the report shows them, "|" escaped)."""
     cols = [str(c) for c in df.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
     for _, row in df.iterrows():
@@ -291,7 +292,7 @@ class _Document:
             elif kind == "p":
                 out += [value, ""]
             elif kind == "table":
-                out += [_md_table(value), ""]
+                out += [markdown_table(value), ""]
             elif kind == "img":
                 rel, cap = value
                 out += [f"![{cap}]({rel})", "", f"*{cap}*", ""]

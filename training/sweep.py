@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import shlex
 import time
@@ -56,8 +57,8 @@ from agent_envs.training.defaults import parse_seeds
 from agent_envs.training.experiment import (
     LEARNER,
     TRIAL_LOG,
-    ExperimentArguments,
     ExperimentOptions,
+    GridArguments,
     Trial,
     build_trials,
     check_envs,
@@ -75,12 +76,9 @@ TUNE_NAME = "tune"
 
 
 @dataclass
-class SweepConfig(ExperimentArguments):
-    """Options of `agent-envs sweep` (one field = one option): the shared experiment options
-    (`ExperimentArguments`) and the sweep's own."""
+class RayArguments:
+    """The Ray options of the commands that run trials on Ray Tune (`sweep`, `tune`)."""
 
-    preset: str = option_field("smoke", "the sweep", choices=tuple(PRESETS))
-    out: str | None = option_field(None, "output directory (default sweep-{preset})")
     num_cpus: int | None = option_field(
         None, "CPUs of the local Ray instance (default: all of this machine's)"
     )
@@ -88,6 +86,30 @@ class SweepConfig(ExperimentArguments):
         None, "address of an existing Ray cluster ('auto': the one on this machine)"
     )
     cpus_per_trial: float = option_field(1.0, "CPUs Ray reserves for each trial")
+
+    def __post_init__(self) -> None:
+        if self.num_cpus is not None:
+            check_int("--num-cpus", self.num_cpus, 1, 1_000_000)
+        if not (
+            isinstance(self.cpus_per_trial, (int, float))
+            and not isinstance(self.cpus_per_trial, bool)
+            and math.isfinite(self.cpus_per_trial)
+            and self.cpus_per_trial > 0
+        ):
+            raise ValueError(f"--cpus-per-trial must be a number > 0, got {self.cpus_per_trial}")
+        if self.address is not None and self.num_cpus is not None:
+            raise ValueError("--num-cpus sizes a local Ray instance; leave it out with --address")
+        if self.address is not None and not self.address.strip():
+            raise ValueError("--address must name a Ray cluster ('auto' or HOST:PORT), got ''")
+
+
+@dataclass
+class SweepConfig(GridArguments, RayArguments):
+    """Options of `agent-envs sweep` (one field = one option): the shared experiment options
+    (`GridArguments`) and the sweep's own."""
+
+    preset: str = option_field("smoke", "the sweep", choices=tuple(PRESETS))
+    out: str | None = option_field(None, "output directory (default sweep-{preset})")
     resume: bool = option_field(
         False, "continue the interrupted sweep in OUT (Tune's Tuner.restore; the saved grid)"
     )
@@ -101,16 +123,9 @@ class SweepConfig(ExperimentArguments):
     bootstrap_seed: int = option_field(0, "seed of the bootstrap's generator in the report")
 
     def __post_init__(self) -> None:
-        super().__post_init__()
+        GridArguments.__post_init__(self)
+        RayArguments.__post_init__(self)
         get_preset(self.preset)  # ValueError naming --preset
-        if self.num_cpus is not None and self.num_cpus < 1:
-            raise ValueError(f"--num-cpus must be >= 1, got {self.num_cpus}")
-        if not (self.cpus_per_trial > 0):
-            raise ValueError(f"--cpus-per-trial must be > 0, got {self.cpus_per_trial}")
-        if self.address is not None and self.num_cpus is not None:
-            raise ValueError("--num-cpus sizes a local Ray instance; leave it out with --address")
-        if self.address is not None and not self.address.strip():
-            raise ValueError("--address must name a Ray cluster ('auto' or HOST:PORT), got ''")
         check_int("--bootstrap-seed", self.bootstrap_seed, 0, MAX_SEED)
         self.training_seeds()  # ValueError naming --seeds
 
@@ -245,7 +260,7 @@ def trial_dirname(trial: Any) -> str:
 # ---------------------------------------------------------------------------------------- Ray
 
 
-def start_ray(config: SweepConfig, out: Path) -> bool:
+def start_ray(config: RayArguments, out: Path) -> bool:
     """`ray.init`: join `config.address`, or start a local instance with `config.num_cpus`
     (without the dashboard) and record its session in `out` (`ray_session.record_session`).
 

@@ -43,7 +43,7 @@ import json
 import re
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -82,7 +82,11 @@ def default_run_name(config: TrainConfig) -> str:
     return f"{env}__{config.algo}__{config.seed}__{int(time.time())}"
 
 
-def train(config: TrainConfig, callbacks: Sequence[Any] | None = None) -> Path:
+def train(
+    config: TrainConfig,
+    callbacks: Sequence[Any] | None = None,
+    on_evaluation: Callable[[dict[str, Any]], None] | None = None,
+) -> Path:
     """Train one agent; return its run directory.
 
     Everything is validated before anything is written: the options, the env kwargs, the
@@ -93,7 +97,8 @@ def train(config: TrainConfig, callbacks: Sequence[Any] | None = None) -> Path:
     With `config.resume` set to a run directory, the run continues from its newest verified
     checkpoint (`agent_envs.training.checkpoints.resumable_checkpoint`; damaged newer ones are
     skipped with a message): its config.json defines the run, except `RESUME_OVERRIDES`,
-    which are taken from `config`. `callbacks` are extra SB3 callbacks appended to the run's own.
+    which are taken from `config`. `callbacks` are extra SB3 callbacks appended to the run's own;
+    `on_evaluation` is called with every validation row (`callbacks.SwarmEvalCallback`).
     """
     if config.resume:
         run_dir = Path(config.resume)
@@ -113,7 +118,7 @@ def train(config: TrainConfig, callbacks: Sequence[Any] | None = None) -> Path:
         lock = RunLock(run_dir).acquire()
     try:
         with torch_threads(config.torch_threads):
-            return _train_in(config, run_dir, list(callbacks or []), description)
+            return _train_in(config, run_dir, list(callbacks or []), description, on_evaluation)
     finally:
         lock.release()
 
@@ -151,7 +156,11 @@ def torch_threads(n: int):
 
 
 def _train_in(
-    config: TrainConfig, run_dir: Path, extra_callbacks: list[Any], description: dict[str, Any]
+    config: TrainConfig,
+    run_dir: Path,
+    extra_callbacks: list[Any],
+    description: dict[str, Any],
+    on_evaluation: Callable[[dict[str, Any]], None] | None = None,
 ) -> Path:
     """Train in `run_dir` (created and locked by `train`): resume point, run files, model,
     callbacks, learning, final checkpoint and summary."""
@@ -170,6 +179,8 @@ def _train_in(
     model, venv = _build_model(config, run_dir, point, resolved)
     done = 0 if point is None else int(model.num_timesteps)
     callbacks, eval_callback = _callbacks(config, run_dir, venv.num_envs, description, done)
+    if eval_callback is not None:
+        eval_callback.on_evaluation = on_evaluation
     start = time.perf_counter()
     _learn(model, config, [*callbacks, *extra_callbacks], point is None, run_dir)
     if eval_callback is not None and (
