@@ -154,14 +154,7 @@ class EpisodeConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.params, SwarmParams):
             raise TypeError(f"params must be a SwarmParams, got {type(self.params).__name__}")
-        spec = SimulationSpec(
-            self.integrator,
-            self.jacobian,
-            self.phi_method,
-            self.n_steps,
-            self.n_paths,
-            self.max_control,
-        ).for_params(self.params)
+        spec = self.simulation.for_params(self.params)
         set_ = object.__setattr__
         for name in ("n_steps", "n_paths", "max_control"):
             set_(self, name, getattr(spec, name))
