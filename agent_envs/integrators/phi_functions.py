@@ -412,6 +412,102 @@ def _lanczos_action(
     return _gather_members(xp, stopped, stacked, beta0, batch), converged
 
 
+def _lanczos_numpy(
+    a: _RowOperator,
+    v: np.ndarray,
+    order: int,
+    rtol: float,
+    max_dim: int,
+    check_every: int = 3,
+    bounds: Any = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`_lanczos_action` for numpy arrays with the per-step overhead taken out.
+
+    The same recurrence, per-member bounds, checks, stopping dimensions and arithmetic (each
+    floating-point operation the same, in the same order: tests/test_phi_functions.py checks the
+    results are equal bit for bit), written with in-place numpy operations: no array-namespace
+    dispatch, no broadcast copies, one host-side test per step. `_lanczos_action` stays the
+    reference and the torch (differentiable) path. Returns (result, converged per member).
+    """
+    xp = arrays.namespace(v)  # numpy's standard namespace (numpy 1.x: array-api-compat)
+    n = a.n
+    max_dim = min(max_dim, n)
+    batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
+    q = np.swapaxes(np.broadcast_to(v, (*batch, *v.shape[-2:])), -1, -2)  # (..., k, n)
+    beta0 = xp.linalg.vector_norm(q, axis=-1)  # (..., k)
+    if np.any(beta0 == 0):
+        q = q / np.where(beta0 > 0, beta0, 1.0)[..., None]
+    else:
+        q = q / beta0[..., None]
+    basis = [q]
+    alphas: list[np.ndarray] = []
+    betas: list[np.ndarray] = []
+    norm_inf, width = a.member_bounds(batch, bounds)
+    first_check = np.minimum(np.ceil(3.5 * np.sqrt(norm_inf)), 1 + np.ceil(3.5 * np.sqrt(width)))
+    first_check = np.clip(first_check, 2, max_dim).astype(np.int64)
+    tiny = (1e-12 * (norm_inf + 1e-300))[..., None]
+    earliest = int(first_check.min())
+    done = np.zeros(batch, dtype=bool)
+    converged = np.zeros(batch, dtype=bool)
+    stopped: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    e1 = None
+    w_prev = None
+    for j in range(max_dim):
+        w = a.apply(q)
+        alpha = xp.vecdot(w, q)
+        w -= alpha[..., None] * q
+        if w_prev is not None:
+            w -= xp.vecdot(w, w_prev)[..., None] * w_prev
+        b = xp.linalg.vector_norm(w, axis=-1)
+        alphas.append(alpha)
+        m = j + 1
+        small = b <= tiny
+        any_small = bool(small.any())
+        if any_small or m == max_dim or m >= earliest:
+            breakdown = ~done & np.all(small, axis=-1)
+            stops = breakdown | (~done & (m == max_dim))
+            check = ~done & ~stops & (m >= first_check) & ((m - first_check) % check_every == 0)
+            needed = stops | check
+            if np.any(needed):
+                t = arrays.tridiagonal(np.stack(alphas, axis=-1), _stack_or_empty(np, betas, alpha))
+                t = t[needed]  # (count, k, m, m)
+                if e1 is None or e1.shape[0] != m:
+                    e1 = np.zeros((m, 1))
+                    e1[0, 0] = 1.0
+                lam, vectors = np.linalg.eigh(t)
+                coef = np.swapaxes(vectors, -1, -2) @ e1
+                coeffs = (vectors @ (phi_scalar(lam, order)[..., None] * coef))[..., 0]
+                passed = np.zeros(batch, dtype=bool)
+                if np.any(check):
+                    est = b[needed] * np.abs(coeffs[..., -1])
+                    ok = np.all(est <= rtol * np.linalg.norm(coeffs, axis=-1) + 1e-300, axis=-1)
+                    passed[needed] = ok & check[needed]
+                now = stops | passed
+                if np.any(now):
+                    stopped[m] = (now, coeffs[now[needed]])
+                converged |= breakdown | passed
+                done |= now
+            if np.all(done):
+                break
+        if any_small:
+            w = np.where(small[..., None], 0.0, w / np.where(small, 1.0, b)[..., None])
+        else:
+            w /= b[..., None]
+        betas.append(b)
+        w_prev, q = q, w
+        basis.append(q)
+    if n >= _ACCUMULATE_BASIS_MIN_N and len(stopped) == 1:
+        # as in `_lanczos_action`: sum the basis vector by vector (no stacked copy)
+        ((m, (_, coeffs)),) = stopped.items()
+        coeffs = np.reshape(coeffs, (*batch, *coeffs.shape[-2:]))
+        out = coeffs[..., 0:1] * basis[0]
+        for j in range(1, m):
+            out = out + coeffs[..., j : j + 1] * basis[j]
+        return np.swapaxes(out * beta0[..., None], -1, -2), converged
+    stacked = np.stack(basis[: max(stopped)], axis=-2)
+    return _gather_members(np, stopped, stacked, beta0, batch), converged
+
+
 def _gather_members(
     xp: Any, stopped: dict[int, tuple[np.ndarray, Any]], stacked: Any, beta: Any, batch: tuple
 ) -> Any:
@@ -480,6 +576,8 @@ def _krylov(
     """The Krylov phi-action (Lanczos if symmetric, else Arnoldi) on a matrix or an operator:
     (result, converged per batch member)."""
     rows = _RowOperator(a)
+    if symmetric and not (arrays.is_torch(v) or arrays.is_torch(a)):
+        return _lanczos_numpy(rows, v, order, rtol, max_dim, bounds=bounds)
     if symmetric:
         return _lanczos_action(rows, v, order, rtol, max_dim, bounds=bounds)
     return _krylov_action(rows, v, order, rtol, max_dim, symmetric)
