@@ -395,6 +395,7 @@ class SwarmEpisode:
         )
         self.params = config.params
         self.model: SwarmModel = _CachedLinearizationModel(self.params, config.linear_operator)
+        arrays.prepare_hot_path()
         self.dt = config.dt
         self.positions: np.ndarray | None = None
         self.step_index = 0

@@ -226,6 +226,7 @@ class SwarmVectorEnv(VectorEnv):
         # the block views of the current state the block models last saw (their cache keys)
         self._block_views: list[Any] = []
         self._block_views_of: Any = None
+        arrays.prepare_hot_path()
         self.phi_method = single_env_phi_method(self.config)
         self.integrator: Integrator = make_integrator(
             self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
