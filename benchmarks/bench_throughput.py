@@ -158,15 +158,69 @@ def plain_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     return step
 
 
+def inplace_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
+    """The same in preallocated buffers (np.subtract/multiply/add/divide with out=, one matmul
+    P [x | 1]): the fewest numpy passes for P and the drift, no allocation of size N^2."""
+    x = np.random.default_rng(0).uniform(-1.0, 1.0, (n_paths, n, 1))
+    w, alpha2 = 1.0 / 0.05, 0.1**2
+    p = np.empty((n_paths, n, n))
+    augmented = np.ones((n_paths, n, 2))
+    product = np.empty((n_paths, n, 2))
+
+    def step() -> None:
+        np.subtract(x[..., None, :, 0], x[..., :, None, 0], out=p)
+        np.multiply(p, p, out=p)
+        np.add(p, alpha2, out=p)
+        np.divide(w, p, out=p)
+        augmented[..., :1] = x
+        np.matmul(p, augmented, out=product)
+        (product[..., :1] - product[..., 1:] * x) / n
+
+    return step
+
+
+def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
+    """One Lanczos product's worth of memory traffic: rows (n_paths, 1, n) @ P (n_paths, n, n)."""
+    p = np.random.default_rng(0).uniform(size=(n_paths, n, n))
+    rows = np.ones((n_paths, 1, n))
+    return lambda: rows @ p
+
+
+def krylov_products_per_step(steps: int = 100) -> float:
+    """Mean number of Lanczos matrix products per SERB env step at the paper setting (the same
+    steps as part 1), counted on the phi-function module's operator wrapper."""
+    from agent_envs.integrators import phi_functions
+
+    count = [0]
+    original = phi_functions._RowOperator.apply
+
+    def counted(self: Any, rows: Any) -> Any:
+        count[0] += 1
+        return original(self, rows)
+
+    step = single_env_stepper(env_kwargs("paper", "serb"))
+    phi_functions._RowOperator.apply = counted
+    try:
+        for _ in range(steps):
+            step()
+    finally:
+        phi_functions._RowOperator.apply = original
+    return count[0] / steps
+
+
 def worker_ratios(rounds: int) -> dict[str, float]:
     fns = {
         "serb_env": single_env_stepper(env_kwargs("paper", "serb")),
         "em_env": single_env_stepper(env_kwargs("paper", "em")),
         "plain": plain_kernel_drift(),
+        "inplace": inplace_kernel_drift(),
+        "matrix_pass": matrix_pass(),
         "serb_bare_1": bare_stepper("serb", 1),
         "em_bare_1": bare_stepper("em", 1),
     }
-    return interleaved(fns, 100, rounds)
+    out = interleaved(fns, 100, rounds)
+    out["krylov_products"] = krylov_products_per_step()
+    return out
 
 
 def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str, float]:
@@ -309,6 +363,7 @@ def main() -> int:
         for label, num, den in (
             ("SERB env step / EM env step", "serb_env", "em_env"),
             ("EM env step / plain numpy kernel + drift", "em_env", "plain"),
+            ("EM env step / in-place numpy kernel + drift", "em_env", "inplace"),
             ("one SERB step / one EM step (N = 100, 1 path)", "serb_bare_1", "em_bare_1"),
         ):
             a, b = res["after"], res.get("before")
@@ -317,6 +372,19 @@ def main() -> int:
                 f"{fmt_pair(1e3 * a[num], b and 1e3 * b[num], '.3f')}, "
                 f"{fmt_pair(1e3 * a[den], b and 1e3 * b[den], '.3f')} |"
             )
+        a, b = res["after"], res.get("before")
+        floors = {
+            k: (v["em_env"] + v["krylov_products"] * v["matrix_pass"]) / v["em_env"]
+            for k, v in res.items()
+        }
+        products = fmt_pair(a["krylov_products"], b and b["krylov_products"], ".1f")
+        one_pass = fmt_pair(1e3 * a["matrix_pass"], b and 1e3 * b["matrix_pass"], ".3f")
+        print(
+            f"\nSERB env step: {products} Lanczos products per step (mean over the 100 steps of"
+            f" part 1); one product (a pass over the 20 x 100 x 100 kernel matrices) {one_pass}"
+            " ms; floor of SERB / EM = (EM step + products x pass) / EM step ="
+            f" {fmt_pair(floors['after'], floors.get('before'), '.2f')}"
+        )
         print()
 
     if "vector" not in args.skip:
