@@ -186,9 +186,9 @@ def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     return lambda: rows @ p
 
 
-def krylov_products_per_step(steps: int = 100) -> float:
-    """Mean number of Lanczos matrix products per SERB env step at the paper setting (the same
-    steps as part 1), counted on the phi-function module's operator wrapper."""
+def krylov_products_per_step(step: Callable[[], None], steps: int = 100) -> float:
+    """Mean number of Lanczos matrix products per call of `step` over `steps` calls, counted on
+    the phi-function module's operator wrapper."""
     from agent_envs.integrators import phi_functions
 
     count = [0]
@@ -198,7 +198,6 @@ def krylov_products_per_step(steps: int = 100) -> float:
         count[0] += 1
         return original(self, rows)
 
-    step = single_env_stepper(env_kwargs("paper", "serb"))
     phi_functions._RowOperator.apply = counted
     try:
         for _ in range(steps):
@@ -219,7 +218,11 @@ def worker_ratios(rounds: int) -> dict[str, float]:
         "em_bare_1": bare_stepper("em", 1),
     }
     out = interleaved(fns, 100, rounds)
-    out["krylov_products"] = krylov_products_per_step()
+    # the same steps as part 1 (paper env) and as the bare 1-path timing (its first 100 steps)
+    out["krylov_products"] = krylov_products_per_step(
+        single_env_stepper(env_kwargs("paper", "serb"))
+    )
+    out["krylov_products_1"] = krylov_products_per_step(bare_stepper("serb", 1))
     return out
 
 
@@ -384,6 +387,17 @@ def main() -> int:
             f" part 1); one product (a pass over the 20 x 100 x 100 kernel matrices) {one_pass}"
             " ms; floor of SERB / EM = (EM step + products x pass) / EM step ="
             f" {fmt_pair(floors['after'], floors.get('before'), '.2f')}"
+        )
+        per_product = {
+            k: (v["serb_bare_1"] - v["em_bare_1"]) / v["krylov_products_1"] for k, v in res.items()
+        }
+        products_1 = fmt_pair(a["krylov_products_1"], b and b["krylov_products_1"], ".1f")
+        before_ms = per_product.get("before")
+        cost = fmt_pair(1e3 * per_product["after"], before_ms and 1e3 * before_ms, ".3f")
+        print(
+            f"\nOne SERB step, N = 100, 1 path: {products_1} Lanczos products per step; its cost"
+            " beyond the EM step per product (the interpreter's share: numpy calls on 100-vectors)"
+            f" {cost} ms"
         )
         print()
 
