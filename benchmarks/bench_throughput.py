@@ -14,7 +14,10 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
    zero control, the same states: episodes from uniform starts).
 3. Native vector env (`gym.make_vec(..., vectorization_mode="vector_entry_point")`) at
    B = 1, 16, 64 for 1 and 20 paths against B single envs stepped in a loop, and against
-   Gymnasium's SyncVectorEnv at B = 64, 1 path (env-steps/s, interleaved rounds, medians).
+   Gymnasium's SyncVectorEnv at B = 64, 1 path (env-steps/s, interleaved rounds, medians). The
+   last column is the time of the unavoidable compute (one in-place numpy kernel matrix and drift
+   per system, B x P systems) as a share of the native step: near 100 % the env is
+   compute-bound.
 4. PPO (SB3) on `agent_envs.training.native_vec_env.NativeVecEnv` at the paper setting with the
    training layer's hyperparameters (`HYPERPARAMS["ppo"]`, VecNormalize, horizon as
    termination; torch on one thread), `--ppo-timesteps` timesteps in a fresh process: env-steps/s
@@ -247,6 +250,14 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
                 "native": lambda native=native, actions=actions: native.step(actions),
                 "loop": lambda singles=singles: [s() for s in singles],
             }
+            # the compute floor: one kernel matrix + drift per system and step (in-place numpy,
+            # in chunks of at most 100 systems = 8 MB, as the native env's blocks)
+            systems = b * n_paths
+            chunk = min(systems, 100)
+            floor = inplace_kernel_drift(n_paths=chunk)
+            fns["floor"] = lambda floor=floor, reps=systems / chunk: [
+                floor() for _ in range(max(1, round(reps)))
+            ]
             if n_paths == 1 and b == max(batches):
                 sync = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="sync", **kwargs)
                 sync.reset(seed=0)
@@ -408,16 +419,20 @@ def main() -> int:
             k: run_worker(py, "vector", batches=batches, paths=paths, rounds=r)
             for k, py in pythons.items()
         }
-        print("| paths | B | native env-steps/s | loop env-steps/s | native / loop |")
-        print("|---|---|---|---|---|")
+        print(
+            "| paths | B | native env-steps/s | loop env-steps/s | native / loop |"
+            " kernel + drift share of the native step |"
+        )
+        print("|---|---|---|---|---|---|")
         for p in paths:
             for b in batches:
                 a, o = res["after"], res.get("before")
-                key_n, key_l = f"native/B{b}/P{p}", f"loop/B{b}/P{p}"
+                key_n, key_l, key_f = f"native/B{b}/P{p}", f"loop/B{b}/P{p}", f"floor/B{b}/P{p}"
                 print(
                     f"| {p} | {b} | {fmt_pair(a[key_n], o and o[key_n])} | "
                     f"{fmt_pair(a[key_l], o and o[key_l])} | "
-                    f"{fmt_pair(a[key_n] / a[key_l], o and o[key_n] / o[key_l], '.2f')} |"
+                    f"{fmt_pair(a[key_n] / a[key_l], o and o[key_n] / o[key_l], '.2f')} | "
+                    f"{fmt_pair(100 * a[key_n] / a[key_f], o and 100 * o[key_n] / o[key_f])} % |"
                 )
         b = max(batches)
         a, o = res["after"], res.get("before")

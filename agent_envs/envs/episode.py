@@ -206,8 +206,11 @@ def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
 class _CachedLinearizationModel(SwarmModel):
     """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
 
-    The episode only hands it read-only state arrays that it never mutates, and the cached
-    matrix is made read-only too, so a stale or corrupted hit is impossible. torch tensors
+    On the numpy workspace path (`agent_envs.dynamics.laplacian`) it keeps the `FrozenLaplacian`
+    and the drift, valid while the workspace still holds that P (`FrozenLaplacian.current`);
+    on the Array-API path the matrix L(x) and the row sums. The episode only hands it read-only
+    state arrays that it never mutates, and the cached arrays are made read-only too, so a
+    stale or corrupted hit is impossible. torch tensors
     cannot be made read-only: they are cached only with `cache_tensors=True`, which the owner
     (the native vector env) sets because it builds a new state tensor every step and never
     writes into one.
