@@ -6,7 +6,8 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
 1. Env steps/s, SERB and EM. **cold**: the first 100 steps of a fresh subprocess (env made and
    reset first; resets with seed 0, 1, ... at each episode end, inside the timing); **warm**: the
    same 100 steps (same seeds) again in that process, median of `--rounds` rounds; cold/warm is
-   their ratio.
+   their ratio. Each figure is the median over `--rounds` fresh processes (100 quick steps take
+   ~10 ms, so one preemption moves a single process's ratio by 10-40 %).
 2. Ratios in one process (interleaved rounds, medians): the warm SERB env step over the EM env
    step (paper); the EM env step over a plain numpy kernel + drift of the same size
    (``p = w / (alpha^2 + (x_l - x_k)^2); (p @ x - p.sum(-1) * x) / N``, its floor); one bare
@@ -356,16 +357,24 @@ def main() -> int:
         print("|---|---|---|---|---|")
         for setting in SETTINGS:
             for integrator in ("serb", "em"):
-                res = {
-                    k: run_worker(py, "cold", setting=setting, integrator=integrator, rounds=r)
-                    for k, py in pythons.items()
-                }
+                # `r` fresh processes per interpreter: medians of their cold and warm figures
+                res = {}
+                for k, py in pythons.items():
+                    runs = [
+                        run_worker(py, "cold", setting=setting, integrator=integrator, rounds=r)
+                        for _ in range(r)
+                    ]
+                    res[k] = {
+                        key: float(np.median([run[key] for run in runs]))
+                        for key in ("cold", "warm")
+                    }
+                    res[k]["ratio"] = float(np.median([run["cold"] / run["warm"] for run in runs]))
                 a, b = res["after"], res.get("before")
                 print(
                     f"| {setting} | {integrator} | "
                     f"{fmt_pair(1 / a['cold'], b and 1 / b['cold'])} | "
                     f"{fmt_pair(1 / a['warm'], b and 1 / b['warm'])} | "
-                    f"{fmt_pair(a['cold'] / a['warm'], b and b['cold'] / b['warm'], '.2f')} |"
+                    f"{fmt_pair(a['ratio'], b and b['ratio'], '.2f')} |"
                 )
         print()
 
