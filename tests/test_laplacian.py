@@ -138,3 +138,30 @@ def test_a_stale_operator_raises_instead_of_using_the_overwritten_matrix():
     dense = model.frozen_linearization(x["spread"])
     model.interaction_drift(x["consensus"])
     np.testing.assert_allclose(dense, model.frozen_linearization(x["spread"]))
+
+
+@pytest.mark.parametrize("integrator", ["serb", "em"])
+def test_an_env_step_allocates_no_kernel_sized_array(integrator):
+    """After the first step, stepping allocates nothing of the size of one kernel matrix batch
+    (n_paths N^2 floats): P lives in the model's workspace (numpy reports its allocations to
+    tracemalloc). What remains is small arrays and numpy's own iterator buffer of a broadcast
+    ufunc (a fixed 128 KiB, whatever N), below half of the 640 kB batch here."""
+    import tracemalloc
+
+    from agent_envs.envs import SwarmEnv
+
+    env = SwarmEnv(n_agents=100, n_paths=8, n_steps=50, integrator=integrator)
+    env.reset(seed=0)
+    action = np.full(100, 0.1, dtype=np.float32)
+    for _ in range(3):
+        env.step(action)
+    kernel_bytes = 8 * 8 * 100 * 100
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        for _ in range(5):
+            env.step(action)
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert peak < kernel_bytes / 2, peak

@@ -42,23 +42,26 @@ _MAX_SHAPES = 2
 class KernelWorkspace:
     """Buffers of the dense kernel evaluation, one set per state shape (..., N, d).
 
-    `kernel_matrix` (..., N, N), `augmented` ([x | 1], (..., N, d + 1)) and `product`
-    (P [x | 1], (..., N, d + 1)). `generation` counts the evaluations; an operator built at
-    one generation is valid until the next.
+    The kernel matrix P (..., N, N), `augmented` ([x | 1], (..., N, d + 1)), `product`
+    (P [x | 1], (..., N, d + 1)) and, for d > 1, a scratch (..., N, N) for the coordinate
+    differences. `generation` counts the evaluations; an operator built at one generation is
+    valid until the next.
     """
 
     def __init__(self) -> None:
         self.generation = 0
-        self._buffers: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._buffers: dict[tuple[int, ...], tuple[Any, ...]] = {}
 
-    def buffers(self, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(P, [x | 1], P [x | 1]) buffers for states of `shape` (..., N, d), made once."""
+    def buffers(self, shape: tuple[int, ...]) -> tuple[Any, ...]:
+        """(P, [x | 1], P [x | 1], scratch or None) for states of `shape` (..., N, d), made
+        once."""
         found = self._buffers.get(shape)
         if found is None:
             *batch, n, d = shape
             augmented = np.empty((*batch, n, d + 1))
             augmented[..., d] = 1.0
-            found = (np.empty((*batch, n, n)), augmented, np.empty((*batch, n, d + 1)))
+            scratch = np.empty((*batch, n, n)) if d > 1 else None
+            found = (np.empty((*batch, n, n)), augmented, np.empty((*batch, n, d + 1)), scratch)
             if len(self._buffers) >= _MAX_SHAPES:
                 self._buffers.pop(next(iter(self._buffers)))
             self._buffers[shape] = found
@@ -66,19 +69,24 @@ class KernelWorkspace:
 
 
 def fill_cucker_smale(
-    x: np.ndarray, alpha: float, weights: float | np.ndarray, out: np.ndarray
+    x: np.ndarray,
+    alpha: float,
+    weights: float | np.ndarray,
+    out: np.ndarray,
+    scratch: np.ndarray | None = None,
 ) -> np.ndarray:
     """P[..., k, l] = w_l / (alpha^2 + |x_k - x_l|^2) written into `out` (..., N, N).
 
     x (..., N, d) float64; `weights` a float or an (N,) array (index l). Four passes over `out`
     for d = 1 (difference, square, + alpha^2, w / .); for d > 1 the squared distances are summed
-    coordinate by coordinate into `out` (no (..., N, N, d) temporary).
+    coordinate by coordinate into `out` through `scratch` (shaped like `out`; a fresh one if
+    None), never an (..., N, N, d) temporary.
     """
     d = x.shape[-1]
     np.subtract(x[..., None, :, 0], x[..., :, None, 0], out=out)
     np.multiply(out, out, out=out)
     if d > 1:
-        diff = np.empty_like(out)
+        diff = np.empty_like(out) if scratch is None else scratch
         for i in range(1, d):
             np.subtract(x[..., None, :, i], x[..., :, None, i], out=diff)
             np.multiply(diff, diff, out=diff)

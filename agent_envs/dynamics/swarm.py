@@ -154,10 +154,10 @@ class SwarmModel:
         """
         kernel = self.kernel
         ws = self._workspace
-        p, augmented, product = ws.buffers(tuple(x.shape))
+        p, augmented, product, scratch = ws.buffers(tuple(x.shape))
         ws.generation += 1
         weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
-        fill_cucker_smale(x, kernel.alpha, weights, out=p)
+        fill_cucker_smale(x, kernel.alpha, weights, out=p, scratch=scratch)
         d = x.shape[-1]
         augmented[..., :d] = x
         np.matmul(p, augmented, out=product)
