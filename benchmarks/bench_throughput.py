@@ -279,7 +279,11 @@ def worker_ppo(timesteps: int) -> dict[str, float]:
 
     from agent_envs.training.config import GYM_ENV_ID, TrainConfig, resolve_hyperparams
     from agent_envs.training.native_vec_env import NativeVecEnv
-    from agent_envs.training.sweep_grid import PAPER_ENV
+
+    try:  # the presets' module (its name before the presets were shared: sweep_grid)
+        from agent_envs.training.presets import PAPER_ENV
+    except ImportError:
+        from agent_envs.training.sweep_grid import PAPER_ENV
 
     torch.set_num_threads(1)
     config = TrainConfig(env_id=GYM_ENV_ID, vec_env="native", seed=0, env_kwargs=dict(PAPER_ENV))
