@@ -59,6 +59,16 @@ def _blas_libraries() -> list[Any]:
     return _BLAS_LIBRARIES
 
 
+def prepare_hot_path() -> None:
+    """Find the BLAS pools `hot_path_threads` limits now rather than at the first step.
+
+    threadpoolctl scans every loaded library (about 10 ms, once per process); an env calls this
+    when it is made, so that its first step costs what the others do.
+    """
+    if HOT_PATH_BLAS_THREADS is not None:
+        _blas_libraries()
+
+
 @contextmanager
 def hot_path_threads() -> Iterator[None]:
     """Limit the BLAS pools to `HOT_PATH_BLAS_THREADS` inside the block; restore them after.

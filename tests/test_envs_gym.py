@@ -395,17 +395,52 @@ def test_human_mode_with_a_non_interactive_backend_is_silent():
     env.close()
 
 
-def test_kernel_matrix_is_built_once_per_step():
+@pytest.mark.parametrize("integrator", ["serb", "em"])
+def test_kernel_matrix_is_built_once_per_step(monkeypatch, integrator):
     """The observation's drift and the next integrator step share L(x) (see episode.py)."""
-    env = SwarmEnv(n_paths=2, **SMALL)
+    import agent_envs.dynamics.swarm as swarm_module
+
+    env = SwarmEnv(n_paths=2, integrator=integrator, **SMALL)
     env.reset(seed=0)
-    kernel = env.model.kernel
     calls = []
-    original = kernel.value
-    kernel.value = lambda xk, xl: calls.append(1) or original(xk, xl)
+    original = swarm_module.fill_cucker_smale
+    monkeypatch.setattr(
+        swarm_module, "fill_cucker_smale", lambda *a, **k: calls.append(1) or original(*a, **k)
+    )
     for _ in range(3):
         env.step(env.action_space.sample())
     assert len(calls) == 3  # one per new state; without the cache it would be 6
+
+
+def test_kernel_matrix_of_a_user_kernel_is_built_once_per_step():
+    """The same on the Array-API path (a kernel that is not a CuckerSmaleKernel)."""
+    from agent_envs.dynamics.kernels import CuckerSmaleKernel
+
+    class Wrapped:
+        symmetric = True
+        radial = True
+
+        def __init__(self) -> None:
+            self.inner = CuckerSmaleKernel.symmetric_kernel(0.1, 0.05)
+            self.calls = 0
+
+        def value(self, xk, xl):
+            self.calls += 1
+            return self.inner.value(xk, xl)
+
+        def grad_x(self, xk, xl):
+            return self.inner.grad_x(xk, xl)
+
+        def grad_y(self, xk, xl):
+            return self.inner.grad_y(xk, xl)
+
+    kernel = Wrapped()
+    env = SwarmEnv(n_paths=2, **{**SMALL, "kernel": kernel})
+    env.reset(seed=0)
+    before = kernel.calls
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    assert kernel.calls - before == 3
 
 
 def test_misspelt_reset_option_is_rejected_naming_it():

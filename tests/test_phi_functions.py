@@ -145,3 +145,49 @@ def test_a_member_that_does_not_converge_leaves_the_others_unchanged(symmetric):
     np.testing.assert_allclose(
         batch[1], phi_action(a[1], v, 1, method=dense, symmetric=symmetric), rtol=1e-9
     )
+
+
+def _swarm_laplacians(n_paths: int = 6, n: int = 100):
+    """tau L(x) of the paper's swarm (dense arrays and the workspace operator) for spread,
+    near-consensus and mixed states."""
+    from agent_envs import SwarmModel, SwarmParams
+
+    rng = np.random.default_rng(5)
+    spread = rng.uniform(-1, 1, (n_paths, n, 1))
+    consensus = 0.3 + 1e-4 * rng.standard_normal((n_paths, n, 1))
+    model = SwarmModel(SwarmParams(n_agents=n))
+    for x in (spread, consensus, np.concatenate([spread[:3], consensus[3:]])):
+        _, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+        yield x, 0.02 * model.frozen_linearization(x), 0.02 * lin.matrix
+
+
+@pytest.mark.parametrize("order", [1, 2])
+@pytest.mark.parametrize("columns", [1, 2])
+def test_numpy_lanczos_equals_the_reference_lanczos_bit_for_bit(order, columns):
+    """The numpy Lanczos (`_lanczos_numpy`) repeats `_lanczos_action` operation by operation,
+    on plain matrices (no bounds) and on the workspace operator (row-sum bounds)."""
+    from agent_envs.integrators.phi_functions import (
+        _lanczos_action,
+        _lanczos_numpy,
+        _RowOperator,
+    )
+
+    rng = np.random.default_rng(order + columns)
+    for _, dense, operator in _swarm_laplacians():
+        v = rng.standard_normal((dense.shape[0], 100, columns))
+        v[0] = 0.0  # a zero member: the happy breakdown at m = 1
+        for a in (dense, operator):
+            got, got_ok = _lanczos_numpy(_RowOperator(a), v, order, 1e-10, 100)
+            want, want_ok = _lanczos_action(_RowOperator(a), v, order, 1e-10, 100)
+            np.testing.assert_array_equal(got, want)
+            np.testing.assert_array_equal(got_ok, want_ok)
+            assert np.all(got_ok)
+
+
+def test_lanczos_with_row_sum_bounds_matches_dense_to_the_tolerance():
+    for _, dense, operator in _swarm_laplacians():
+        v = np.random.default_rng(0).standard_normal((dense.shape[0], 100, 1))
+        ref = phi_action(dense, v, 1, method="eigh", symmetric=True)
+        got = phi_action(operator, v, 1, method="krylov", symmetric=True)
+        scale = np.linalg.norm(ref, axis=-2, keepdims=True)
+        assert np.max(np.abs(got - ref) / scale) < 1e-8

@@ -117,6 +117,28 @@ def test_native_matches_sync_vector_env_with_autoreset_and_divergence(kwargs):
     assert truncated >= 6  # the other envs reached the horizon, episode after episode
 
 
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"n_agents": 100, "n_steps": 6},  # Lanczos on the workspace operator
+        {"n_agents": 12, "n_paths": 3},  # expm of the operator's dense form
+        {"n_agents": 10, "integrator": "em", "epsilon": 0.5},
+    ],
+)
+def test_native_env_in_blocks_matches_sync_vector_env(monkeypatch, kwargs):
+    """Blocks of envs (vector_env.BLOCK_BYTES) change nothing: 5 envs in blocks of 2, 2, 1,
+    through autoresets and divergence (the block caches are rebuilt after both)."""
+    import agent_envs.envs.vector_env as vector_env
+
+    kwargs = {**DIVERGING, **kwargs}
+    n = kwargs["n_agents"]
+    monkeypatch.setattr(vector_env, "BLOCK_BYTES", 8 * kwargs.get("n_paths", 1) * n * n * 2)
+    assert len(SwarmVectorEnv(5, **kwargs)._blocks) == 3
+    terminated, truncated = run_side_by_side(5, 3 * kwargs["n_steps"] + 2, **kwargs)
+    assert terminated >= 2
+    assert truncated >= 6
+
+
 def test_arnoldi_members_match_exactly():
     # Non-symmetric kernel at N = 130: "auto" is Arnoldi, whose batch members also stop one by
     # one, so the vector env is exact there too.

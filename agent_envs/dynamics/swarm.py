@@ -35,6 +35,12 @@ import numpy as np
 
 from agent_envs import arrays
 from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
+from agent_envs.dynamics.laplacian import (
+    FrozenLaplacian,
+    KernelWorkspace,
+    fill_cucker_smale,
+    krylov_bounds,
+)
 from agent_envs.dynamics.operators import (
     AUTO_MATRIX_FREE_MIN_AGENTS,
     DENSE_MEMORY_BUDGET_BYTES,
@@ -67,9 +73,19 @@ class Linearization:
     flattened state (..., Nd) (the exact Jacobian).
     """
 
-    matrix: Any  # an array, or a matrix-free operator (`@`, scalar `*`, see dynamics.operators)
+    matrix: Any  # an array, or an operator (`@`, scalar `*`: dynamics.operators, .laplacian)
     per_coordinate: bool
     symmetric: bool
+    #: (||A||_inf per batch member, width of spec(A) without its eigenvalue 0 or None), numpy
+    #: arrays of the batch shape, for the Krylov phi-action (scaled with A by `scaled_bounds`)
+    bounds: tuple[np.ndarray, np.ndarray | None] | None = None
+
+    def scaled_bounds(self, c: float) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """`bounds` of c A."""
+        if self.bounds is None:
+            return None
+        norms, widths = self.bounds
+        return abs(c) * norms, None if widths is None else abs(c) * widths
 
     def as_columns(self, v: Any) -> Any:
         """The state-shaped v (..., N, d) as the block of vectors A acts on."""
@@ -115,6 +131,50 @@ class SwarmModel:
         self.dim = params.dim
         self.sigma = params.sigma
         self.linear_operator = check_linear_operator(linear_operator)
+        self._workspace = KernelWorkspace()
+        kernel = self.kernel
+        # p_max = w / alpha^2 = P_kk >= every P_kl: the symmetric Cucker-Smale kernel's peak
+        self._peak: float | None = None
+        if isinstance(kernel, CuckerSmaleKernel) and kernel.weights.ndim == 0:
+            self._peak = float(kernel.weights) / kernel.alpha**2
+
+    def _uses_workspace(self, x: Any) -> bool:
+        """Whether x takes the workspace path: numpy, the Cucker-Smale kernel, dense."""
+        return (
+            isinstance(x, np.ndarray)
+            and isinstance(self.kernel, CuckerSmaleKernel)
+            and not self.matrix_free(x)
+        )
+
+    def _laplacian(self, x: np.ndarray) -> tuple[FrozenLaplacian, np.ndarray]:
+        """L(x) as a `FrozenLaplacian` over the workspace, and the drift L(x) x (fresh).
+
+        One kernel pass into the workspace's P, one product P [x | 1] = [P x | s], then
+        F = (P x - s * x) / N; nothing of size (..., N, N) is allocated after the first call.
+        """
+        kernel = self.kernel
+        ws = self._workspace
+        p, augmented, product, scratch = ws.buffers(tuple(x.shape))
+        ws.generation += 1
+        weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
+        fill_cucker_smale(x, kernel.alpha, weights, out=p, scratch=scratch)
+        d = x.shape[-1]
+        augmented[..., :d] = x
+        np.matmul(p, augmented, out=product)
+        row_sums = product[..., d].copy()
+        drift = product[..., :d] - row_sums[..., None] * x
+        drift /= self.n_agents
+        view = p.view()
+        view.flags.writeable = False
+        operator = FrozenLaplacian(
+            view,
+            row_sums,
+            symmetric=bool(kernel.symmetric),
+            peak=self._peak,
+            workspace=ws,
+            generation=ws.generation,
+        )
+        return operator, drift
 
     def matrix_free(self, x: Any, kind: str = "frozen") -> bool:
         """Whether the drift and the `kind` linearization at x go matrix-free (see class doc).
@@ -171,21 +231,28 @@ class SwarmModel:
         return self.kernel.value(x[..., :, None, :], x[..., None, :, :])
 
     def frozen_linearization(self, x: Any) -> Any:
-        """L(x) = (P(x) - diag(P(x) 1)) / N; shape (..., N, N)."""
+        """L(x) = (P(x) - diag(P(x) 1)) / N; shape (..., N, N), a fresh array."""
+        return self._frozen_with_row_sums(x)[0]
+
+    def _frozen_with_row_sums(self, x: Any) -> tuple[Any, Any]:
+        """(L(x), s = P(x) 1): the Array-API path (torch, user kernels, the reference)."""
         p = self.interaction_matrix(x)
         xp = arrays.namespace(p)
         if not isinstance(self.kernel, CuckerSmaleKernel) and isinstance(p, np.ndarray):
             # the in-place steps below may only write into an array we own: a user kernel may
             # return a cached, read-only or broadcast array
             p = np.array(p, dtype=float, copy=True)
-        p = arrays.subtract_diagonal(p, xp.sum(p, axis=-1))
-        return arrays.divide_fresh(p, self.n_agents)
+        row_sums = xp.sum(p, axis=-1)
+        p = arrays.subtract_diagonal(p, row_sums)
+        return arrays.divide_fresh(p, self.n_agents), row_sums
 
     def interaction_drift(self, x: Any) -> Any:
         """(1/N) sum_l p(x_k, x_l)(x_l - x_k) = L(x) x; shape (..., N, d)."""
         x = self._check_state(x)
         if self.matrix_free(x):
             return self.linearization_operator(x).drift()
+        if self._uses_workspace(x):
+            return self._laplacian(x)[1]
         return self.frozen_linearization(x) @ x
 
     def drift(self, t: float, x: Any, u: Any = None) -> Any:
@@ -232,13 +299,25 @@ class SwarmModel:
                 f = f + u
             # in d = 1 the exact Jacobian is symmetric like L(x) for a radial kernel
             return f, Linearization(operator, True, operator.symmetric)
-        frozen = self.frozen_linearization(x)
+        symmetric = bool(self.kernel.symmetric)
+        if kind == "frozen" and self._uses_workspace(x):
+            operator, f = self._laplacian(x)
+            if u is not None:
+                f = f + u
+            return f, Linearization(operator, True, symmetric)
+        frozen, row_sums = self._frozen_with_row_sums(x)
         f = frozen @ x
         if u is not None:
             f = f + u
-        symmetric = bool(self.kernel.symmetric)
         if kind == "frozen":
-            return f, Linearization(frozen, True, symmetric)
+            bounds = None
+            if isinstance(self.kernel, CuckerSmaleKernel):
+                # the same bounds the workspace path reads off its operator (torch, reference)
+                diagonal = self.kernel.weights / self.kernel.alpha**2
+                bounds = krylov_bounds(
+                    arrays.to_numpy(row_sums), diagonal, self.n_agents, self._peak, symmetric
+                )
+            return f, Linearization(frozen, True, symmetric, bounds)
         # r ⊗ dp/dy is a symmetric block only for radial kernels (p a function of |x - y|).
         symmetric = symmetric and bool(getattr(self.kernel, "radial", False))
         return f, Linearization(self.jacobian(x), self.dim == 1, symmetric)

@@ -209,8 +209,11 @@ def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
 class _CachedLinearizationModel(SwarmModel):
     """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
 
-    The episode only hands it read-only state arrays that it never mutates, and the cached
-    matrix is made read-only too, so a stale or corrupted hit is impossible. torch tensors
+    On the numpy workspace path (`agent_envs.dynamics.laplacian`) it keeps the `FrozenLaplacian`
+    and the drift, valid while the workspace still holds that P (`FrozenLaplacian.current`);
+    on the Array-API path the matrix L(x) and the row sums. The episode only hands it read-only
+    state arrays that it never mutates, and the cached arrays are made read-only too, so a
+    stale or corrupted hit is impossible. torch tensors
     cannot be made read-only: they are cached only with `cache_tensors=True`, which the owner
     (the native vector env) sets because it builds a new state tensor every step and never
     writes into one.
@@ -224,21 +227,33 @@ class _CachedLinearizationModel(SwarmModel):
         self._cached_state: Any = None
         self._cached_matrix: Any = None
 
-    def frozen_linearization(self, x: Any) -> Any:
+    def _frozen_with_row_sums(self, x: Any) -> tuple[Any, Any]:
+        # the Array-API path: (L(x), P(x) 1), cached as a list to tell it from the workspace's
         cached = self._cached_matrix
-        if (
-            x is self._cached_state
-            and cached is not None
-            and not isinstance(cached, LinearizationOperator)
-        ):
-            return self._cached_matrix
-        matrix = super().frozen_linearization(x)
+        if x is self._cached_state and isinstance(cached, list):
+            return cached[0], cached[1]
+        matrix, row_sums = super()._frozen_with_row_sums(x)
         if isinstance(x, np.ndarray) and not x.flags.writeable:
             matrix.flags.writeable = False
-            self._cached_state, self._cached_matrix = x, matrix
+            row_sums.flags.writeable = False
+            self._cached_state, self._cached_matrix = x, [matrix, row_sums]
         elif self._cache_tensors and arrays.is_torch(x):
-            self._cached_state, self._cached_matrix = x, matrix
-        return matrix
+            self._cached_state, self._cached_matrix = x, [matrix, row_sums]
+        return matrix, row_sums
+
+    def _laplacian(self, x: np.ndarray) -> tuple[Any, np.ndarray]:
+        # the workspace path (numpy, Cucker-Smale, dense): the operator over the model's P and
+        # the drift, kept while P is still the workspace's (the next evaluation overwrites it)
+        cached = self._cached_matrix
+        if x is self._cached_state and isinstance(cached, tuple) and cached[0].current:
+            return cached
+        found = super()._laplacian(x)
+        if not x.flags.writeable:
+            found[1].flags.writeable = False
+            self._cached_state, self._cached_matrix = x, found
+        else:
+            self._cached_state = self._cached_matrix = None
+        return found
 
     def linearization_operator(self, x: np.ndarray, kind: str = "frozen") -> LinearizationOperator:
         # the matrix-free L(x) (large N), cached like the matrix (it holds no mutable state)
@@ -386,6 +401,7 @@ class SwarmEpisode:
         )
         self.params = config.params
         self.model: SwarmModel = _CachedLinearizationModel(self.params, config.linear_operator)
+        arrays.prepare_hot_path()
         self.dt = config.dt
         self.positions: np.ndarray | None = None
         self.step_index = 0

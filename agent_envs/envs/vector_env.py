@@ -60,6 +60,14 @@ from agent_envs.integrators.phi_functions import auto_phi_method
 from agent_envs.simulator import brownian_increments
 from agent_envs.validation import check_seed, real_array
 
+#: Bytes of kernel matrices one block of envs holds at most (numpy): the envs are stepped in
+#: balanced blocks of at most this size, so that a block's P(x) (B_block x P x N x N floats)
+#: stays in the cache while the Krylov iteration multiplies with it, instead of streaming the
+#: whole batch's P from memory at every product (N = 100, 20 paths, B = 16: 25.6 MB per product
+#: in one batch). 8 MiB measured best of 1, 2, 4, 8 MiB and one batch on a 32 MiB L3
+#: (benchmarks/bench_throughput.py prints the vector env's figures).
+BLOCK_BYTES = 2**23
+
 #: Autoreset modes the native env implements (Gymnasium's names).
 AUTORESET_MODES = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
 
@@ -202,6 +210,23 @@ class SwarmVectorEnv(VectorEnv):
         self.model = _CachedLinearizationModel(
             params, self.config.linear_operator, cache_tensors=True
         )
+        # numpy: the envs in blocks of about BLOCK_BYTES of kernel matrices, each block with its
+        # own model (workspace and cached L(x)); torch: one block (a device wants one batch)
+        per_env = 8 * self.config.n_paths * n * n
+        n_blocks = 1 if self._device is not None else -(-self.num_envs * per_env // BLOCK_BYTES)
+        n_blocks = max(1, min(self.num_envs, n_blocks))
+        envs_per_block = -(-self.num_envs // n_blocks)  # balanced: blocks differ by <= 1 env
+        self._blocks = [
+            slice(i, min(i + envs_per_block, self.num_envs))
+            for i in range(0, self.num_envs, envs_per_block)
+        ]
+        self._block_models = [self.model] + [
+            _CachedLinearizationModel(params, self.config.linear_operator) for _ in self._blocks[1:]
+        ]
+        # the block views of the current state the block models last saw (their cache keys)
+        self._block_views: list[Any] = []
+        self._block_views_of: Any = None
+        arrays.prepare_hot_path()
         self.phi_method = single_env_phi_method(self.config)
         self.integrator: Integrator = make_integrator(
             self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
@@ -316,7 +341,7 @@ class SwarmVectorEnv(VectorEnv):
         rows_on_device = self._on_device(rows)
         positions = xp.asarray(self._positions, copy=True)
         positions[rows_on_device] = self._on_device(starts)  # the same start for every path
-        drift = mean_interaction_drift(self.model, positions)
+        drift = self._mean_drift_of(positions)
         if not bool(xp.all(xp.isfinite(drift[rows_on_device]))):
             raise ValueError("the interaction drift is not finite at the initial positions")
         targets = xp.asarray(self._targets, copy=True)
@@ -324,6 +349,55 @@ class SwarmVectorEnv(VectorEnv):
         self._positions, self._mean_drift, self._targets = positions, drift, targets
         self.step_index[mask] = 0
         self._autoreset[mask] = False
+
+    def _views_of(self, positions: Any) -> list[Any]:
+        """The block views of `positions`: the ones the block models cached, if current."""
+        if self._block_views_of is positions:
+            return self._block_views
+        return [positions[block] for block in self._blocks]
+
+    def _mean_drift_of(self, positions: Any) -> Any:
+        """E interaction drift (B, N, d) of `positions` (B, P, N, d), block by block; the block
+        models keep L(x) of their views for the next step."""
+        if len(self._blocks) == 1:
+            return mean_interaction_drift(self.model, positions)
+        positions.flags.writeable = False
+        views = self._views_of(positions)
+        drifts = [
+            mean_interaction_drift(m, v) for m, v in zip(self._block_models, views, strict=True)
+        ]
+        self._block_views, self._block_views_of = views, positions
+        return np.concatenate(drifts)
+
+    def _advance(self, x: Any, controls: Any, times: Any, dw: Any) -> tuple[Any, Any, Any]:
+        """`advance_paths` of the whole batch, one block of envs at a time (see BLOCK_BYTES):
+        every env's arithmetic is the same as in one call (the core works member by member)."""
+        threshold = self.config.divergence_threshold
+        if len(self._blocks) == 1:
+            return advance_paths(
+                self.integrator, self.model, x, controls, times, self.dt, dw, threshold
+            )
+        parts = [
+            advance_paths(
+                self.integrator,
+                model,
+                view,
+                controls[block],
+                times[block],
+                self.dt,
+                dw[block],
+                threshold,
+            )
+            for model, view, block in zip(
+                self._block_models, self._views_of(x), self._blocks, strict=True
+            )
+        ]
+        x_next = np.concatenate([part[0] for part in parts])
+        x_next.flags.writeable = False
+        self._block_views, self._block_views_of = [part[0] for part in parts], x_next
+        drift = np.concatenate([part[1] for part in parts])
+        diverged = np.concatenate([part[2] for part in parts])
+        return x_next, drift, diverged
 
     def _state_info(self) -> dict[str, Any]:
         every = np.ones(self.num_envs, dtype=bool)
@@ -423,15 +497,8 @@ class SwarmVectorEnv(VectorEnv):
         for i in np.flatnonzero(stepping):
             dw[i] = brownian_increments(self._rng(i), (p, n, d), self.dt)
         with arrays.hot_path_threads():  # BLAS on one thread, as the single env's step
-            x_next, drift_next, diverged_on_device = advance_paths(
-                self.integrator,
-                self.model,
-                x,
-                controls,
-                self._on_device(self.times[:, None, None, None]),
-                self.dt,
-                self._on_device(dw),
-                self.config.divergence_threshold,
+            x_next, drift_next, diverged_on_device = self._advance(
+                x, controls, self._on_device(self.times[:, None, None, None]), self._on_device(dw)
             )
         diverged = arrays.to_numpy(diverged_on_device) & stepping
         moved = stepping & ~diverged
@@ -447,7 +514,7 @@ class SwarmVectorEnv(VectorEnv):
             if np.any(resetting):
                 self._reset_envs(resetting, [None] * b, None)
             else:
-                self._mean_drift = mean_interaction_drift(self.model, self._positions)
+                self._mean_drift = self._mean_drift_of(self._positions)
 
         truncated = moved & (self.step_index >= self.config.n_steps)
         terminated = diverged.copy()

@@ -50,6 +50,8 @@ class RosenbrockEuler(Integrator):
             rhs = rhs + lin.apply(noise)
         scaled = dt * lin.matrix
         kw = {"method": self.phi_method, "symmetric": lin.symmetric}
+        if lin.bounds is not None:
+            kw["bounds"] = lin.scaled_bounds(dt)
         incr = dt * phi_action(scaled, lin.as_columns(rhs), 1, **kw)
         if du_dt is not None:
             v = arrays.namespace(rhs).broadcast_to(du_dt, tuple(rhs.shape))

@@ -170,18 +170,35 @@ class _RowOperator:
             self._at = arrays.namespace(a).matrix_transpose(a)
             self.arrays = (a,)
 
-    def member_norms(self, batch: tuple) -> np.ndarray:
-        """||A||_inf per batch member (a float64 array of shape `batch`); an operator's bound
-        is shared by its members."""
-        if self._op is not None:
-            return np.full(batch, float(self._op.norm_inf))
-        xp = arrays.namespace(self._a)
-        norms = arrays.to_numpy(xp.max(xp.sum(xp.abs(self._a), axis=-1), axis=-1))
-        return np.broadcast_to(norms, batch).astype(np.float64)
+    def member_bounds(self, batch: tuple, bounds: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """(||A||_inf, width) per batch member, float64 arrays of shape `batch`.
+
+        width bounds the spread of spec(A) apart from an isolated eigenvalue 0 (then one
+        Krylov dimension more is needed); without that knowledge it is inf. The bounds come
+        from `bounds` (the caller's, e.g. `Linearization.scaled_bounds`), else from the
+        operator's `krylov_bounds()`, else ||A||_inf of the matrix (one pass over A) or the
+        operator's shared `norm_inf`.
+        """
+        if bounds is None and self._op is not None and hasattr(self._op, "krylov_bounds"):
+            bounds = self._op.krylov_bounds()
+        if bounds is not None:
+            norms, widths = bounds
+            if widths is None:
+                widths = np.inf
+        elif self._op is not None:
+            norms, widths = float(self._op.norm_inf), np.inf
+        else:
+            xp = arrays.namespace(self._a)
+            norms = arrays.to_numpy(xp.max(xp.sum(xp.abs(self._a), axis=-1), axis=-1))
+            widths = np.inf
+        norms = np.broadcast_to(np.asarray(norms, dtype=np.float64), batch)
+        return norms, np.broadcast_to(np.asarray(widths, dtype=np.float64), batch)
 
     @property
     def max_abs(self) -> Any:
         """max |A_kl| per batch entry (..., 1), or a float bound for an operator."""
+        if self._op is not None and hasattr(self._op, "max_abs"):
+            return self._op.max_abs
         if self._op is not None:
             return float(self._op.norm_inf)  # max |A_kl| <= ||A||_inf
         xp = arrays.namespace(self._a)
@@ -190,6 +207,8 @@ class _RowOperator:
     def apply(self, rows: Any) -> Any:
         if self._op is None:
             return rows @ self._at
+        if hasattr(self._op, "apply_rows"):
+            return self._op.apply_rows(rows)
         xp = arrays.namespace(rows)
         return xp.matrix_transpose(self._op.matvec(xp.matrix_transpose(rows)))
 
@@ -279,7 +298,13 @@ def _krylov_action(
 
 
 def _lanczos_action(
-    a: _RowOperator, v: Any, order: int, rtol: float, max_dim: int, check_every: int = 3
+    a: _RowOperator,
+    v: Any,
+    order: int,
+    rtol: float,
+    max_dim: int,
+    check_every: int = 2,
+    bounds: Any = None,
 ) -> Any | None:
     """Lanczos for symmetric A: phi_p(A) v ~ |v| Q_m phi_p(T_m) e_1, T_m tridiagonal.
 
@@ -290,8 +315,11 @@ def _lanczos_action(
     (Druskin, Greenbaum & Knizhnerman, 1998); tests/test_phi_functions.py checks it against the
     dense eigh on the swarm's L(x) and exact Jacobian. Stopped when Saad's error estimate
     b_m |e_m^T phi_p(T_m) e_1| is below rtol |phi_p(T_m) e_1|, checked every `check_every`
-    steps from m = 3.5 sqrt(|A|_inf) (about the dimension below which the Krylov approximation of
-    the exponential has not converged yet), or at a happy breakdown; a member that reaches `max_dim`
+    steps from m_0 = min(3.5 sqrt(|A|_inf), 1 + 3.5 sqrt(w)) (about the dimension below which the
+    Krylov approximation of the exponential has not converged yet: 3.5 sqrt of the width of an
+    interval holding the spectrum, by Hochbruck & Lubich 1997; w is the width of the spectrum
+    apart from an isolated eigenvalue 0, which takes one dimension more; see
+    `_RowOperator.member_bounds`), or at a happy breakdown; a member that reaches `max_dim`
     first (also when m reaches n: the basis is then not exact) counts as not converged.
     Returns (result, converged per batch member). Differentiable on torch
     (list-built basis, no in-place writes to the basis).
@@ -317,8 +345,9 @@ def _lanczos_action(
     alphas: list[Any] = []
     betas: list[Any] = []
     # per member: |A|_inf, the first check and the breakdown tolerance
-    norm_inf = a.member_norms(batch)
-    first_check = np.clip(np.ceil(3.5 * np.sqrt(norm_inf)), 2, max_dim).astype(np.int64)
+    norm_inf, width = a.member_bounds(batch, bounds)
+    first_check = np.minimum(np.ceil(3.5 * np.sqrt(norm_inf)), 1 + np.ceil(3.5 * np.sqrt(width)))
+    first_check = np.clip(first_check, 2, max_dim).astype(np.int64)
     tiny = 1e-12 * (norm_inf + 1e-300)
     done = np.zeros(batch, dtype=bool)
     converged = np.zeros(batch, dtype=bool)
@@ -383,6 +412,108 @@ def _lanczos_action(
     return _gather_members(xp, stopped, stacked, beta0, batch), converged
 
 
+def _norms(w: np.ndarray) -> np.ndarray:
+    """||w|| along the last axis: numpy's vector_norm arithmetic (sqrt of the pairwise sum of
+    w * w) without its argument handling."""
+    return np.sqrt(np.add.reduce(w * w, axis=-1))
+
+
+def _lanczos_numpy(
+    a: _RowOperator,
+    v: np.ndarray,
+    order: int,
+    rtol: float,
+    max_dim: int,
+    check_every: int = 2,
+    bounds: Any = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`_lanczos_action` for numpy arrays with the per-step overhead taken out.
+
+    The same recurrence, per-member bounds, checks, stopping dimensions and arithmetic (each
+    floating-point operation the same, in the same order: tests/test_phi_functions.py checks the
+    results are equal bit for bit), written with in-place numpy operations: no array-namespace
+    dispatch, no broadcast copies, one host-side test per step. `_lanczos_action` stays the
+    reference and the torch (differentiable) path. Returns (result, converged per member).
+    """
+    xp = arrays.namespace(v)  # numpy's standard namespace (numpy 1.x: array-api-compat)
+    n = a.n
+    max_dim = min(max_dim, n)
+    batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
+    q = np.swapaxes(np.broadcast_to(v, (*batch, *v.shape[-2:])), -1, -2)  # (..., k, n)
+    beta0 = _norms(q)  # (..., k)
+    if (beta0 == 0).any():
+        q = q / np.where(beta0 > 0, beta0, 1.0)[..., None]
+    else:
+        q = q / beta0[..., None]
+    basis = [q]
+    alphas: list[np.ndarray] = []
+    betas: list[np.ndarray] = []
+    norm_inf, width = a.member_bounds(batch, bounds)
+    first_check = np.minimum(np.ceil(3.5 * np.sqrt(norm_inf)), 1 + np.ceil(3.5 * np.sqrt(width)))
+    first_check = np.clip(first_check, 2, max_dim).astype(np.int64)
+    tiny = (1e-12 * (norm_inf + 1e-300))[..., None]
+    earliest = int(first_check.min())
+    done = np.zeros(batch, dtype=bool)
+    converged = np.zeros(batch, dtype=bool)
+    stopped: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    e1 = None
+    w_prev = None
+    for j in range(max_dim):
+        w = a.apply(q)
+        alpha = xp.vecdot(w, q)
+        w -= alpha[..., None] * q
+        if w_prev is not None:
+            w -= xp.vecdot(w, w_prev)[..., None] * w_prev
+        b = _norms(w)
+        alphas.append(alpha)
+        m = j + 1
+        small = b <= tiny
+        any_small = bool(small.any())
+        if any_small or m == max_dim or m >= earliest:
+            breakdown = ~done & small.all(axis=-1)
+            stops = breakdown | (~done & (m == max_dim))
+            check = ~done & ~stops & (m >= first_check) & ((m - first_check) % check_every == 0)
+            needed = stops | check
+            if needed.any():
+                t = arrays.tridiagonal(np.stack(alphas, axis=-1), _stack_or_empty(np, betas, alpha))
+                t = t[needed]  # (count, k, m, m)
+                if e1 is None or e1.shape[0] != m:
+                    e1 = np.zeros((m, 1))
+                    e1[0, 0] = 1.0
+                lam, vectors = np.linalg.eigh(t)
+                coef = np.swapaxes(vectors, -1, -2) @ e1
+                coeffs = (vectors @ (phi_scalar(lam, order)[..., None] * coef))[..., 0]
+                passed = np.zeros(batch, dtype=bool)
+                if check.any():
+                    est = b[needed] * np.abs(coeffs[..., -1])
+                    ok = (est <= rtol * _norms(coeffs) + 1e-300).all(axis=-1)
+                    passed[needed] = ok & check[needed]
+                now = stops | passed
+                if now.any():
+                    stopped[m] = (now, coeffs[now[needed]])
+                converged |= breakdown | passed
+                done |= now
+            if done.all():
+                break
+        if any_small:
+            w = np.where(small[..., None], 0.0, w / np.where(small, 1.0, b)[..., None])
+        else:
+            w /= b[..., None]
+        betas.append(b)
+        w_prev, q = q, w
+        basis.append(q)
+    if n >= _ACCUMULATE_BASIS_MIN_N and len(stopped) == 1:
+        # as in `_lanczos_action`: sum the basis vector by vector (no stacked copy)
+        ((m, (_, coeffs)),) = stopped.items()
+        coeffs = np.reshape(coeffs, (*batch, *coeffs.shape[-2:]))
+        out = coeffs[..., 0:1] * basis[0]
+        for j in range(1, m):
+            out = out + coeffs[..., j : j + 1] * basis[j]
+        return np.swapaxes(out * beta0[..., None], -1, -2), converged
+    stacked = np.stack(basis[: max(stopped)], axis=-2)
+    return _gather_members(np, stopped, stacked, beta0, batch), converged
+
+
 def _gather_members(
     xp: Any, stopped: dict[int, tuple[np.ndarray, Any]], stacked: Any, beta: Any, batch: tuple
 ) -> Any:
@@ -445,12 +576,16 @@ def _auto_method(a: Any, v: Any, symmetric: bool) -> str:
     return auto_phi_method(a.shape[-1], n_matrices, symmetric)
 
 
-def _krylov(a: Any, v: Any, order: int, symmetric: bool, rtol: float, max_dim: int) -> Any:
+def _krylov(
+    a: Any, v: Any, order: int, symmetric: bool, rtol: float, max_dim: int, bounds: Any = None
+) -> Any:
     """The Krylov phi-action (Lanczos if symmetric, else Arnoldi) on a matrix or an operator:
     (result, converged per batch member)."""
     rows = _RowOperator(a)
+    if symmetric and not (arrays.is_torch(v) or arrays.is_torch(a)):
+        return _lanczos_numpy(rows, v, order, rtol, max_dim, bounds=bounds)
     if symmetric:
-        return _lanczos_action(rows, v, order, rtol, max_dim)
+        return _lanczos_action(rows, v, order, rtol, max_dim, bounds=bounds)
     return _krylov_action(rows, v, order, rtol, max_dim, symmetric)
 
 
@@ -517,6 +652,7 @@ def phi_action(
     symmetric: bool = False,
     rtol: float = 1e-10,
     max_krylov_dim: int = 100,
+    bounds: Any = None,
 ) -> Any:
     """phi_order(A) V for A (..., n, n) and V (..., n, k); returns (..., n, k).
 
@@ -524,9 +660,10 @@ def phi_action(
     A may also be a matrix-free operator (an object with `matvec`, `shape`, `norm_inf`,
     `scaled`, e.g. `agent_envs.dynamics.operators.LinearizationOperator`): then the Krylov
     method is the only one ("auto" chooses it), and if its space does not converge within
-    `max_krylov_dim` the action is taken in substeps (`_substepped_operator_action`).
-
-    numpy or torch arrays (see `agent_envs.arrays`); on torch every strategy is differentiable.
+    `max_krylov_dim` the action is taken in substeps (`_substepped_operator_action`). A
+    dense-backed operator (one with `dense()` and `apply_rows`, e.g.
+    `agent_envs.dynamics.laplacian.FrozenLaplacian`) is treated as the matrix it stands for:
+    "auto" picks as for that matrix, "expm"/"eigh" and the fallback use `dense()`.
 
     Args:
         a: the (already time-step scaled) matrix, e.g. tau J.
@@ -536,29 +673,41 @@ def phi_action(
         symmetric: whether A is symmetric (enables "eigh").
         rtol: relative tolerance of the Krylov approximation.
         max_krylov_dim: largest Krylov dimension tried.
+        bounds: (||A||_inf, width of spec(A) apart from an eigenvalue 0, or None) per batch
+            member, numpy arrays, when the caller knows them (`Linearization.scaled_bounds`);
+            the Lanczos iteration reads them instead of a pass over A (see `_lanczos_action`).
     """
     if order < 1:
         raise ValueError(f"order must be >= 1, got {order}")
     if method not in PHI_METHODS:
         raise ValueError(f"method must be one of {PHI_METHODS}, got {method!r}")
-    if is_operator(a):
+    dense_backed = is_operator(a) and hasattr(a, "dense") and hasattr(a, "apply_rows")
+    if is_operator(a) and not dense_backed:
         return _operator_action(a, v, order, method, symmetric, rtol, max_krylov_dim)
-    if not (arrays.is_torch(a) or arrays.is_torch(v)):
+    if dense_backed:
+        if arrays.is_torch(v):
+            raise TypeError("a dense-backed operator acts on numpy arrays, got a torch tensor")
+        v = np.asarray(v, dtype=float)
+    elif not (arrays.is_torch(a) or arrays.is_torch(v)):
         a = np.asarray(a, dtype=float)
         v = np.asarray(v, dtype=float)
     if a.shape[-1] != a.shape[-2] or v.shape[-2] != a.shape[-1]:
         raise ValueError(f"shapes do not fit: A {tuple(a.shape)}, V {tuple(v.shape)}")
     if method == "auto":
         method = _auto_method(a, v, symmetric)
+    if dense_backed and method != "krylov":
+        a = a.dense()
     if method == "eigh":
         if not symmetric:
             raise ValueError("method='eigh' needs a symmetric matrix (symmetric=True)")
         return _eigh_action(a, v, order)
     if method == "expm":
         return _augmented_expm(a, v, order)
-    result, converged = _krylov(a, v, order, symmetric, rtol, max_krylov_dim)
+    result, converged = _krylov(a, v, order, symmetric, rtol, max_krylov_dim, bounds)
     if np.all(converged):
         return result
+    if dense_backed:
+        a = a.dense()
     # Only the members that did not converge get the dense method: the others keep their
     # Krylov values, so a batch member's result never depends on the other members.
     if not (symmetric and max_krylov_dim >= a.shape[-1]):

@@ -1,0 +1,477 @@
+"""Throughput at the paper's setting: env steps cold and warm, the native vector env, PPO.
+
+Settings (`agent_envs/Swarm-v0`, frozen Jacobian, max_control = 25, eps = 0.05):
+paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
+
+1. Env steps/s, SERB and EM. **cold**: the first 100 steps of a fresh subprocess (env made and
+   reset first; resets with seed 0, 1, ... at each episode end, inside the timing); **warm**: the
+   same 100 steps (same seeds) again in that process, median of `--rounds` rounds; cold/warm is
+   their ratio. Each figure is the median over `--rounds` fresh processes (100 quick steps take
+   ~10 ms, so one preemption moves a single process's ratio by 10-40 %).
+2. Ratios in one process (interleaved rounds, medians): the warm SERB env step over the EM env
+   step (paper); the EM env step over a plain numpy kernel + drift of the same size
+   (``p = w / (alpha^2 + (x_l - x_k)^2); (p @ x - p.sum(-1) * x) / N``, its floor); one bare
+   SERB step over one bare EM step (`integrator.step` with a `SwarmModel`, N = 100, 1 path,
+   zero control, the same states: episodes from uniform starts).
+3. Native vector env (`gym.make_vec(..., vectorization_mode="vector_entry_point")`) at
+   B = 1, 16, 64 for 1 and 20 paths against B single envs stepped in a loop, and against
+   Gymnasium's SyncVectorEnv at B = 64, 1 path (env-steps/s, interleaved rounds, medians). The
+   last column is the time of the unavoidable compute (one in-place numpy kernel matrix and drift
+   per system, B x P systems) as a share of the native step: near 100 % the env is
+   compute-bound.
+4. PPO (SB3) on `agent_envs.training.native_vec_env.NativeVecEnv` at the paper setting with the
+   training layer's hyperparameters (`HYPERPARAMS["ppo"]`, VecNormalize, horizon as
+   termination; torch on one thread), `--ppo-timesteps` timesteps in a fresh process: env-steps/s
+   of `model.learn` and the share of its wall time spent inside the env's reset/step_wait.
+
+`--baseline-python PATH` runs parts 1, 3 and 4 (and 2) again with another interpreter, e.g. a
+virtual environment with an older checkout of the project installed, and prints both (the
+"before" column): the workers only use public APIs that existed before the workspaces.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_throughput.py [--baseline-python PY]
+
+The BLAS pools are set to one thread below, before numpy loads (the workers inherit it). On a
+shared machine absolute figures move with the load: compare the ratios, each measured within
+one process (parts 2-3) or on the same steps (part 1).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _pool in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_pool] = "1"
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+SETTINGS: dict[str, dict[str, Any]] = {
+    "paper": {"n_agents": 100, "n_steps": 50, "n_paths": 20},
+    "quick": {"n_agents": 10, "n_steps": 20, "n_paths": 20},
+}
+COMMON = {"epsilon": 0.05, "jacobian": "frozen", "max_control": 25.0}
+COLD_STEPS = 100
+
+
+def env_kwargs(setting: str, integrator: str, **extra: Any) -> dict[str, Any]:
+    return {**SETTINGS[setting], **COMMON, "integrator": integrator, **extra}
+
+
+# ----------------------------------------------------------------------------- workers
+def single_env_stepper(kwargs: dict[str, Any], first_seed: int = 0) -> Callable[[], None]:
+    """One `env.step` per call, with a fixed action; resets with the next seed at episode end."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401  (registers the id)
+    from agent_envs.envs import ENV_ID
+
+    env = gym.make(ENV_ID, **kwargs).unwrapped
+    action = np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape)
+    action = action.astype(np.float32)
+    state = {"seed": first_seed}
+    env.reset(seed=first_seed)
+
+    def step() -> None:
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            state["seed"] += 1
+            env.reset(seed=state["seed"])
+
+    def restart() -> None:
+        state["seed"] = first_seed
+        env.reset(seed=first_seed)
+
+    step.restart = restart  # type: ignore[attr-defined]
+    return step
+
+
+def worker_cold(setting: str, integrator: str, rounds: int) -> dict[str, float]:
+    """Seconds per step of the first COLD_STEPS steps of this process, then warm (median)."""
+    step = single_env_stepper(env_kwargs(setting, integrator))
+
+    def block() -> float:
+        start = time.perf_counter()
+        for _ in range(COLD_STEPS):
+            step()
+        return (time.perf_counter() - start) / COLD_STEPS
+
+    cold = block()
+    warm = []
+    for _ in range(rounds):
+        step.restart()  # type: ignore[attr-defined]
+        warm.append(block())
+    return {"cold": cold, "warm": float(np.median(warm))}
+
+
+def interleaved(fns: dict[str, Callable[[], None]], calls: int, rounds: int) -> dict[str, float]:
+    """Median over `rounds` interleaved rounds of the seconds per call of each function."""
+    for fn in fns.values():
+        fn()  # warm-up
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    for _ in range(rounds):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            for _ in range(calls):
+                fn()
+            times[name].append((time.perf_counter() - start) / calls)
+    return {name: float(np.median(t)) for name, t in times.items()}
+
+
+def bare_stepper(integrator: str, n_paths: int) -> Callable[[], None]:
+    """One `integrator.step` per call at N = 100 (zero control), episodes of m = 50 steps from
+    uniform starts drawn from default_rng(k) for episode k."""
+    from agent_envs import SwarmModel, SwarmParams, make_integrator
+    from agent_envs.simulator import brownian_increments, uniform_positions
+
+    n, m = 100, 50
+    model = SwarmModel(SwarmParams(n_agents=n, epsilon=0.05))
+    scheme = make_integrator(integrator)
+    dt, control = 1.0 / m, np.zeros((n, 1))
+    state: dict[str, Any] = {"episode": -1, "n": m}
+
+    def step() -> None:
+        if state["n"] == m:
+            state["episode"] += 1
+            state["rng"] = np.random.default_rng(state["episode"])
+            x0 = uniform_positions(state["rng"], n, 1)
+            state["x"], state["n"] = np.broadcast_to(x0, (n_paths, n, 1)).copy(), 0
+        dw = brownian_increments(state["rng"], state["x"].shape, dt)
+        state["x"] = scheme.step(model, state["x"], control, state["n"] * dt, dt, dw)
+        state["n"] += 1
+
+    return step
+
+
+def plain_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
+    """The floor of an env step: numpy kernel matrix + drift for x (n_paths, n, 1), as written
+    without this project (temporaries and all)."""
+    x = np.random.default_rng(0).uniform(-1.0, 1.0, (n_paths, n, 1))
+    w, alpha2 = 1.0 / 0.05, 0.1**2
+
+    def step() -> None:
+        p = w / (alpha2 + (x[..., None, :, 0] - x[..., :, None, 0]) ** 2)
+        (p @ x - p.sum(axis=-1)[..., None] * x) / n
+
+    return step
+
+
+def inplace_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
+    """The same in preallocated buffers (np.subtract/multiply/add/divide with out=, one matmul
+    P [x | 1]): the fewest numpy passes for P and the drift, no allocation of size N^2."""
+    x = np.random.default_rng(0).uniform(-1.0, 1.0, (n_paths, n, 1))
+    w, alpha2 = 1.0 / 0.05, 0.1**2
+    p = np.empty((n_paths, n, n))
+    augmented = np.ones((n_paths, n, 2))
+    product = np.empty((n_paths, n, 2))
+
+    def step() -> None:
+        np.subtract(x[..., None, :, 0], x[..., :, None, 0], out=p)
+        np.multiply(p, p, out=p)
+        np.add(p, alpha2, out=p)
+        np.divide(w, p, out=p)
+        augmented[..., :1] = x
+        np.matmul(p, augmented, out=product)
+        (product[..., :1] - product[..., 1:] * x) / n
+
+    return step
+
+
+def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
+    """One Lanczos product's worth of memory traffic: rows (n_paths, 1, n) @ P (n_paths, n, n)."""
+    p = np.random.default_rng(0).uniform(size=(n_paths, n, n))
+    rows = np.ones((n_paths, 1, n))
+    return lambda: rows @ p
+
+
+def krylov_products_per_step(step: Callable[[], None], steps: int = 100) -> float:
+    """Mean number of Lanczos matrix products per call of `step` over `steps` calls, counted on
+    the phi-function module's operator wrapper."""
+    from agent_envs.integrators import phi_functions
+
+    count = [0]
+    original = phi_functions._RowOperator.apply
+
+    def counted(self: Any, rows: Any) -> Any:
+        count[0] += 1
+        return original(self, rows)
+
+    phi_functions._RowOperator.apply = counted
+    try:
+        for _ in range(steps):
+            step()
+    finally:
+        phi_functions._RowOperator.apply = original
+    return count[0] / steps
+
+
+def worker_ratios(rounds: int) -> dict[str, float]:
+    fns = {
+        "serb_env": single_env_stepper(env_kwargs("paper", "serb")),
+        "em_env": single_env_stepper(env_kwargs("paper", "em")),
+        "plain": plain_kernel_drift(),
+        "inplace": inplace_kernel_drift(),
+        "matrix_pass": matrix_pass(),
+        "serb_bare_1": bare_stepper("serb", 1),
+        "em_bare_1": bare_stepper("em", 1),
+    }
+    out = interleaved(fns, 100, rounds)
+    # the same steps as part 1 (paper env) and as the bare 1-path timing (its first 100 steps)
+    out["krylov_products"] = krylov_products_per_step(
+        single_env_stepper(env_kwargs("paper", "serb"))
+    )
+    out["krylov_products_1"] = krylov_products_per_step(bare_stepper("serb", 1))
+    return out
+
+
+def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str, float]:
+    """env-steps/s of the native vector env and of B single envs in a loop (and Sync)."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401
+    from agent_envs.envs import ENV_ID
+
+    out: dict[str, float] = {}
+    for n_paths in paths:
+        for b in batches:
+            kwargs = env_kwargs("paper", "serb", n_paths=n_paths)
+            native = gym.make_vec(
+                ENV_ID, num_envs=b, vectorization_mode="vector_entry_point", **kwargs
+            )
+            native.reset(seed=0)
+            actions = np.random.default_rng(1).uniform(-0.5, 0.5, (b, 100)).astype(np.float32)
+            singles = [single_env_stepper(kwargs, first_seed=1000 * i) for i in range(b)]
+            fns = {
+                "native": lambda native=native, actions=actions: native.step(actions),
+                "loop": lambda singles=singles: [s() for s in singles],
+            }
+            # the compute floor: one kernel matrix + drift per system and step (in-place numpy,
+            # in chunks of at most 100 systems = 8 MB, as the native env's blocks)
+            systems = b * n_paths
+            chunk = min(systems, 100)
+            floor = inplace_kernel_drift(n_paths=chunk)
+            fns["floor"] = lambda floor=floor, reps=systems / chunk: [
+                floor() for _ in range(max(1, round(reps)))
+            ]
+            if n_paths == 1 and b == max(batches):
+                sync = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="sync", **kwargs)
+                sync.reset(seed=0)
+                fns["sync"] = lambda sync=sync, actions=actions: sync.step(actions)
+            # blocks of about 0.3 s of the slower side at today's speeds
+            calls = max(2, int(60 / (b * (1 if n_paths == 1 else 5))))
+            t = interleaved(fns, calls, rounds)
+            for name, seconds in t.items():
+                out[f"{name}/B{b}/P{n_paths}"] = b / seconds
+    return out
+
+
+def worker_ppo(timesteps: int) -> dict[str, float]:
+    """PPO env-steps/s at the paper setting (fresh process), and the env's share of the time."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agent_envs.training.config import GYM_ENV_ID, TrainConfig, resolve_hyperparams
+    from agent_envs.training.native_vec_env import NativeVecEnv
+
+    try:  # the presets' module (its name before the presets were shared: sweep_grid)
+        from agent_envs.training.presets import PAPER_ENV
+    except ImportError:
+        from agent_envs.training.sweep_grid import PAPER_ENV
+
+    torch.set_num_threads(1)
+    config = TrainConfig(env_id=GYM_ENV_ID, vec_env="native", seed=0, env_kwargs=dict(PAPER_ENV))
+    kwargs, n_envs, normalize_kwargs, policy = resolve_hyperparams(config)
+    venv = NativeVecEnv(n_envs, dict(PAPER_ENV), horizon_as_termination=True)
+    venv.seed(0)
+    in_env = [0.0]
+    for name in ("step_wait", "reset"):
+        method = getattr(venv, name)
+
+        def timed(*args: Any, _method: Callable[..., Any] = method) -> Any:
+            start = time.perf_counter()
+            try:
+                return _method(*args)
+            finally:
+                in_env[0] += time.perf_counter() - start
+
+        setattr(venv, name, timed)
+    normalized = VecNormalize(venv, **(normalize_kwargs or {}))
+    model = PPO(policy, normalized, seed=0, device="cpu", **kwargs)
+    start = time.perf_counter()
+    model.learn(total_timesteps=timesteps)
+    elapsed = time.perf_counter() - start
+    return {
+        "steps_per_s": model.num_timesteps / elapsed,
+        "env_share": in_env[0] / elapsed,
+        "n_envs": float(n_envs),
+        "timesteps": float(model.num_timesteps),
+    }
+
+
+WORKERS = {"cold": worker_cold, "ratios": worker_ratios, "vector": worker_vector, "ppo": worker_ppo}
+
+
+# ----------------------------------------------------------------------------- driver
+def run_worker(python: str, name: str, **kwargs: Any) -> dict[str, float]:
+    """Run a worker in a fresh process of `python` and return its JSON answer."""
+    cmd = [python, os.path.abspath(__file__), "--worker", name, "--worker-args", json.dumps(kwargs)]
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"worker {name} failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def fmt_pair(after: float, before: float | None, spec: str = ",.0f") -> str:
+    if before is None:
+        return format(after, spec)
+    return f"{format(after, spec)} ({format(before, spec)})"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5, help="rounds (medians)")
+    parser.add_argument("--ppo-timesteps", type=int, default=4096)
+    parser.add_argument("--baseline-python", default=None, help="interpreter of the 'before'")
+    parser.add_argument("--skip", nargs="*", default=[], choices=list(WORKERS))
+    parser.add_argument("--worker", choices=list(WORKERS), help=argparse.SUPPRESS)
+    parser.add_argument("--worker-args", default="{}", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker:
+        print(json.dumps(WORKERS[args.worker](**json.loads(args.worker_args))))
+        return 0
+
+    pythons = {"after": sys.executable}
+    if args.baseline_python:
+        pythons["before"] = args.baseline_python
+    has_before = "before" in pythons
+    r = args.rounds
+    note = " (before in brackets)" if has_before else ""
+    print(f"Throughput, OPENBLAS_NUM_THREADS=1, medians of {r} rounds{note}\n")
+
+    if "cold" not in args.skip:
+        print("## 1. Env steps/s, first 100 steps of a fresh process (cold) and warm\n")
+        print("| setting | integrator | cold steps/s | warm steps/s | cold/warm |")
+        print("|---|---|---|---|---|")
+        for setting in SETTINGS:
+            for integrator in ("serb", "em"):
+                # `r` fresh processes per interpreter: medians of their cold and warm figures
+                res = {}
+                for k, py in pythons.items():
+                    runs = [
+                        run_worker(py, "cold", setting=setting, integrator=integrator, rounds=r)
+                        for _ in range(r)
+                    ]
+                    res[k] = {
+                        key: float(np.median([run[key] for run in runs]))
+                        for key in ("cold", "warm")
+                    }
+                    res[k]["ratio"] = float(np.median([run["cold"] / run["warm"] for run in runs]))
+                a, b = res["after"], res.get("before")
+                print(
+                    f"| {setting} | {integrator} | "
+                    f"{fmt_pair(1 / a['cold'], b and 1 / b['cold'])} | "
+                    f"{fmt_pair(1 / a['warm'], b and 1 / b['warm'])} | "
+                    f"{fmt_pair(a['ratio'], b and b['ratio'], '.2f')} |"
+                )
+        print()
+
+    if "ratios" not in args.skip:
+        res = {k: run_worker(py, "ratios", rounds=r) for k, py in pythons.items()}
+        print("## 2. Ratios in one process (warm, paper setting unless said)\n")
+        print("| ratio | value | ms per step (numerator, denominator) |")
+        print("|---|---|---|")
+        for label, num, den in (
+            ("SERB env step / EM env step", "serb_env", "em_env"),
+            ("EM env step / plain numpy kernel + drift", "em_env", "plain"),
+            ("EM env step / in-place numpy kernel + drift", "em_env", "inplace"),
+            ("one SERB step / one EM step (N = 100, 1 path)", "serb_bare_1", "em_bare_1"),
+        ):
+            a, b = res["after"], res.get("before")
+            print(
+                f"| {label} | {fmt_pair(a[num] / a[den], b and b[num] / b[den], '.2f')} | "
+                f"{fmt_pair(1e3 * a[num], b and 1e3 * b[num], '.3f')}, "
+                f"{fmt_pair(1e3 * a[den], b and 1e3 * b[den], '.3f')} |"
+            )
+        a, b = res["after"], res.get("before")
+        floors = {
+            k: (v["em_env"] + v["krylov_products"] * v["matrix_pass"]) / v["em_env"]
+            for k, v in res.items()
+        }
+        products = fmt_pair(a["krylov_products"], b and b["krylov_products"], ".1f")
+        one_pass = fmt_pair(1e3 * a["matrix_pass"], b and 1e3 * b["matrix_pass"], ".3f")
+        print(
+            f"\nSERB env step: {products} Lanczos products per step (mean over the 100 steps of"
+            f" part 1); one product (a pass over the 20 x 100 x 100 kernel matrices) {one_pass}"
+            " ms; floor of SERB / EM = (EM step + products x pass) / EM step ="
+            f" {fmt_pair(floors['after'], floors.get('before'), '.2f')}"
+        )
+        per_product = {
+            k: (v["serb_bare_1"] - v["em_bare_1"]) / v["krylov_products_1"] for k, v in res.items()
+        }
+        products_1 = fmt_pair(a["krylov_products_1"], b and b["krylov_products_1"], ".1f")
+        before_ms = per_product.get("before")
+        cost = fmt_pair(1e3 * per_product["after"], before_ms and 1e3 * before_ms, ".3f")
+        print(
+            f"\nOne SERB step, N = 100, 1 path: {products_1} Lanczos products per step; its cost"
+            " beyond the EM step per product (the interpreter's share: numpy calls on 100-vectors)"
+            f" {cost} ms"
+        )
+        print()
+
+    if "vector" not in args.skip:
+        print("## 3. Native vector env (SERB, paper setting) vs B single envs in a loop\n")
+        batches, paths = [1, 16, 64], [1, 20]
+        res = {
+            k: run_worker(py, "vector", batches=batches, paths=paths, rounds=r)
+            for k, py in pythons.items()
+        }
+        print(
+            "| paths | B | native env-steps/s | loop env-steps/s | native / loop |"
+            " kernel + drift share of the native step |"
+        )
+        print("|---|---|---|---|---|---|")
+        for p in paths:
+            for b in batches:
+                a, o = res["after"], res.get("before")
+                key_n, key_l, key_f = f"native/B{b}/P{p}", f"loop/B{b}/P{p}", f"floor/B{b}/P{p}"
+                print(
+                    f"| {p} | {b} | {fmt_pair(a[key_n], o and o[key_n])} | "
+                    f"{fmt_pair(a[key_l], o and o[key_l])} | "
+                    f"{fmt_pair(a[key_n] / a[key_l], o and o[key_n] / o[key_l], '.2f')} | "
+                    f"{fmt_pair(100 * a[key_n] / a[key_f], o and 100 * o[key_n] / o[key_f])} % |"
+                )
+        b = max(batches)
+        a, o = res["after"], res.get("before")
+        key_n, key_s = f"native/B{b}/P1", f"sync/B{b}/P1"
+        print(
+            f"\nSyncVectorEnv, B = {b}, 1 path: {fmt_pair(a[key_s], o and o[key_s])} env-steps/s;"
+            f" native / Sync = {fmt_pair(a[key_n] / a[key_s], o and o[key_n] / o[key_s], '.2f')}"
+        )
+        print()
+
+    if "ppo" not in args.skip:
+        print(f"## 4. PPO on NativeVecEnv, paper setting, {args.ppo_timesteps} timesteps\n")
+        res = {k: run_worker(py, "ppo", timesteps=args.ppo_timesteps) for k, py in pythons.items()}
+        a, b = res["after"], res.get("before")
+        print("| env-steps/s | share of time in the env | n_envs |")
+        print("|---|---|---|")
+        print(
+            f"| {fmt_pair(a['steps_per_s'], b and b['steps_per_s'], ',.1f')} | "
+            f"{fmt_pair(100 * a['env_share'], b and 100 * b['env_share'], '.0f')} % | "
+            f"{a['n_envs']:.0f} |"
+        )
+        if b:
+            print(f"\nPPO after / before: {a['steps_per_s'] / b['steps_per_s']:.2f}x")
+        print()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
