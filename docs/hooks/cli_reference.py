@@ -15,7 +15,7 @@ import os
 from contextlib import contextmanager
 
 MARKER = "<!-- cli-reference -->"
-HELP_WIDTH = 100
+HELP_WIDTH = 88
 
 
 @contextmanager
