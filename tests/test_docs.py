@@ -130,6 +130,13 @@ def test_nav_pages_exist_and_every_page_is_in_the_nav():
     pages = [str(p.relative_to(DOCS)) for p in DOCS.rglob("*.md")]
     orphans = [p for p in pages if p not in nav and p not in excluded]
     assert orphans == [], f"pages in docs/ that the nav does not list: {orphans}"
+    # every page opens with its title (after an optional marker comment and blank lines)
+    untitled = [
+        page
+        for page in nav
+        if not re.match(r"(<!--.*?-->\s*)?# ", (DOCS / page).read_text(), flags=re.S)
+    ]
+    assert untitled == [], f"pages whose first line is not a '# title': {untitled}"
 
 
 def _cli_hook():
