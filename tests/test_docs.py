@@ -174,6 +174,7 @@ def _snippets() -> list:
     return params
 
 
+@pytest.mark.filterwarnings("ignore:PettingZoo in TorchRL is tested:UserWarning")
 @pytest.mark.parametrize("block", _snippets())
 def test_getting_started_snippet_runs(block, capsys):
     for module in ("torchrl", "stable_baselines3"):
