@@ -65,7 +65,9 @@ def target_as_vector(target: float | Sequence[float] | np.ndarray, dim: int) -> 
 class SwarmParams:
     """Parameters of the controlled swarm SDE and its cost.
 
-    Attributes (ranges from `agent_envs.validation`, which derives them):
+    The accepted ranges come from `agent_envs.validation`, which derives them.
+
+    Attributes:
         n_agents: 2 <= N <= 1e7, the number of agents.
         dim: d >= 1 with N d <= 1e7, the dimension of each agent's position (the paper uses
             d = 1).
@@ -75,8 +77,9 @@ class SwarmParams:
             following `agent_envs.dynamics.kernels.InteractionKernel`.
         alpha: alpha in [1e-6, 1e6], the kernel's length scale.
         epsilon: eps in [1e-12, 1e12], the symmetric kernel's stiffness (small eps = stiff).
-        epsilon_min, epsilon_max: eps_min <= eps_max in [1e-12, 1e12], range of the
-            non-symmetric kernel.
+        epsilon_min: eps_min in [1e-12, 1e12], the smallest eps_l of the non-symmetric
+            kernel (eps_min <= eps_max).
+        epsilon_max: eps_max in [1e-12, 1e12], the largest eps_l of the non-symmetric kernel.
         sigma: sigma in [0, 1e6], the additive noise level.
         horizon: T in [1e-6, 1e6], the final time (the start time is t0 = 0).
         target: xbar, a scalar (broadcast to all d coordinates) or a length-d sequence, entries

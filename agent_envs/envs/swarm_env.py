@@ -55,9 +55,12 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     `Box(-1, 1, (N d,), float32)`, agent-major (entry k d + i is coordinate i of agent k).
     The control is u = max_control * clip(action, -1, 1), reshaped (N, d): an action outside
     [-1, 1] is clipped (not an error); a NaN or infinite entry, or a shape other than (N d,) or
-    (N, d), raises `ValueError`. The default `max_control = 150` leaves the paper's turnpike
-    cheap control (`eq:cheap_ctr`, beta = 12, N = 100, m = 50) unclipped: benchmarks/max_control.py
-    measures its largest |u_k^n|; README.md ("Why max_control = 150") has the figures.
+    (N, d), raises `ValueError`. Actions must have a real numeric dtype (ints or floats):
+    strings, bools and complex numbers raise `TypeError` (an imaginary part is never dropped);
+    an object array is accepted when every entry is an int or a float. The default
+    `max_control = 150` leaves the paper's turnpike cheap control (`eq:cheap_ctr`, beta = 12,
+    N = 100, m = 50) unclipped: `benchmarks/max_control.py` measures its largest |u_k^n| (the
+    figures are on the docs page "Environments > Gymnasium", "Why max_control = 150").
 
     ## Observation Space
 
@@ -72,8 +75,9 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
 
     Bounds: positions and target in [-divergence_threshold, divergence_threshold], drift in
     [-mean(1/eps)/(2 alpha), mean(1/eps)/(2 alpha)], t/T in [0, 1]. Use
-    `agent_envs.envs.observation.split_observation(obs, N, d)` to take it apart (batched).
-    With it the turnpike control is u = beta (xbar - E x) - E drift.
+    `agent_envs.envs.observation.split_observation(obs, N, d)` to take it apart (batched over
+    leading axes, VecEnv observations included). With it the turnpike control is
+    u = beta (xbar - E x) - E drift.
 
     ## Rewards
 
@@ -84,7 +88,8 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     taken at the state x^n at the *start* of the step (left rectangle rule) and averaged over
     the paths. So the rewards of an episode add up to minus the discrete cost functional
     `eq:discrete_cost_functional` estimated on the env's paths:
-    sum_n r^n = -agent_envs.costs.discrete_cost(positions, controls, xbar, gamma, tau).mean().
+    sum_n r^n = -agent_envs.costs.discrete_cost(positions, controls, xbar, gamma, tau).mean()
+    (tested to 1e-12).
 
     ## Starting State
 
@@ -93,17 +98,20 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     (N, d) replaces them, and `options={"target": xbar}` replaces the target for the episode.
     The uniform draw is made either way, so the Brownian increments of a seeded episode do not
     depend on the options. Any other option key raises `ValueError` (a typo never passes
-    silently).
+    silently). `reset(seed=s)` takes an int in [0, 2**32 - 1]; bools, floats, strings and
+    negative ints are rejected with a named error.
 
     ## Episode End
 
     - Truncation: after m = `n_steps` steps (t = T), `truncated=True`. `gym.make` adds a
-      `TimeLimit(n_steps)` as well, so `env.spec.max_episode_steps == n_steps`.
+      `TimeLimit(n_steps)` as well, so `env.spec.max_episode_steps == n_steps` for any
+      `n_steps`.
     - Termination: if a step makes some path non-finite or leave
       [-divergence_threshold, divergence_threshold] (e.g. Euler-Maruyama on a stiff kernel),
       `terminated=True` and `info["diverged"] = True`. The env keeps the last finite state
       x^n and time t_n, returns it as the observation and in `info["positions"]`, and the
-      reward -tau c(x^n, u^n) is finite. With n_paths > 1 one diverging path ends the episode.
+      reward -tau c(x^n, u^n) is finite: nothing is NaN. With n_paths > 1 one diverging path
+      ends the episode.
 
     ## Info
 
@@ -113,38 +121,67 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     info): `positions`, `control` (zeros: nothing applied yet), `time` (0.0), `running_cost`
     (0.0: nothing accrued yet) and `diverged` (False).
 
+    ## Rendering
+
+    `render_mode="rgb_array"` returns uint8 (H, W, 3) frames, `"human"` draws in a pyplot
+    window (nothing with a non-interactive backend). d = 1 plots every agent's path-mean
+    position against time with the target as a dashed line; d >= 2 a scatter of the first two
+    coordinates. An env that has rendered can be pickled and deep-copied (the copy draws a new
+    figure).
+
     ## Arguments
 
-    | kwarg                | default       | meaning                                          |
-    |----------------------|---------------|--------------------------------------------------|
-    | n_agents             | 100           | N >= 2                                           |
-    | dim                  | 1             | d >= 1                                           |
-    | kernel               | "symmetric"   | "symmetric", "nonsymmetric" or a kernel object   |
-    | alpha                | 0.1           | kernel length scale                              |
-    | epsilon              | 0.05          | symmetric kernel stiffness eps > 0               |
-    | epsilon_min, _max    | 0.01, 0.1     | non-symmetric kernel's eps_l range               |
-    | sigma                | 0.01          | noise level                                      |
-    | horizon              | 1.0           | T                                                |
-    | target               | 0.7           | xbar, scalar or length-d sequence                |
-    | gamma                | 0.01          | control weight of the running cost               |
-    | integrator           | "serb"        | "em", "ee", "heun", "erb" or "serb"              |
-    | jacobian             | "frozen"      | "frozen" L(x) or "exact" dF/dx (erb, serb)       |
-    | phi_method           | "auto"        | "auto", "expm", "eigh" or "krylov"               |
-    | n_steps              | 50            | m, the number of steps; tau = T / m              |
-    | n_paths              | 1             | Brownian paths driven by the same control        |
-    | max_control          | 150.0         | u = max_control * clip(action, -1, 1)            |
-    | divergence_threshold | 1e4           | max |x| beyond which a step counts as diverged   |
-    | render_mode          | None          | None, "rgb_array" or "human"                     |
+    Every keyword argument, its default and the values it accepts:
 
-    Bad values raise `ValueError`/`TypeError` naming the argument and its accepted range (the
-    README's table; `agent_envs.validation` derives the ranges so that every accepted value
-    gives finite rewards and observations inside the spaces). An unknown keyword raises
-    Python's own `TypeError("SwarmEnv.__init__() got an unexpected keyword argument 'x'")`.
+    | kwarg | default | meaning | accepted |
+    |---|---|---|---|
+    | n_agents | 100 | N | int in [2, 1e7] |
+    | dim | 1 | d | int >= 1, N d <= 1e7 |
+    | kernel | "symmetric" | p(x, y): `eq:symmker` or `eq:nonsymmker` | those two, or an object |
+    | alpha | 0.1 | kernel length scale | [1e-6, 1e6] |
+    | epsilon | 0.05 | symmetric kernel stiffness (small = stiff) | [1e-12, 1e12] |
+    | epsilon_min, _max | 0.01, 0.1 | non-symmetric kernel's eps_l | [1e-12, 1e12], min <= max |
+    | sigma | 0.01 | noise level | [0, 1e6] |
+    | horizon | 1.0 | T | [1e-6, 1e6] |
+    | target | 0.7 | xbar, scalar or length-d sequence | in [-1e6, 1e6], \|xbar\| < R |
+    | gamma | 0.01 | control weight of the running cost | [0, 1e6] |
+    | integrator | "serb" | the scheme of one step | "em", "ee", "heun", "erb", "serb" |
+    | jacobian | "frozen" | linearization of erb/serb | "frozen" (L(x)), "exact" (dF/dx) |
+    | phi_method | "auto" | phi-function actions | "auto", "expm", "eigh", "krylov" |
+    | linear_operator | "auto" | N x N matrices or kernel sums | "auto", "dense", "matrix_free" |
+    | n_steps | 50 | m; tau = T / m; the episode length | int in [1, 1e9] |
+    | n_paths | 1 | Brownian paths under one control | int in [1, 1e6], n_paths N d <= 1e8 |
+    | max_control | 150.0 | u = max_control * clip(action, -1, 1) | (0, 1e6] |
+    | divergence_threshold | 1e4 | R: max \|x\| before a step diverges | [1, 1e6] |
+    | render_mode | None | see Rendering | None, "rgb_array", "human" |
+
+    The defaults are the paper's stiff setting. A kernel object has `value`, `grad_x`,
+    `grad_y` and `symmetric` and answers in the library of its input (numpy or torch; docs page
+    "Numerical core", "Your own kernel"). `linear_operator="auto"` is matrix-free for
+    numpy states with the Cucker-Smale kernel when d = 1 and N >= 500 or d = 2 and N >= 2000,
+    or whenever the dense matrices of a step would exceed 2 GiB; dense otherwise (docs page
+    "Large swarms"). Bad values raise `ValueError`/`TypeError` naming the argument and its
+    accepted range: numbers must be ints or floats (numpy's included; bools, strings, complex
+    numbers and None are rejected), finite, and in the range above (an int too large for a
+    float is a `ValueError`, not an `OverflowError`). `agent_envs.validation` derives the ranges
+    so that every accepted combination gives finite rewards and observations inside the
+    spaces. The dense kernel matrix needs n_paths N^2 entries per step; that memory is not
+    capped. An unknown keyword raises Python's own
+    `TypeError("SwarmEnv.__init__() got an unexpected keyword argument 'x'")`.
 
     ## Attributes (on `env.unwrapped`)
 
     params, model, max_control, n_steps, n_paths, dt, integrator_name, jacobian, positions
     (n_paths, N, d), time, step_index, episode (the shared `SwarmEpisode`).
+
+    ## Version History
+
+    - v0: the only version. Within v0 the dynamics, spaces and rewards have not changed;
+      added since the first release: range checks on every argument and real-dtype actions,
+      the reset info with the step's keys, the `reset` option check, the native vector env
+      as `vector_entry_point`, and `linear_operator` (matrix-free large swarms). The
+      integrators' round-off changed once (the Array API core with Lanczos phi-actions), which
+      moves trained policies' results, not the references' (docs page "Changelog").
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}

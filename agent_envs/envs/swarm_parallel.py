@@ -65,11 +65,27 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     the start of the step. sum_k r_k^n is the Gymnasium reward -tau c(x^n, u^n) for the same
     states and controls (up to round-off).
 
-    ## Starting State / Episode End / Arguments
+    ## Starting State
 
-    As for `SwarmEnv`: the same keyword arguments and reset options; after m = `n_steps` steps
-    every agent is truncated, on divergence every agent is terminated (and its info has
-    ``diverged=True``). Either way `agents` becomes empty; call `reset()` again.
+    As `SwarmEnv`: uniform on [-1, 1]^d from the env's generator, the same for every path;
+    `reset(seed=s, options={"initial_positions": x0, "target": xbar})` overrides them for one
+    episode. Unknown option keys are ignored here (PettingZoo's own API tests pass one), where
+    the Gymnasium env raises `ValueError`.
+
+    ## Episode End
+
+    After m = `n_steps` steps every agent is truncated; on divergence (a path non-finite or
+    beyond `divergence_threshold`) every agent is terminated and its info has
+    ``diverged=True``. Either way `agents` becomes empty; call `reset()` again.
+
+    ## Arguments
+
+    The keyword arguments of `SwarmEnv`, with the same defaults and accepted ranges (its
+    table), `render_mode` included. Bad values raise `ValueError`/`TypeError` naming the
+    argument; an unknown keyword raises
+    `TypeError("SwarmParallelEnv.__init__() got an unexpected keyword argument 'x'")`.
+    `agent_envs.swarm_v0.env()`/`raw_env()` give the AEC env through PettingZoo's
+    `parallel_to_aec`.
 
     ## Info (per agent)
 
@@ -77,6 +93,11 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     mean over the paths), `diverged` (bool). `reset` returns the same keys, with `time` and
     `running_cost` 0.0 and `diverged` False. Global quantities (positions of all paths, the
     control) are on the env: `positions`, `last_control`.
+
+    ## Version History
+
+    - v0 (`agent_envs.swarm_v0`): the only version; its changes within v0 are the Gymnasium
+      env's (`SwarmEnv`, Version History), which shares the episode core.
     """
 
     metadata: ClassVar[dict[str, Any]] = {

@@ -150,6 +150,11 @@ class SwarmVectorEnv(VectorEnv):
     config (`EpisodeConfig`), model, integrator, phi_method (the resolved strategy), dt,
     n_steps, n_paths, positions (B, P, N, d), step_index (B,), targets (B, d), np_randoms (one
     generator per env).
+
+    ## Version History
+
+    - v0: the `vector_entry_point` of `agent_envs/Swarm-v0` since the native vector env was
+      added; bit-identical to `SyncVectorEnv` over the single env for every phi strategy.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
