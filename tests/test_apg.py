@@ -274,3 +274,18 @@ def test_bad_observations_and_paths(tmp_path):
         LawSpec(n_knots=0)
     with pytest.raises(TypeError, match="initial_gain"):
         LawSpec(initial_gain="12")
+
+
+def test_evaluate_policies_loads_an_apg_run_by_its_folder(tmp_path):
+    from agent_envs.training.evaluate import evaluate_policies
+
+    run = tmp_path / "run"
+    train_apg(_tiny_config(iterations=2), run)
+    results = evaluate_policies(
+        {"apg": str(run), "zero": "zero"}, env_kwargs=TINY, seeds=[5, 6], progress=False
+    )
+    assert results.meta["policies"]["apg"] == {"kind": "apg", "path": str(run)}
+    apg = results.episodes[results.episodes.policy == "apg"].total_cost.to_numpy()
+    env = gym.make("agent_envs/Swarm-v0", **TINY)
+    direct = [-rollout(load_apg_policy(run), env, s).rewards.sum() for s in (5, 6)]
+    np.testing.assert_allclose(apg, direct, rtol=1e-12)

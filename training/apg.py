@@ -58,9 +58,9 @@ from agent_envs.training.apg_policy import (
     LAW_DESCRIPTION,
     LawSpec,
     SwarmFeedbackLaw,
-    SwarmFeedbackPolicy,
     describe_law,
-    load_law,
+    is_apg_run,
+    load_apg_policy,
     save_law,
 )
 from agent_envs.training.apg_rollout import ClosedLoop, EpisodeNoise, with_env_kwargs
@@ -106,8 +106,8 @@ class APGConfig:
         train_paths: Brownian paths of a training episode, 1..1e6; None = the env's n_paths.
             The law sees path means, so fewer paths than the env's change its input only by
             noise of order sigma / sqrt(K); 4 paths cost a fifth of 20 (docs/APG.md).
-        learning_rate: Adam's rate in (0, 10] for the gains (default 0.1).
-        mlp_learning_rate: the rate of the shared MLP's weights in (0, 10] (default 0.01).
+        learning_rate: Adam's rate in (0, 10] for the gains (default 0.2).
+        mlp_learning_rate: the rate of the shared MLP's weights in (0, 10] (default 0.2).
         final_learning_rate_fraction: cosine decay to this fraction of the rates, [0, 1].
         max_grad_norm: clip the gradient's global norm to this, (0, 1e6] (default 1).
         hidden: width of the shared MLP, 0..1024 (0: the linear law alone; default 16).
@@ -129,8 +129,8 @@ class APGConfig:
     iterations: int = 300
     episodes_per_iteration: int = 1
     train_paths: int | None = 4
-    learning_rate: float = 0.1
-    mlp_learning_rate: float = 0.01
+    learning_rate: float = 0.2
+    mlp_learning_rate: float = 0.2
     final_learning_rate_fraction: float = 0.02
     max_grad_norm: float = 1.0
     hidden: int = 16
@@ -280,6 +280,7 @@ def _save_checkpoint(run_dir: Path, iteration: int, trainer: _Trainer) -> None:
         "generator": trainer.rng.bit_generator.state,
         "best_cost": trainer.best_cost,
         "wall_time_s": trainer.wall_time(),
+        "cpu_time_s": trainer.cpu_time(),
     }
     save_recorded(run_dir, weights.with_suffix(".json"), lambda p: p.write_text(json.dumps(books)))
     save_recorded(run_dir, weights, lambda p: torch.save(state, p))
@@ -326,10 +327,17 @@ class _Trainer:
         self.history: list[dict[str, Any]] = []
         self.reference_costs: dict[str, float] = {}
         self._started = time.perf_counter()
+        self._cpu_started = time.process_time()
         self._wall_offset = 0.0
+        self._cpu_offset = 0.0
 
     def wall_time(self) -> float:
         return self._wall_offset + time.perf_counter() - self._started
+
+    def cpu_time(self) -> float:
+        """CPU seconds of this process spent on the run (resumed parts included); on a shared
+        machine the wall time also counts the waits for a core."""
+        return self._cpu_offset + time.process_time() - self._cpu_started
 
     def step(self) -> float:
         """One Adam step on fresh episodes; returns the mean training cost."""
@@ -452,6 +460,7 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
         trainer.rng.bit_generator.state = books["generator"]
         trainer.best_cost = float(books["best_cost"])
         trainer._wall_offset = float(books["wall_time_s"])
+        trainer._cpu_offset = float(books.get("cpu_time_s", 0.0))
         trainer.history = [
             r
             for r in read_learning_curve(run_dir / "learning_curve.csv")
@@ -529,43 +538,13 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
         "validation_seeds": trainer.eval_seeds,
         "reference_costs": trainer.reference_costs,
         "wall_time_s": round(trainer.wall_time(), 3),
+        "cpu_time_s": round(trainer.cpu_time(), 3),
         "best_law": BEST_LAW,
         "final_law": FINAL_LAW,
         "run_dir": str(run_dir),
     }
     write_json_atomic(run_dir / "summary.json", summary)
     return summary
-
-
-# ------------------------------------------------------------------------------ loading
-
-
-def is_apg_run(path: str | os.PathLike) -> bool:
-    """True when `path` is an apg run folder or an apg weights file beside its description."""
-    path = Path(path)
-    folder = path if path.is_dir() else path.parent
-    return (folder / LAW_DESCRIPTION).is_file() and (path.is_dir() or path.suffix == ".pt")
-
-
-def load_apg_policy(path: str | os.PathLike, which: str = "best") -> SwarmFeedbackPolicy:
-    """The `PolicyPredictor` of an apg run: a run folder (its best or final law) or a weights
-    file (``*.pt`` beside ``apg_law.json``).
-
-    The weights must match the run's manifest when the folder has one (as SB3 statistics are
-    checked); ValueError naming the path otherwise.
-    """
-    if which not in ("best", "final"):
-        raise ValueError(f"which must be 'best' or 'final', got {which!r}")
-    path = Path(path)
-    weights = path / (BEST_LAW if which == "best" else FINAL_LAW) if path.is_dir() else path
-    if path.is_dir() and which == "best" and not weights.is_file():
-        weights = path / FINAL_LAW
-    manifest = RunManifest(weights.parent)
-    if manifest.exists():
-        problem = manifest.problem(weights)
-        if problem is not None:
-            raise ValueError(f"apg policy {path}: {problem}")
-    return SwarmFeedbackPolicy(load_law(weights))
 
 
 __all__ = [

@@ -48,6 +48,7 @@ import torch
 from torch import nn
 
 from agent_envs.envs.observation import agent_observation_size
+from agent_envs.training.storage import RunManifest
 from agent_envs.validation import check_int, check_positive
 
 #: the file names of a saved law (weights and its description) in a run folder
@@ -328,6 +329,37 @@ class SwarmFeedbackPolicy:
         return f"SwarmFeedbackPolicy(d={s.dim}, knots={s.n_knots}, hidden={s.hidden})"
 
 
+# ------------------------------------------------------------------------------ runs
+
+
+def is_apg_run(path: str | os.PathLike) -> bool:
+    """True when `path` is an apg run folder or an apg weights file beside its description."""
+    path = Path(path)
+    folder = path if path.is_dir() else path.parent
+    return (folder / LAW_DESCRIPTION).is_file() and (path.is_dir() or path.suffix == ".pt")
+
+
+def load_apg_policy(path: str | os.PathLike, which: str = "best") -> SwarmFeedbackPolicy:
+    """The `PolicyPredictor` of an apg run: a run folder (its best or final law) or a weights
+    file (``*.pt`` beside ``apg_law.json``).
+
+    The weights must match the run's manifest when the folder has one (as SB3 statistics are
+    checked); ValueError naming the path otherwise.
+    """
+    if which not in ("best", "final"):
+        raise ValueError(f"which must be 'best' or 'final', got {which!r}")
+    path = Path(path)
+    weights = path / (BEST_LAW if which == "best" else FINAL_LAW) if path.is_dir() else path
+    if path.is_dir() and which == "best" and not weights.is_file():
+        weights = path / FINAL_LAW
+    manifest = RunManifest(weights.parent)
+    if manifest.exists():
+        problem = manifest.problem(weights)
+        if problem is not None:
+            raise ValueError(f"apg policy {path}: {problem}")
+    return SwarmFeedbackPolicy(load_law(weights))
+
+
 __all__ = [
     "BEST_LAW",
     "FINAL_LAW",
@@ -336,6 +368,8 @@ __all__ = [
     "SwarmFeedbackLaw",
     "SwarmFeedbackPolicy",
     "describe_law",
+    "is_apg_run",
+    "load_apg_policy",
     "load_law",
     "read_spec",
     "save_law",
