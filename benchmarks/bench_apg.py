@@ -19,6 +19,8 @@ script can be stopped and run again, part by part, on a small machine):
 - ``em-serb``: train on Euler-Maruyama, evaluate on SERB (the paper env). At eps = 0.05, EM
   is unstable for tau = 1/50 (tau |lambda| > 2), so its training diverges or its gradient is
   not finite; the part records what happened.
+- ``em-serb-eps1``: the same at eps = 1, where EM is stable and its gradient finite.
+- ``gradient``: the gradient's norm at the initial law, SERB and EM, eps = 0.05 and 1.
 
     OPENBLAS_NUM_THREADS=1 nice -n 5 python benchmarks/bench_apg.py --out /tmp/bench-apg \
         --parts paper quick across-n eps1 em-serb --seeds 0 1 2
@@ -31,6 +33,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 import sys
 import time
 import traceback
@@ -47,7 +50,8 @@ from agent_envs.training.results import EvaluationResults
 from agent_envs.training.sweep_grid import PAPER_ENV
 
 QUICK_ENV = {**PAPER_ENV, "n_agents": 10, "n_steps": 20}
-PARTS = ("paper", "quick", "across-n", "eps1", "em-serb")
+PARTS = ("paper", "quick", "across-n", "eps1", "em-serb", "em-serb-eps1", "gradient")
+EPS1_ENV = {**PAPER_ENV, "epsilon": 1.0}
 
 
 def cached_evaluation(folder: Path, policies: dict[str, Any], env_kwargs, seeds) -> Any:
@@ -185,6 +189,47 @@ def across_n(out: Path, args) -> dict:
     return {"rows": rows}
 
 
+def gradient_norms(args) -> dict:
+    """|dJ/dtheta| at the initial (proportional) law on one training episode (4 paths), per
+    integrator and eps: where the gradient through the integrator is usable."""
+    from agent_envs.envs.episode import EpisodeConfig
+    from agent_envs.training.apg_policy import SwarmFeedbackLaw
+    from agent_envs.training.apg_rollout import ClosedLoop, EpisodeNoise
+
+    rows = []
+    for eps in (0.05, 1.0):
+        for integrator in ("serb", "em"):
+            kwargs = {**PAPER_ENV, "epsilon": eps, "integrator": integrator, "n_paths": 4}
+            config = EpisodeConfig.from_kwargs(**kwargs)
+            law = SwarmFeedbackLaw(APGConfig(env_kwargs=kwargs, progress=False).law_spec())
+            for seed in (0, 1):
+                noise = EpisodeNoise.draw(np.random.default_rng(seed), config)
+                cost, diverged = ClosedLoop(config).cost(law, noise)
+                law.zero_grad()
+                if not diverged:
+                    cost.backward()
+                norm = (
+                    math.sqrt(
+                        sum(
+                            float((p.grad**2).sum()) for p in law.parameters() if p.grad is not None
+                        )
+                    )
+                    if not diverged
+                    else math.nan
+                )
+                rows.append(
+                    {
+                        "epsilon": eps,
+                        "integrator": integrator,
+                        "seed": seed,
+                        "cost": float(cost.detach()),
+                        "diverged": bool(diverged),
+                        "grad_norm": norm,
+                    }
+                )
+    return {"rows": rows}
+
+
 def pct(x: float) -> str:
     return f"{100 * x:+.2f}%"
 
@@ -261,13 +306,15 @@ def main(argv: list[str] | None = None) -> int:
     jobs = {
         "paper": lambda: learned_setting(args.out, "paper", PAPER_ENV, PAPER_ENV, args),
         "quick": lambda: learned_setting(args.out, "quick", QUICK_ENV, QUICK_ENV, args),
-        "eps1": lambda: learned_setting(
-            args.out, "eps1", {**PAPER_ENV, "epsilon": 1.0}, {**PAPER_ENV, "epsilon": 1.0}, args
-        ),
+        "eps1": lambda: learned_setting(args.out, "eps1", EPS1_ENV, EPS1_ENV, args),
         "em-serb": lambda: learned_setting(
             args.out, "em-serb", {**PAPER_ENV, "integrator": "em"}, PAPER_ENV, args
         ),
+        "em-serb-eps1": lambda: learned_setting(
+            args.out, "em-serb-eps1", {**EPS1_ENV, "integrator": "em"}, EPS1_ENV, args
+        ),
         "across-n": lambda: across_n(args.out, args),
+        "gradient": lambda: gradient_norms(args),
     }
     for part in args.parts:
         began = time.perf_counter()
@@ -283,6 +330,10 @@ def main(argv: list[str] | None = None) -> int:
             continue
         if part == "across-n":
             print_across(results[part])
+        elif part == "gradient":
+            print("\n### gradient norm at the initial law (N = 100, 4 paths)")
+            for row in results[part]["rows"]:
+                print(row)
         else:
             print_setting(part, results[part])
     return 0 if all(p in results for p in args.parts) else 1

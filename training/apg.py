@@ -339,8 +339,9 @@ class _Trainer:
         machine the wall time also counts the waits for a core."""
         return self._cpu_offset + time.process_time() - self._cpu_started
 
-    def step(self) -> float:
-        """One Adam step on fresh episodes; returns the mean training cost."""
+    def step(self) -> tuple[float, float]:
+        """One Adam step on fresh episodes; returns the mean training cost and the gradient's
+        norm before clipping."""
         self.optimizer.zero_grad(set_to_none=True)
         k = self.config.episodes_per_iteration
         total = 0.0
@@ -360,10 +361,10 @@ class _Trainer:
                 "the gradient of the cost is not finite (an unstable integrator: EM at small "
                 "epsilon; docs/APG.md)"
             )
-        torch.nn.utils.clip_grad_norm_(self.law.parameters(), self.config.max_grad_norm)
+        norm = torch.nn.utils.clip_grad_norm_(self.law.parameters(), self.config.max_grad_norm)
         self.optimizer.step()
         self.scheduler.step()
-        return total
+        return total, float(norm)
 
     def validation_costs(self) -> tuple[np.ndarray, np.ndarray]:
         """The law's cost on each validation episode and which diverged."""
@@ -477,7 +478,7 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
         total=config.iterations, initial=start, desc="apg", unit="it", disable=not config.progress
     )
 
-    def validate(iteration: int, train_cost: float) -> dict[str, Any]:
+    def validate(iteration: int, train_cost: float, grad_norm: float) -> dict[str, Any]:
         costs, diverged = trainer.validation_costs()
         mean, ci = mean_ci95(costs) if len(costs) > 1 else (float(costs[0]), 0.0)
         row: dict[str, Any] = {
@@ -493,6 +494,7 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
             row["cost_ratio_to_turnpike"] = mean / row["turnpike_cost"]
         row["iteration"] = iteration
         row["train_cost"] = train_cost
+        row["grad_norm"] = grad_norm
         trainer.history.append(row)
         write_learning_curve(run_dir / "learning_curve.csv", trainer.history)
         for key, value in row.items():
@@ -507,11 +509,12 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
 
     try:
         if start == 0:
-            validate(0, math.nan)
-        train_cost = math.nan
+            validate(0, math.nan, math.nan)
+        train_cost = grad_norm = math.nan
         for iteration in range(start + 1, config.iterations + 1):
-            train_cost = trainer.step()
+            train_cost, grad_norm = trainer.step()
             writer.add_scalar("train/cost", train_cost, iteration * steps_per_iteration)
+            writer.add_scalar("train/grad_norm", grad_norm, iteration * steps_per_iteration)
             writer.add_scalar(
                 "train/learning_rate",
                 trainer.scheduler.get_last_lr()[0],
@@ -519,7 +522,7 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
             )
             bar.update(1)
             if iteration % config.eval_freq == 0 or iteration == config.iterations:
-                row = validate(iteration, train_cost)
+                row = validate(iteration, train_cost, grad_norm)
                 bar.set_postfix_str(f"val {row['cost_mean']:.5g}")
             if iteration % config.checkpoint_freq == 0 or iteration == config.iterations:
                 _save_checkpoint(run_dir, iteration, trainer)
