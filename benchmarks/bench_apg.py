@@ -20,6 +20,8 @@ script can be stopped and run again, part by part, on a small machine):
   is unstable for tau = 1/50 (tau |lambda| > 2), so its training diverges or its gradient is
   not finite; the part records what happened.
 - ``em-serb-eps1``: the same at eps = 1, where EM is stable and its gradient finite.
+- ``paper-linear``: the paper setting with the linear law alone (``hidden = 0``: time-varying
+  gains on the centre's offset, the agent's offset and the interaction drift), an ablation.
 - ``gradient``: the gradient's norm at the initial law, SERB and EM, eps = 0.05 and 1.
 
     OPENBLAS_NUM_THREADS=1 nice -n 5 python benchmarks/bench_apg.py --out /tmp/bench-apg \
@@ -50,7 +52,16 @@ from agent_envs.training.results import EvaluationResults
 from agent_envs.training.sweep_grid import PAPER_ENV
 
 QUICK_ENV = {**PAPER_ENV, "n_agents": 10, "n_steps": 20}
-PARTS = ("paper", "quick", "across-n", "eps1", "em-serb", "em-serb-eps1", "gradient")
+PARTS = (
+    "paper",
+    "quick",
+    "across-n",
+    "eps1",
+    "em-serb",
+    "em-serb-eps1",
+    "paper-linear",
+    "gradient",
+)
 EPS1_ENV = {**PAPER_ENV, "epsilon": 1.0}
 
 
@@ -85,7 +96,7 @@ def train(out: Path, setting: str, env_kwargs: dict, seed: int, args) -> dict[st
         seed=seed,
         iterations=args.iterations,
         train_paths=args.train_paths,
-        hidden=args.hidden,
+        hidden=0 if setting == "paper-linear" else args.hidden,
         progress=False,
     )
     print(f"[{setting}] training seed {seed} -> {run}", flush=True)
@@ -309,6 +320,9 @@ def main(argv: list[str] | None = None) -> int:
         "eps1": lambda: learned_setting(args.out, "eps1", EPS1_ENV, EPS1_ENV, args),
         "em-serb": lambda: learned_setting(
             args.out, "em-serb", {**PAPER_ENV, "integrator": "em"}, PAPER_ENV, args
+        ),
+        "paper-linear": lambda: learned_setting(
+            args.out, "paper-linear", PAPER_ENV, PAPER_ENV, args
         ),
         "em-serb-eps1": lambda: learned_setting(
             args.out, "em-serb-eps1", {**EPS1_ENV, "integrator": "em"}, EPS1_ENV, args

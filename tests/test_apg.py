@@ -289,3 +289,29 @@ def test_evaluate_policies_loads_an_apg_run_by_its_folder(tmp_path):
     env = gym.make("agent_envs/Swarm-v0", **TINY)
     direct = [-rollout(load_apg_policy(run), env, s).rewards.sum() for s in (5, 6)]
     np.testing.assert_allclose(apg, direct, rtol=1e-12)
+
+
+def test_ctrl_c_saves_the_last_whole_iteration(tmp_path, monkeypatch):
+    from agent_envs.training import apg
+
+    config = _tiny_config(iterations=4, eval_freq=3, checkpoint_freq=4)
+    train_apg(config, tmp_path / "whole")
+    original = apg._Trainer.validation_costs
+    calls = []
+
+    def interrupted(self):
+        calls.append(1)
+        if len(calls) == 2:  # the validation after iteration 3
+            raise KeyboardInterrupt
+        return original(self)
+
+    monkeypatch.setattr(apg._Trainer, "validation_costs", interrupted)
+    run = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_apg(config, run)
+    assert (run / "checkpoints" / "apg_3.pt").is_file()
+    monkeypatch.setattr(apg._Trainer, "validation_costs", original)
+    train_apg(config, run, resume=True)
+    a = torch.load(tmp_path / "whole" / FINAL_LAW, weights_only=True)
+    b = torch.load(run / FINAL_LAW, weights_only=True)
+    assert all(torch.equal(a[k], b[k]) for k in a)

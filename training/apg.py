@@ -410,7 +410,9 @@ def train_apg(
     A new run creates `run_dir` exclusively (`storage.create_run_directory`: an existing folder
     is an error naming --resume); ``resume=True`` needs the folder, its config.json equal to
     `config` except for `iterations` (which may grow) and `progress`, and a valid checkpoint.
-    The folder is locked (`storage.RunLock`) for the whole run.
+    The folder is locked (`storage.RunLock`) for the whole run. Resuming with more iterations
+    stretches the cosine schedule over the new total from where the run stopped. Ctrl-C
+    (KeyboardInterrupt) saves a checkpoint of the last whole iteration, then propagates.
     """
     if not isinstance(config, APGConfig):
         raise TypeError(f"config must be an APGConfig, got {type(config).__name__}")
@@ -507,12 +509,15 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
             _write_law(run_dir, BEST_LAW, trainer.law)
         return row
 
+    done, saved, in_step = start, start, False
     try:
         if start == 0:
             validate(0, math.nan, math.nan)
         train_cost = grad_norm = math.nan
         for iteration in range(start + 1, config.iterations + 1):
+            in_step = True
             train_cost, grad_norm = trainer.step()
+            in_step, done = False, iteration
             writer.add_scalar("train/cost", train_cost, iteration * steps_per_iteration)
             writer.add_scalar("train/grad_norm", grad_norm, iteration * steps_per_iteration)
             writer.add_scalar(
@@ -526,6 +531,13 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
                 bar.set_postfix_str(f"val {row['cost_mean']:.5g}")
             if iteration % config.checkpoint_freq == 0 or iteration == config.iterations:
                 _save_checkpoint(run_dir, iteration, trainer)
+                saved = iteration
+    except KeyboardInterrupt:
+        # Ctrl-C: keep the last whole iteration (not one stopped inside its Adam step, whose
+        # weights may be half-updated), so --resume loses nothing
+        if not in_step and done > saved:
+            _save_checkpoint(run_dir, done, trainer)
+        raise
     finally:
         bar.close()
         writer.close()
