@@ -336,3 +336,26 @@ def test_training_beats_the_proportional_controller_at_the_quick_setting(tmp_pat
     )
     costs = results.episodes.groupby("policy").total_cost.mean()
     assert costs["apg"] < 0.8 * costs["proportional"]
+
+
+def test_two_dimensional_swarm_trains_resumes_and_acts(tmp_path):
+    kwargs = {"n_agents": 3, "dim": 2, "target": (0.5, -0.2), "n_steps": 10, "n_paths": 2}
+    config = _tiny_config(env_kwargs=kwargs, iterations=2, eval_freq=1, checkpoint_freq=1)
+    train_apg(config, tmp_path / "run")
+    (tmp_path / "run" / FINAL_LAW).unlink()
+    # config.json holds the target as a list; resuming with the tuple is the same run
+    train_apg(_tiny_config(env_kwargs=kwargs, iterations=3), tmp_path / "run", resume=True)
+    policy = load_apg_policy(tmp_path / "run")
+    for n in (3, 6):
+        env = gym.make("agent_envs/Swarm-v0", **{**kwargs, "n_agents": n})
+        episode = rollout(policy, env, 4)
+        assert episode.controls.shape == (10, n, 2) and not episode.diverged
+        par = swarm_v0.parallel_env(**{**kwargs, "n_agents": n})
+        observations, _ = par.reset(seed=4)
+        actions = policy.act(observations)
+        np.testing.assert_allclose(
+            np.stack([actions[a] for a in par.agents]) * env.unwrapped.max_control,
+            episode.controls[0],
+            rtol=1e-5,
+            atol=1e-5,
+        )

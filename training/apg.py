@@ -409,7 +409,8 @@ def train_apg(
 
     A new run creates `run_dir` exclusively (`storage.create_run_directory`: an existing folder
     is an error naming --resume); ``resume=True`` needs the folder, its config.json equal to
-    `config` except for `iterations` (which may grow) and `progress`, and a valid checkpoint.
+    `config` except for `iterations` (which may grow), `progress`, `eval_freq`, `checkpoint_freq`
+    and `threads` (none changes the training's arithmetic), and a valid checkpoint.
     The folder is locked (`storage.RunLock`) for the whole run. Resuming with more iterations
     stretches the cosine schedule over the new total from where the run stopped. Ctrl-C
     (KeyboardInterrupt) saves a checkpoint of the last whole iteration, then propagates.
@@ -421,10 +422,13 @@ def train_apg(
         if not (run_dir / "config.json").is_file():
             raise ValueError(f"resume {run_dir}: not an apg run folder (no config.json)")
         saved = APGConfig.from_dict(json.loads((run_dir / "config.json").read_text()))
-        ignore = {"iterations", "progress"}
-        diff = sorted(
-            k for k, v in config.to_dict().items() if k not in ignore and saved.to_dict()[k] != v
+        ignore = {"iterations", "progress", "eval_freq", "checkpoint_freq", "threads"}
+        # compared as JSON (a tuple target of d > 1 comes back from config.json as a list)
+        now, then = (
+            json.loads(json.dumps(config.to_dict())),
+            json.loads(json.dumps(saved.to_dict())),
         )
+        diff = sorted(k for k, v in now.items() if k not in ignore and then[k] != v)
         if diff:
             raise ValueError(f"resume {run_dir}: config differs from the run's in {diff}")
         if config.iterations < saved.iterations:
