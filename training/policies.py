@@ -361,6 +361,10 @@ def resolve_policy(
             if name == "zero" or not issubclass(BASELINES[name], FeedbackController):
                 kw = {}
             return make_baseline(name, env, **kw), {"kind": "baseline", "name": name, **kw}
+        from agent_envs.training.apg_policy import is_apg_run, load_apg_policy
+
+        if is_apg_run(name):  # an apg run folder or its weights (.pt beside apg_law.json)
+            return load_apg_policy(name), {"kind": "apg", "path": name}
         return load_sb3_policy(name, env)
     if hasattr(spec, "predict"):
         return spec, {"kind": "object", "type": type(spec).__name__}
