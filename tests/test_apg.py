@@ -359,3 +359,24 @@ def test_two_dimensional_swarm_trains_resumes_and_acts(tmp_path):
             rtol=1e-5,
             atol=1e-5,
         )
+
+
+def test_train_algo_apg_from_the_command_line_trains_resumes_and_evaluates(tmp_path):
+    """`agent-envs train --algo apg` (settings in --hyperparams), `train --resume RUN` of an apg
+    run without --algo, and `evaluate -p apg=RUN`: the CLI routes to the apg learner."""
+    import json
+
+    from agent_envs.training.cli import main
+
+    env = '{"n_agents": 4, "n_steps": 5}'
+    hyper = '{"iterations": 2, "eval_freq": 1, "hidden": 2}'
+    out = tmp_path / "runs"
+    argv = ["train", "--algo", "apg", "--env-kwargs", env, "--hyperparams", hyper]
+    assert main([*argv, "--out", str(out), "--run-name", "r", "--no-progress-bar"]) == 0
+    run = out / "r"
+    assert json.loads((run / "summary.json").read_text())["iterations"] == 2
+    more = '{"iterations": 3}'
+    assert main(["train", "--resume", str(run), "--hyperparams", more, "--no-progress-bar"]) == 0
+    assert json.loads((run / "summary.json").read_text())["iterations"] == 3
+    ev = ["evaluate", "-p", f"apg={run}", "--env-kwargs", env, "--seeds", "0-1", "--no-progress"]
+    assert main([*ev, "--out", str(tmp_path / "ev")]) == 0

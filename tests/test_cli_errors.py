@@ -254,6 +254,11 @@ BATTERY: list[tuple[list[str], str]] = [
     # --settings --timesteps-scale --test-episodes --vec-env --dry-run --bootstrap-seed
     (["sweep", "--out", "{out}", "--preset", "bogus"], "--preset"),
     (["tune", "--out", "{out}", "--preset", "bogus"], "--preset"),
+    (["train", "--algo", "apg", "--timesteps", "10", "--out", "{out}"], "--timesteps"),
+    (["train", "--algo", "apg", "--hyperparams", '{"iters": 1}', "--out", "{out}"], "iters"),
+    (["train", "--algo", "apg", "--hyperparams", '{"hidden": -1}', "--out", "{out}"], "hidden"),
+    (["train", "--algo", "apg", "--env-kwargs", '{"n_agents": 0}', "--out", "{out}"], "n_agents"),
+    (["tune", "--out", "{out}", "--preset", "paper", "--learner", "apg"], "--learner"),
     (["tune", "--out", "{out}", "--learner", "dqn"], "--learner"),
     (["tune", "--out", "{out}", "--setting", "eps1"], "--setting"),
     (["tune", "--out", "{file}", "--dry-run"], "--out"),

@@ -99,23 +99,29 @@ def test_paper_preset_definition():
     assert preset.references == ("optimal", "mpc", "turnpike", "proportional", "zero")
     assert len(preset.seeds) >= 3
     assert preset.vec_env == "native" and preset.vec_env in VEC_ENV_CHOICES
-    assert {t.train["vec_env"] for t in build_trials(preset) if t.kind == LEARNER} == {
+    sb3 = [t for t in build_trials(preset) if t.kind == LEARNER and t.train["algo"] != "apg"]
+    assert {t.train["vec_env"] for t in sb3} == {
         "native",
         "dummy",  # the PettingZoo learner trains on SuperSuit's vector env
     }
     trials = build_trials(preset, ExperimentOptions(vec_env="dummy"))
     learners = [t for t in trials if t.kind == LEARNER]
     main = {(t.policy, t.seed) for t in learners if t.setting == "main"}
-    names = ("ppo", "ppo-swarm", "sac", "td3", "ppo-shared")
+    names = ("ppo", "ppo-swarm", "sac", "td3", "ppo-shared", "apg")
     assert main == {(a, s) for a in names for s in preset.seeds}
-    assert {t.policy for t in learners if t.setting in ("eps1", "em-to-serb")} == {"ppo-swarm"}
+    contrasts = {t.policy for t in learners if t.setting in ("eps1", "em-to-serb")}
+    assert contrasts == {"ppo-swarm", "apg"}
+    # apg: APGConfig's defaults (what benchmarks/bench_apg.py measured) on the setting's env
+    apg = next(t for t in learners if t.policy == "apg" and t.setting == "main")
+    assert apg.train["iterations"] == 300 and apg.train["eval_freq"] == 25
+    assert apg.train["env_kwargs"] == preset.env_kwargs and apg.train["train_paths"] == 4
     swarm = next(t for t in learners if t.policy == "ppo-swarm")
     from agent_envs.training.config import default_hyperparams
 
     config = TrainConfig.from_dict(swarm.train)
     assert config.hyperparams == {} and config.n_envs is None  # the training layer's own
     assert default_hyperparams("ppo", swarm.train["env_id"])["policy_kwargs"]["log_std_init"] < 0
-    by_setting = {t.setting: t for t in learners}
+    by_setting = {t.setting: t for t in learners if t.policy != "apg"}
     assert by_setting["eps1"].train["env_kwargs"]["epsilon"] == 1.0
     em = by_setting["em-to-serb"]
     assert em.train["env_kwargs"]["integrator"] == "em"
@@ -472,13 +478,13 @@ def test_compare_runs_one_seed_of_the_sweeps_grid():
     ]
     assert [t.policy for t in compare] == [t.policy for t in sweep]
     for c, s in zip(compare, sweep, strict=True):
-        same = {"run_name": None, "progress_bar": None}
+        same = {"run_name": None, "progress_bar": None, "progress": None}
         assert {**c.train, **same} == {**s.train, **same}
         assert c.eval_env_kwargs == s.eval_env_kwargs and c.test_seeds == s.test_seeds
     # a contrast setting: its learners, its env, its evaluation env
     em = CompareConfig(preset="paper", setting="em-to-serb", seed=2, out="x").trials()
     learners = [t for t in em if t.kind == LEARNER]
-    assert [(t.policy, t.seed) for t in learners] == [("ppo-swarm", 2)]
+    assert [(t.policy, t.seed) for t in learners] == [("ppo-swarm", 2), ("apg", 2)]
     assert learners[0].train["env_kwargs"]["integrator"] == "em"
     assert {t.eval_env_kwargs["integrator"] for t in em} == {"serb"}
 

@@ -476,7 +476,8 @@ def test_compare_quick_preset_smoke(tmp_path):
     ]
     assert main(argv) == 0
     report = (out / "report" / "report.md").read_text()
-    for name in ("turnpike", "proportional", "zero", "optimal", "mpc", "ppo", "sac", "ppo-shared"):
+    names = ("turnpike", "proportional", "zero", "optimal", "mpc", "ppo", "sac", "ppo-shared")
+    for name in (*names, "apg"):
         assert f"| {name} |" in report
     assert "gap to optimal" in report
     assert "Learning curves" in report and "learning_curves.png" in report

@@ -12,7 +12,7 @@ with gradient clipping, periodic evaluation) for the swarm env `agent_envs/Swarm
    horizon (m steps; no truncated windows: with SERB the gradient through m = 50 steps stays
    finite and exact, and the target is met without truncation, which was therefore not
    measured; with EM at eps = 0.05 the gradient is ~1e15 and no window length fixes the
-   instability of the step itself, docs/APG.md);
+   instability of the step itself, docs/learners/apg.md);
 3. Adam with the gradient's norm clipped to `max_grad_norm` and a cosine learning-rate decay
    to `final_learning_rate_fraction` of the rates (a constant rate leaves the law rattling
    around the optimum; the per-iteration gradient is a one-start sample);
@@ -68,7 +68,13 @@ from agent_envs.training.apg_policy import (
 )
 from agent_envs.training.apg_rollout import ClosedLoop, EpisodeNoise, with_env_kwargs
 from agent_envs.training.callbacks import mean_ci95, read_learning_curve, write_learning_curve
-from agent_envs.training.defaults import DEFAULT_EVAL_SEED, GYM_ENV_ID
+from agent_envs.training.defaults import (
+    DEFAULT_EVAL_SEED,
+    GYM_ENV_ID,
+    parse_env_kwargs,
+    parse_json_object,
+)
+from agent_envs.training.environments import env_description
 from agent_envs.training.storage import (
     RunLock,
     RunManifest,
@@ -109,7 +115,7 @@ class APGConfig:
         train_paths: Brownian paths of a training episode, 1..1e6; None = the env's n_paths.
             The law sees path means, so fewer paths than the env's change its input only by
             noise of order sigma sqrt(t / K); at N = 100 a cost + gradient takes 0.2 s of CPU
-            with 4 paths, 0.85 s with 20 (docs/APG.md).
+            with 4 paths, 0.85 s with 20 (docs/learners/apg.md).
         learning_rate: Adam's rate in (0, 10] for the gains (default 0.2).
         mlp_learning_rate: the rate of the shared MLP's weights in (0, 10] (default 0.2).
         final_learning_rate_fraction: cosine decay to this fraction of the rates, [0, 1].
@@ -229,6 +235,63 @@ class APGConfig:
         if "references" in data:
             data["references"] = tuple(data["references"])
         return cls(**data)
+
+
+#: `agent-envs train` options that mean the same for `--algo apg`, and the APGConfig field each
+#: sets; APG's own settings (iterations, learning rates, hidden, ...) go in --hyperparams.
+TRAIN_OPTIONS = {
+    "env_kwargs": "env_kwargs",
+    "seed": "seed",
+    "eval_episodes": "n_eval_episodes",
+    "eval_seed": "eval_seed",
+    "progress_bar": "progress",
+    "torch_threads": "threads",
+}
+#: `agent-envs train` options about where the run lives (not APGConfig fields)
+RUN_OPTIONS = ("algo", "out", "run_name", "resume")
+
+
+def from_train_options(options: dict[str, Any]) -> tuple[APGConfig, Path, bool]:
+    """(config, run folder, resume) of `agent-envs train --algo apg` from the options given.
+
+    `options` holds only the options the user gave (field name -> value, `TrainConfig`'s
+    names). ``--hyperparams`` holds APGConfig fields (e.g. ``{"iterations": 300, "hidden":
+    16}``); an SB3-only option (``--timesteps``, ``--n-envs``, ...) is a ValueError naming it.
+    ``--resume RUN`` continues that run with its own config.json.
+    """
+    given = dict(options)
+    unknown = sorted(set(given) - set(TRAIN_OPTIONS) - set(RUN_OPTIONS) - {"hyperparams"})
+    if unknown:
+        flags = ", ".join("--" + n.replace("_", "-") for n in unknown)
+        verb = "does" if len(unknown) == 1 else "do"
+        raise ValueError(
+            f"{flags} {verb} not apply to --algo apg; its own settings go in --hyperparams "
+            f"(APGConfig fields: {', '.join(f.name for f in dataclasses.fields(APGConfig))})"
+        )
+    hyper = parse_json_object(given.get("hyperparams"), "--hyperparams")
+    if "env_kwargs" in given:
+        given["env_kwargs"] = parse_env_kwargs(given["env_kwargs"])
+    values = {TRAIN_OPTIONS[k]: v for k, v in given.items() if k in TRAIN_OPTIONS}
+    if given.get("resume"):
+        # the run's own config.json; what may change on a resume (iterations, eval_freq, ...)
+        # is checked by train_apg, which names any other difference
+        run_dir = Path(given["resume"])
+        if not (run_dir / "config.json").is_file():
+            raise ValueError(f"--resume {run_dir}: not an apg run folder (no config.json)")
+        saved = json.loads((run_dir / "config.json").read_text())
+        return APGConfig.from_dict({**saved, **values, **hyper}), run_dir, True
+    fields = {f.name for f in dataclasses.fields(APGConfig)}
+    wrong = sorted(set(hyper) - fields)
+    if wrong:
+        raise ValueError(
+            f"--hyperparams: {wrong} are not APGConfig fields; choose from {sorted(fields)}"
+        )
+    config = APGConfig(**{**values, **hyper})
+    out = given.get("out", "runs")
+    run_dir = (
+        Path(out) / given["run_name"] if given.get("run_name") else default_run_dir(out, config)
+    )
+    return config, run_dir, False
 
 
 def default_run_dir(out: str | os.PathLike, config: APGConfig) -> Path:
@@ -355,7 +418,7 @@ class _Trainer:
             if diverged or not bool(torch.isfinite(cost)):
                 raise FloatingPointError(
                     "a training episode diverged under the law; lower learning_rate or "
-                    "max_grad_norm, or use a stabler integrator (docs/APG.md)"
+                    "max_grad_norm, or use a stabler integrator (docs/learners/apg.md)"
                 )
             (cost / k).backward()
             total += float(cost.detach()) / k
@@ -363,7 +426,7 @@ class _Trainer:
         if not all(bool(torch.all(torch.isfinite(g))) for g in grads):
             raise FloatingPointError(
                 "the gradient of the cost is not finite (an unstable integrator: EM at small "
-                "epsilon; docs/APG.md)"
+                "epsilon; docs/learners/apg.md)"
             )
         norm = torch.nn.utils.clip_grad_norm_(self.law.parameters(), self.config.max_grad_norm)
         self.optimizer.step()
@@ -479,7 +542,8 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
         ]
         start = iteration
     write_json_atomic(run_dir / "config.json", config.to_dict())
-    write_json_atomic(run_dir / "env.json", {"env_id": GYM_ENV_ID, "env_kwargs": config.env_kwargs})
+    # the SB3 runs' env.json (N, d, m, integrator, ...): compare and sweep read it alike
+    write_json_atomic(run_dir / "env.json", env_description(GYM_ENV_ID, config.env_kwargs))
     write_json_atomic(run_dir / LAW_DESCRIPTION, describe_law(trainer.spec))
     writer = SummaryWriter(str(run_dir / "tb"))
     m = trainer.env_config.n_steps
@@ -556,6 +620,10 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
         "seed": config.seed,
         "iterations": config.iterations,
         "timesteps": config.iterations * steps_per_iteration,
+        # the SB3 runs' keys (compare's and sweep's training tables): env transitions simulated
+        # in training, and the training wall time over every part of a resumed run
+        "swarm_steps": config.iterations * steps_per_iteration,
+        "train_wall_time_s": round(trainer.wall_time(), 2),
         "best_validation_cost": trainer.best_cost,
         "final_validation_cost": trainer.history[-1]["cost_mean"] if trainer.history else None,
         "validation_seeds": trainer.eval_seeds,

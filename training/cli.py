@@ -362,8 +362,13 @@ def _run_report(config: Any) -> int:
 
 
 def _run_train(options: dict[str, Any]) -> int:
+    from agent_envs.training.apg_policy import is_apg_run
     from agent_envs.training.train import config_from_options, train
 
+    if options.get("algo") == "apg" or (
+        options.get("resume") and is_apg_run(options["resume"]) and "algo" not in options
+    ):
+        return _run_train_apg(options)
     run_dir = train(config_from_options(options))
     summary = json.loads((run_dir / "summary.json").read_text())
     print(f"run directory: {run_dir}")
@@ -374,6 +379,21 @@ def _run_train(options: dict[str, Any]) -> int:
             f"(turnpike {last.get('turnpike_cost', float('nan')):.4g}) after "
             f"{summary['timesteps']} timesteps, {summary['train_wall_time_s']:.0f} s"
         )
+    return 0
+
+
+def _run_train_apg(options: dict[str, Any]) -> int:
+    """`agent-envs train --algo apg` (and --resume of an apg run): `apg.train_apg`."""
+    from agent_envs.training.apg import from_train_options, train_apg
+
+    config, run_dir, resume = from_train_options(options)
+    summary = train_apg(config, run_dir, resume=resume)
+    print(f"run directory: {run_dir}")
+    print(
+        f"best validation cost {summary['best_validation_cost']:.4g} after "
+        f"{summary['iterations']} iterations, {summary['cpu_time_s']:.0f} s CPU "
+        f"({summary['wall_time_s']:.0f} s wall)"
+    )
     return 0
 
 

@@ -50,10 +50,12 @@ from agent_envs.training.experiment import (
     ExperimentOptions,
     GridArguments,
     Trial,
+    budget,
     build_trials,
     check_envs,
+    evaluation_spec,
     select,
-    train_learner,
+    train_from_dict,
 )
 from agent_envs.training.presets import OPTIMUM_POLICIES, PRESETS, Learner, get_preset
 from agent_envs.validation import MAX_SEED, check_int
@@ -236,8 +238,8 @@ def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], pa
         if not rows:
             continue
         env = json.loads((run_dir / "env.json").read_text())
-        config = json.loads((run_dir / "config.json").read_text())
-        per_step = env["n_agents"] if config["env_id"] == PETTINGZOO_ENV_ID else 1
+        trained_on = json.loads((run_dir / "summary.json").read_text())["env_id"]
+        per_step = env["n_agents"] if trained_on == PETTINGZOO_ENV_ID else 1
         steps = np.array([r["timesteps"] for r in rows]) / per_step
         wall = np.array([r["wall_time_s"] for r in rows])
         mean = np.array([r["cost_mean"] for r in rows])
@@ -293,7 +295,7 @@ def training_table(run_dirs: dict[str, Path], learners: dict[str, Learner]):
                 "learner": name,
                 "algorithm": learners[name].description or learners[name].algo,
                 "env": learners[name].env_id,
-                "SB3 timesteps": summary["timesteps"],
+                "training timesteps": summary["timesteps"],
                 "swarm steps": summary["swarm_steps"],
                 "training wall time [s]": summary["train_wall_time_s"],
                 "best validation cost": None if best is None else round(best["cost_mean"], 4),
@@ -306,31 +308,27 @@ def training_table(run_dirs: dict[str, Path], learners: dict[str, Learner]):
 
 def _train_all(config: CompareConfig, trials: list[Trial]) -> dict[str, Path]:
     """Train (or reuse / resume) every learner trial; {learner name: run directory}."""
-    from agent_envs.training.config import TrainConfig
-
     learners = [t for t in trials if t.kind == LEARNER]
     run_dirs: dict[str, Path] = {}
     for i, trial in enumerate(learners, 1):
-        train = TrainConfig.from_dict(trial.train)
+        train = trial.train
         print(
-            f"[{i}/{len(learners)}] training {trial.policy} ({train.algo} on {train.env_id}, "
-            f"{train.timesteps} timesteps)",
+            f"[{i}/{len(learners)}] training {trial.policy} ({train['algo']} on "
+            f"{train['env_id']}, {budget(train)})",
             flush=True,
         )
-        run_dirs[trial.policy] = train_learner(train, retrain=config.retrain)
+        run_dirs[trial.policy] = train_from_dict(train, retrain=config.retrain)
     return run_dirs
 
 
 def _evaluate(config: CompareConfig, trials: list[Trial], run_dirs: dict[str, Path]):
     """The held-out evaluation of the references and the learners' best models; and, with
     ``--eval-env-kwargs``, the same on the modified env (else None)."""
-    from agent_envs.training.checkpoints import best_model_path
-
     references = [t for t in trials if t.kind != LEARNER]
     env_kwargs, seeds = trials[0].eval_env_kwargs, list(trials[0].test_seeds)
     print(f"evaluating {len(references) + len(run_dirs)} policies on {len(seeds)} seeds")
     policies: dict[str, Any] = {t.policy: t.reference_spec() for t in references}
-    policies.update({name: str(best_model_path(d)) for name, d in run_dirs.items()})
+    policies.update({name: evaluation_spec(d) for name, d in run_dirs.items()})
     out = config.out_dir
     results = evaluate_all(policies, env_kwargs, seeds, out / "evaluation", config.progress_bar)
     if not config.eval_env_kwargs:

@@ -122,7 +122,14 @@ def command_line(prog: str, config: Any) -> str:
 class TrainConfig:
     """One training run. Every field is an `agent-envs train` option (`--field-name`)."""
 
-    algo: str = option_field("ppo", "Stable-Baselines3 algorithm", choices=tuple(ALGORITHMS))
+    algo: str = option_field(
+        "ppo",
+        "Stable-Baselines3 algorithm, or apg (a feedback law trained by backpropagation "
+        "through the core's integrator, agent_envs.training.apg: its settings go in "
+        "--hyperparams, e.g. '{\"iterations\": 300}'; --timesteps, --n-envs and the other "
+        "SB3 options do not apply)",
+        choices=(*ALGORITHMS, "apg"),
+    )
     env_id: str = option_field(
         GYM_ENV_ID,
         f"environment: the Gymnasium id {GYM_ENV_ID!r} (one controller for the swarm) or "

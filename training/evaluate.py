@@ -137,9 +137,11 @@ class EvaluateConfig:
 
     def check_models(self) -> None:
         """Check every saved model named: its file, algorithm and statistics (nothing is
-        unpickled)."""
+        unpickled); an apg run folder is checked against its manifest when it is loaded."""
+        from agent_envs.training.apg_policy import is_apg_run
+
         for spec in self.policy_specs().values():
-            if spec not in BASELINE_POLICIES:
+            if spec not in BASELINE_POLICIES and not is_apg_run(spec):
                 check_model(spec)
 
     def reset_options(self) -> dict[str, Any] | None:

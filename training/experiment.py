@@ -41,6 +41,11 @@ from agent_envs.validation import MAX_SEED, check_int
 
 LEARNER = "learner"
 REFERENCE = "reference"
+#: the learner trained by analytic policy gradients (`agent_envs.training.apg`); every other
+#: learner's algo is a Stable-Baselines3 one
+APG = "apg"
+#: keys of an apg trial's training dict that are not `APGConfig` fields
+APG_RUN_KEYS = ("algo", "env_id", "out", "run_name")
 #: a trial's log file (in its run folder, or its reference folder)
 TRIAL_LOG = "sweep_trial.log"
 #: a learner trial's held-out evaluation, in its run folder
@@ -257,12 +262,16 @@ def learner_config(
     seed: int,
     options: ExperimentOptions,
     runs_dir: str | Path,
-) -> TrainConfig:
-    """The validated `TrainConfig` of one learner trial: the learner's budget times the scale,
-    `preset.evaluations` validations of `preset.validation_episodes` episodes, a checkpoint
-    every quarter of the budget."""
+) -> TrainConfig | dict[str, Any]:
+    """The validated training config of one learner trial: for an SB3 learner its `TrainConfig`
+    (the learner's budget times the scale, `preset.evaluations` validations of
+    `preset.validation_episodes` episodes, a checkpoint every quarter of the budget); for `apg`
+    the dict of `apg_trial` (its budget is iterations)."""
     timesteps = max(round(learner.timesteps * options.timesteps_scale), 1)
     train_kwargs, _ = setting_env_kwargs(preset, setting, options)
+    name = run_name(setting.name, learner.name, seed) if options.run_names else None
+    if learner.algo == APG:
+        return apg_trial(learner, train_kwargs, seed, timesteps, options, runs_dir, name)
     return TrainConfig(
         algo=learner.algo,
         env_id=learner.env_id,
@@ -270,7 +279,7 @@ def learner_config(
         timesteps=timesteps,
         seed=seed,
         out=str(runs_dir),
-        run_name=run_name(setting.name, learner.name, seed) if options.run_names else None,
+        run_name=name,
         n_envs=learner.n_envs,
         hyperparams=dict(learner.hyperparams),
         eval_freq=max(timesteps // preset.evaluations, 1),
@@ -282,6 +291,37 @@ def learner_config(
         verbose=options.verbose,
         torch_threads=options.torch_threads,
     ).validate()
+
+
+def apg_trial(
+    learner: Learner,
+    env_kwargs: dict[str, Any],
+    seed: int,
+    iterations: int,
+    options: ExperimentOptions,
+    runs_dir: str | Path,
+    name: str | None,
+) -> dict[str, Any]:
+    """The training dict of an `apg` learner trial: ``algo``, ``env_id``, ``out``, ``run_name``
+    and the fields of its validated `apg.APGConfig` (the learner's `hyperparams` over the
+    defaults, `iterations` = its budget times the scale; validation every 25 iterations and a
+    checkpoint every 50, or at the end of a shorter run)."""
+    from agent_envs.training.apg import APGConfig
+    from agent_envs.training.defaults import GYM_ENV_ID
+
+    values = {
+        "eval_freq": min(25, iterations),
+        "checkpoint_freq": min(50, iterations),
+        **learner.hyperparams,
+        "env_kwargs": env_kwargs,
+        "seed": seed,
+        "iterations": iterations,
+        "progress": options.progress_bar,
+        "threads": max(options.torch_threads, 1),
+    }
+    config = APGConfig(**values)
+    where = {"algo": APG, "env_id": GYM_ENV_ID, "out": str(runs_dir), "run_name": name}
+    return {**where, **config.to_dict()}
 
 
 def available_references(
@@ -308,6 +348,8 @@ def _learner_trials(
             continue
         for seed in options.training_seeds(preset):
             config = learner_config(preset, setting, learner, seed, options, runs_dir)
+            if isinstance(config, TrainConfig):
+                config = config.to_dict()
             trials.append(
                 Trial(
                     trial_id=run_name(setting.name, learner.name, seed),
@@ -318,7 +360,7 @@ def _learner_trials(
                     eval_env_kwargs=eval_kwargs,
                     test_seeds=options.test_seeds(preset),
                     settings=(setting.name,),
-                    train=config.to_dict(),
+                    train=config,
                 )
             )
     return trials
@@ -479,7 +521,81 @@ def train_learner(config: TrainConfig, *, retrain: bool = False) -> Path:
     return train(dataclasses.replace(config, resume=str(run_dir)))
 
 
+def _apg_run(config: Any, out: Path, run_name_: str | None) -> tuple[Path, bool] | None:
+    """The newest apg run in `out` (or `out/run_name_`) with `config`'s settings (`progress`
+    and `threads` aside): (run dir, finished with enough iterations)."""
+    from agent_envs.training.apg_policy import is_apg_run
+
+    wanted = {k: v for k, v in config.to_dict().items() if k not in ("progress", "threads")}
+    wanted = json.loads(json.dumps(wanted))
+    folders = [out / run_name_] if run_name_ else [p for p in out.glob("*") if is_apg_run(p)]
+    candidates = []
+    for folder in folders:
+        try:
+            saved = json.loads((folder / "config.json").read_text())
+        except (OSError, json.JSONDecodeError):
+            continue
+        if any(saved.get(k) != v for k, v in wanted.items() if k != "iterations"):
+            continue
+        try:
+            done = int(json.loads((folder / "summary.json").read_text())["iterations"])
+        except (OSError, ValueError, KeyError):
+            done = 0
+        candidates.append((folder.stat().st_mtime, folder, done >= config.iterations))
+    if not candidates:
+        return None
+    _, folder, finished = max(candidates)
+    return folder, finished
+
+
+def train_apg_trial(train: dict[str, Any], *, retrain: bool = False) -> Path:
+    """Train the apg learner of a training dict (`apg_trial`), or reuse / resume its run."""
+    from agent_envs.training.apg import APGConfig, default_run_dir, train_apg
+
+    config = APGConfig.from_dict({k: v for k, v in train.items() if k not in APG_RUN_KEYS})
+    out = Path(train["out"])
+    existing = None if retrain else _apg_run(config, out, train.get("run_name"))
+    if existing is None:
+        name = train.get("run_name")
+        run_dir = out / name if name else default_run_dir(out, config)
+        out.mkdir(parents=True, exist_ok=True)
+        train_apg(config, run_dir)
+        return run_dir
+    run_dir, finished = existing
+    if finished:
+        print(f"  reusing finished run {run_dir}")
+        return run_dir
+    print(f"  resuming {run_dir} from its last checkpoint")
+    train_apg(config, run_dir, resume=True)
+    return run_dir
+
+
+def train_from_dict(train: dict[str, Any], *, retrain: bool = False) -> Path:
+    """Train a trial's learner from its training dict (SB3 `TrainConfig` or apg), or reuse /
+    resume its run; return the run directory."""
+    if train.get("algo") == APG:
+        return train_apg_trial(train, retrain=retrain)
+    return train_learner(TrainConfig.from_dict(train), retrain=retrain)
+
+
+def budget(train: dict[str, Any]) -> str:
+    """A trial's training budget in words: SB3 timesteps or apg iterations."""
+    if train.get("algo") == APG:
+        return f"{train['iterations']} iterations"
+    return f"{train['timesteps']} timesteps"
+
+
+def evaluation_spec(run_dir: Path) -> str:
+    """What `evaluate_policies` loads for a trained run: an apg run folder as it is, an SB3
+    run's best model on the validation seeds (else its final one)."""
+    from agent_envs.training.apg_policy import is_apg_run
+    from agent_envs.training.checkpoints import best_model_path
+
+    return str(run_dir) if is_apg_run(run_dir) else str(best_model_path(run_dir))
+
+
 __all__ = [
+    "APG",
     "LEARNER",
     "REFERENCE",
     "ExperimentArguments",
@@ -494,5 +610,6 @@ __all__ = [
     "learner_config",
     "learner_run_dir",
     "run_name",
+    "train_from_dict",
     "train_learner",
 ]

@@ -13,11 +13,12 @@ Presets:
 - ``smoke``: PPO x 2 training seeds, N = 5 agents, m = 5 steps, 256 timesteps, 5 test
   episodes; a CI check that the whole pipeline runs.
 - ``quick``: N = 10, m = 20, otherwise the paper's stiff setting; PPO, SAC and
-  parameter-shared PPO with the training layer's hyperparameters; the main job
+  parameter-shared PPO with the training layer's hyperparameters, and ``apg``; the main job
   (`agent-envs compare --preset quick`, a few minutes on 2 cores).
 - ``paper``: the paper's scale (N = 100, m = 50, eps = 0.05, SERB, 20 Brownian paths,
   max_control = 25): the zoo's tuned Pendulum-v1 entries for PPO, SAC, TD3 and parameter-shared
-  PPO, and ``ppo-swarm`` (PPO with the training layer's own hyperparameters); 3 training seeds;
+  PPO, ``ppo-swarm`` (PPO with the training layer's own hyperparameters) and ``apg``; 3 training
+  seeds;
   contrasts eps = 1, max_control = 150 and train-on-EM / evaluate-on-SERB. The published study
   (README "Results at the paper's scale", docs/results/paper-sweep).
 
@@ -40,7 +41,9 @@ class Learner:
     """One learner of a preset: an SB3 algorithm on one of the two swarm envs, with its budget.
 
     `hyperparams` override the training layer's defaults (`config.default_hyperparams`) key by
-    key; `timesteps` counts SB3 timesteps (agent-steps on the PettingZoo env).
+    key; `timesteps` counts SB3 timesteps (agent-steps on the PettingZoo env). For the `apg`
+    learner (algo "apg": `agent_envs.training.apg`) `timesteps` is the number of iterations
+    and `hyperparams` are `APGConfig` fields over its defaults.
     """
 
     name: str
@@ -119,6 +122,17 @@ class Preset:
 #: optimization per episode (optimal) or per step (mpc).
 OPTIMUM_POLICIES = ("optimal", "mpc")
 
+#: The analytic-policy-gradient learner with `APGConfig`'s defaults (300 iterations, what
+#: benchmarks/bench_apg.py measured; docs/learners/apg.md): a per-agent feedback law trained by
+#: backpropagation of the discrete cost through the core's SERB.
+APG_LEARNER = Learner(
+    "apg",
+    "apg",
+    GYM_ENV_ID,
+    300,
+    description="APG: a per-agent feedback law trained by backpropagation through SERB",
+)
+
 # ------------------------------------------------------------------------------------- smoke
 
 _SMOKE_ENV = {"n_agents": 5, "n_steps": 5}
@@ -183,6 +197,7 @@ _QUICK = Preset(
             150_000,
             description="parameter-shared PPO, one agent per swarm member (SuperSuit)",
         ),
+        APG_LEARNER,
     ),
     seeds=(0, 1, 2),
     references=(*FEEDBACK_BASELINES, *OPTIMUM_POLICIES),
@@ -276,7 +291,7 @@ _PAPER = Preset(
             "eps1",
             "non-stiff contrast: eps = 1, SERB",
             env_kwargs={"epsilon": 1.0},
-            learners=("ppo-swarm",),
+            learners=("ppo-swarm", "apg"),
             # MPC re-solves at every step: the main setting only
             references=("optimal", "turnpike", "proportional", "zero"),
         ),
@@ -293,7 +308,7 @@ _PAPER = Preset(
             "trained with Euler-Maruyama, evaluated with SERB (eps = 0.05)",
             env_kwargs={"integrator": "em"},
             eval_env_kwargs={"integrator": "serb"},
-            learners=("ppo-swarm",),
+            learners=("ppo-swarm", "apg"),
         ),
     ),
     learners=(
@@ -330,6 +345,7 @@ _PAPER = Preset(
             n_envs=1,  # one swarm of N agents: SuperSuit's vector env
             n_steps=32,
         ),
+        APG_LEARNER,
     ),
     seeds=(0, 1, 2),
     references=("optimal", "mpc", "turnpike", "proportional", "zero"),

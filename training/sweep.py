@@ -60,6 +60,7 @@ from agent_envs.training.experiment import (
     ExperimentOptions,
     GridArguments,
     Trial,
+    budget,
     build_trials,
     check_envs,
     evaluation_dir,
@@ -176,10 +177,9 @@ def _finished_evaluation(folder: Path, trial: Trial) -> bool:
 
 def train_trial(trial: Trial, out: Path) -> Path:
     """Train the learner of `trial` (or continue its interrupted run); return the run folder."""
-    from agent_envs.training.config import TrainConfig
-    from agent_envs.training.experiment import train_learner
+    from agent_envs.training.experiment import train_from_dict
 
-    return train_learner(TrainConfig.from_dict({**trial.train, "out": str(out / "runs")}))
+    return train_from_dict({**trial.train, "out": str(out / "runs")})
 
 
 def trial_log_path(trial: Trial, out: Path) -> Path:
@@ -198,9 +198,9 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
     (`train` creates the run folder itself, exclusively), a reference trial to
     ``sweep_trial.log`` in its evaluation folder.
     """
-    from agent_envs.training.checkpoints import best_model_path
     from agent_envs.training.defaults import GYM_ENV_ID
     from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.experiment import evaluation_spec
     from agent_envs.training.results import EvaluationResults
 
     started = time.perf_counter()
@@ -215,7 +215,7 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
         print(f"trial {trial.trial_id} started {time.strftime('%Y-%m-%d %H:%M:%S')}")
         if trial.kind == LEARNER:
             run_dir = train_trial(trial, out)
-            spec = str(best_model_path(run_dir))
+            spec = evaluation_spec(run_dir)
         else:
             spec = trial.reference_spec()
             if trial.policy_kwargs:
@@ -362,8 +362,8 @@ def describe_trials(trials: list[Trial]) -> str:
         if t.kind == LEARNER:
             tc = t.train
             lines.append(
-                f"{t.trial_id}: train {tc['algo']} on {tc['env_id']} for {tc['timesteps']} "
-                f"timesteps (seed {t.seed}, env {tc['env_kwargs']}), evaluate on "
+                f"{t.trial_id}: train {tc['algo']} on {tc['env_id']} for {budget(tc)} "
+                f"(seed {t.seed}, env {tc['env_kwargs']}), evaluate on "
                 f"{len(t.test_seeds)} test seeds"
             )
         else:

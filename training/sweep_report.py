@@ -167,7 +167,7 @@ def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
                 "setting": trial.setting,
                 "learner": trial.policy,
                 "seed": trial.seed,
-                "SB3 timesteps": summary["timesteps"],
+                "training timesteps": summary["timesteps"],
                 "swarm steps": summary["swarm_steps"],
                 "training wall time [s]": summary["train_wall_time_s"],
                 "best validation cost": None if best is None else round(best["cost_mean"], 4),
