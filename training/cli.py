@@ -283,7 +283,7 @@ def _run_cheap_control_bound(config: Any) -> int:
     check_output_dir(config.out)
     start = time.perf_counter()
     rows, _ = reproduce(config.out, config)
-    print(markdown(rows, SUMMARY), end="")
+    print(markdown(rows, SUMMARY))
     print((config.out / "cheap_control_bound.md").read_text().split("\n\n", 1)[1], end="")
     seconds = time.perf_counter() - start
     print(
