@@ -75,6 +75,7 @@ from agent_envs.training.experiments.turnpike_property import cheap_constant, ke
 from agent_envs.validation import (
     EPSILON_RANGE,
     HORIZON_RANGE,
+    MAX_BATCH_SIZE,
     MAX_CONTROL_RANGE,
     MAX_SEED,
     SIGMA_RANGE,
@@ -351,7 +352,11 @@ class CheapControlBoundConfig:
             object.__setattr__(self, name, tuple(getattr(self, name)))
         check_sizes(self.n_agents, self.n_paths, min_agents=2)
         check_int("--eval-paths", self.eval_paths, 2, 100_000)
-        check_sizes(self.n_agents, self.eval_paths, min_agents=2)
+        if self.n_agents * self.eval_paths > MAX_BATCH_SIZE:
+            raise ValueError(
+                f"--n-agents times --eval-paths must be <= {MAX_BATCH_SIZE}, got "
+                f"{self.n_agents} x {self.eval_paths}"
+            )
         check_positive("--tau", self.tau, HORIZON_RANGE)
         for horizon in self.horizons:
             check_positive("--horizons", horizon, HORIZON_RANGE)
