@@ -529,7 +529,7 @@ def measure(
     if config.progress:
         print(
             f"  {case:12s} eps={epsilon:<5g} sigma={sigma:<5g} N={n_agents:<3d} T={horizon:<4g} "
-            f"V={res.cost:.5f} V_fresh={v_fresh:.5f} floor={floor:.3g} upper={upper:.3g} "
+            f"V={res.cost:.5g} V_fresh={v_fresh:.5g} floor={floor:.3g} upper={upper:.3g} "
             f"lemma={rhs:.3g} conv={res.converged} ({res.wall_time:.1f} s)",
             flush=True,
         )
