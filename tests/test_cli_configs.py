@@ -96,8 +96,8 @@ def test_the_five_hand_written_parsers_keep_their_option_names():
         },
         "reproduce-turnpike-property": {
             "--out", "--n-agents", "--n-paths", "--tau", "--horizons", "--sigmas",
-            "--epsilons", "--kernels", "--delta", "--seed", "--max-control", "--gtol",
-            "--max-iterations", "--no-progress",
+            "--epsilons", "--kernels", "--delta", "--seed", "--n-seeds", "--starts",
+            "--max-control", "--gtol", "--max-iterations", "--no-progress",
         },
         "evaluate": {
             "--policy", "-p", "--env-id", "--env-kwargs", "--seeds", "--target", "--beta",

@@ -146,6 +146,31 @@ BATTERY: list[tuple[list[str], str]] = [
     (["reproduce", "turnpike-property", "--out", "{out}", "--gtol", "inf"], "--gtol"),
     (["reproduce", "turnpike-property", "--out", "{out}", "--max-iterations", "0"], "iterations"),
     (["reproduce", "turnpike-property", "--out", "{out}", "--no-progress=1"], "--no-progress"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--n-seeds", "0"], "--n-seeds"),
+    (["reproduce", "turnpike-property", "--out", "{out}", "--starts", "bogus"], "--starts"),
+    # reproduce cheap-control-bound: --out --n-agents --n-paths --eval-paths --tau --horizons
+    # --sigma --epsilon --beta --scaling-agents --scaling-horizon --scaling-epsilons --seed
+    # --max-control --gtol --max-iterations --no-progress
+    (["reproduce", "cheap-control-bound", "--out", "{file}"], "--out"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--n-agents", "1"], "--n-agents"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--n-paths", "0"], "--n-paths"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--eval-paths", "1"], "--eval-paths"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--tau", "0"], "--tau"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--horizons", "0.33"], "--horizons"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--sigma", "0"], "--sigma"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--epsilon", "-1"], "--epsilon"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--beta", "0"], "--beta"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--scaling-agents", "1"], "agents"),
+    (
+        ["reproduce", "cheap-control-bound", "--out", "{out}", "--scaling-horizon", "0.07"],
+        "horizon",
+    ),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--scaling-epsilons", "0"], "epsilons"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--seed", "-1"], "--seed"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--max-control", "0"], "--max-control"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--gtol", "0"], "--gtol"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--max-iterations", "0"], "iterations"),
+    (["reproduce", "cheap-control-bound", "--out", "{out}", "--no-progress=1"], "--no-progress"),
     # evaluate: --policy --env-id --env-kwargs --seeds --target --beta --delta --out --report
     # --no-progress
     (["evaluate"], "--out"),

@@ -274,6 +274,25 @@ def _run_turnpike_property(config: Any) -> int:
     return 0
 
 
+def _run_cheap_control_bound(config: Any) -> int:
+    import time
+
+    from agent_envs.training.experiments.cheap_control_bound import SUMMARY, markdown, reproduce
+    from agent_envs.training.storage import check_output_dir
+
+    check_output_dir(config.out)
+    start = time.perf_counter()
+    rows, _ = reproduce(config.out, config)
+    print(markdown(rows, SUMMARY))
+    print((config.out / "cheap_control_bound.md").read_text().split("\n\n", 1)[1], end="")
+    seconds = time.perf_counter() - start
+    print(
+        f"wrote {config.out}/cheap_control_bound.png, .csv, .md and contraction.csv, .md "
+        f"({seconds:.0f} s)"
+    )
+    return 0
+
+
 # ------------------------------------------------------------------------ evaluate, report
 
 
@@ -446,6 +465,11 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         _T + "experiments.turnpike_property:TurnpikePropertyConfig",
         _run_turnpike_property,
     ),
+    "reproduce-cheap-control-bound": Subcommand(
+        "lem:cheap measured: its counterexamples, the noise floor, a corrected bound, L^n",
+        _T + "experiments.cheap_control_bound:CheapControlBoundConfig",
+        _run_cheap_control_bound,
+    ),
     "evaluate": Subcommand(
         "run policies on an env over fixed seeds, store results",
         _T + "evaluate:EvaluateConfig",
@@ -495,7 +519,7 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.
-REPRODUCTIONS = ("uncontrolled", "turnpike", "turnpike-property")
+REPRODUCTIONS = ("uncontrolled", "turnpike", "turnpike-property", "cheap-control-bound")
 
 
 def _normalise(argv: list[str]) -> list[str]:

@@ -11,9 +11,15 @@ at one tau (so m = T / tau grows with T), and the run reports, per setting:
   for n = 0..m-1, plotted against t_n on a log scale, one line per T;
 - the entry and exit rates: minus the slope of log D_n (least squares in t) from t = 0 to the
   first n with D_n <= delta, and the slope from the last n with D_n <= delta to t_{m-1}; next
-  to the entry rate, the rate the swarm's slow mode predicts (`centre_mode_rate`);
+  to the entry rate, the rate the swarm's slow mode predicts (`centre_mode_rate`: our own LQ
+  analysis of the swarm's centre, not a statement of the paper, which has no rate);
 - the share of the horizon with D_n <= delta (delta = 2e-4, the paper's threshold of
-  `eq:tptime`, by default);
+  `eq:tptime`, by default), and with delta / 10 and 10 delta (its sensitivity to delta);
+- the per-path quantity the theorem is about when there is noise: Dp_n = E||x*^n - x~||^2 +
+  ||u*^n - u~||^2 (the mean over the K paths of each path's squared distance, not the squared
+  distance of the mean), its minimum and its share within delta. For every deterministic
+  control E||x^n - x~||^2 >= d sigma^2 t_n (the centre's random walk, docs/TURNPIKE_THEORY.md),
+  so Dp stays within delta at most until t = delta / (d sigma^2) (`path_exit_time_bound`);
 - V against the cheap-control bound of Lemma `lem:cheap` (`eq:cheap`):
   V <= C0 E[gamma/(2N) ||x^0 - x~||^2], C0 = 2 tau (1 + gamma beta_p) / (gamma (1 - e^{-2 beta
   tau})), beta_p = 2((beta + M_p)^2 + M_p^2), M_p = sup p = max_l w_l / alpha^2 (Assumption
@@ -28,10 +34,14 @@ uniform on [-1, 1] from the seed (the same for every T); xbar = 0.7, gamma = 0.0
 
 Sizes: N = 20 agents, K = 10 paths (1 for sigma = 0), tau = 0.05 by default, so that the whole
 run takes minutes on 2 cores; `--n-agents 100 --n-paths 20 --tau 0.02` is the paper's N, K, tau.
-Each T is warm-started from the previous T's solution followed by zeros.
+Each T is warm-started from the previous T's solution followed by zeros. `--n-seeds S` repeats
+everything for the seeds seed .. seed + S - 1 and `--starts` for several kinds of x^0
+(`START_KINDS`); `turnpike_property_seeds.md` then summarizes the rows across them (mean, min
+and max of the shares and the entry rate). The figure shows the first seed and start.
 
-Outputs in --out: `turnpike_property.png`, `turnpike_property.csv` / `.md` (one row per setting
-and T), `curves.npz` (D_n per run) and `meta.json`. Library use:
+Outputs in --out: `turnpike_property.png`, `turnpike_property.csv` / `.md` (one row per seed,
+start, setting and T), `turnpike_property_seeds.md`, `curves.npz` (D_n per run) and
+`meta.json`. Library use:
 `reproduce(out, TurnpikePropertyConfig(...))`; the command line's options are the config's fields.
 """
 
@@ -67,6 +77,28 @@ HORIZONS = (0.5, 1.0, 2.0, 4.0, 8.0)
 SIGMAS = (0.0, 0.01, 0.1)
 EPSILONS = (0.05, 1.0)
 KERNELS = ("symmetric", "nonsymmetric")
+#: kinds of initial state: uniform on [-1, 1] (the paper's), two clusters near -1 and +1, and a
+#: swarm uniform on [2, 4], whose hull does not contain the target xbar = 0.7
+START_KINDS = ("uniform", "bimodal", "far")
+
+
+def initial_state(kind: str, rng: np.random.Generator, n_agents: int, dim: int = 1) -> np.ndarray:
+    """x^0 of shape (N, d) of one of `START_KINDS`, drawn from `rng`."""
+    if kind == "uniform":
+        return rng.uniform(-1.0, 1.0, size=(n_agents, dim))
+    if kind == "bimodal":
+        sign = np.where(np.arange(n_agents) % 2 == 0, -1.0, 1.0)[:, None]
+        return sign * rng.uniform(0.9, 1.0, size=(n_agents, dim))
+    if kind == "far":
+        return rng.uniform(2.0, 4.0, size=(n_agents, dim))
+    raise ValueError(f"--starts must be among {START_KINDS}, got {kind!r}")
+
+
+def path_curve(positions: np.ndarray, controls: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Dp_n = mean over paths of ||x^{n,j} - x~||^2, plus ||u^n||^2: (m+1, K, N, d), (m, N, d)."""
+    m = controls.shape[0]
+    state = np.mean(np.sum((positions[:m] - target) ** 2, axis=(-2, -1)), axis=1)
+    return state + np.sum(controls**2, axis=(-2, -1))
 
 
 @dataclass(frozen=True)
@@ -202,6 +234,10 @@ class TurnpikePropertyConfig:
     kernels: tuple[str, ...] = option_field(KERNELS, "interaction kernels", choices=KERNELS)
     delta: float = option_field(DELTA, "turnpike band (eq:tptime)")
     seed: int = option_field(0, "x^0 and the noise")
+    n_seeds: int = option_field(1, "repeat for the seeds seed .. seed + n_seeds - 1")
+    starts: tuple[str, ...] = option_field(
+        ("uniform",), "kinds of initial state x^0", choices=START_KINDS
+    )
     max_control: float = option_field(150.0, "bound |u| <= max_control of the solver")
     gtol: float = option_field(1e-6, "relative gradient tolerance")
     max_iterations: int = option_field(500, "the solver's iterations per horizon, at most")
@@ -211,10 +247,14 @@ class TurnpikePropertyConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
-        for name in ("horizons", "sigmas", "epsilons", "kernels"):
+        for name in ("horizons", "sigmas", "epsilons", "kernels", "starts"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         check_sizes(self.n_agents, self.n_paths, min_agents=2)
         check_int("--seed", self.seed, 0, MAX_SEED)
+        check_int("--n-seeds", self.n_seeds, 1, 1000)
+        check_int("--seed", self.seed + self.n_seeds - 1, 0, MAX_SEED)
+        if not self.starts or sorted(set(self.starts) - set(START_KINDS)):
+            raise ValueError(f"--starts must be among {START_KINDS}, got {list(self.starts)}")
         for horizon in self.horizons:
             check_positive("--horizons", horizon, HORIZON_RANGE)
         check_positive("--tau", self.tau, HORIZON_RANGE)
@@ -248,11 +288,18 @@ class TurnpikePropertyConfig:
         ]
 
 
-def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray) -> list[dict]:
+def run_setting(
+    setting: Setting,
+    config: TurnpikePropertyConfig,
+    x0: np.ndarray,
+    seed: int | None = None,
+    start_kind: str = "uniform",
+) -> list[dict]:
     """Solve every horizon of one setting (warm-started), return one row per T."""
     from agent_envs.baselines.optimal_control import solve_optimal_control
     from agent_envs.dynamics.swarm import kernel_from_params
 
+    seed = config.seed if seed is None else seed
     rows, previous = [], None
     for horizon in config.horizons:
         n_steps = round(horizon / config.tau)
@@ -267,7 +314,7 @@ def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray
             "serb",
             n_steps=n_steps,
             n_paths=n_paths,
-            seed=config.seed,
+            seed=seed,
             initial_positions=x0,
             max_control=config.max_control,
             initial_controls=warm,
@@ -279,6 +326,14 @@ def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray
         dt = params.horizon / n_steps
         curve = turnpike_curve(res.mean_positions, res.controls, target)
         rates = arc_rates(res.times[:n_steps], curve, config.delta)
+        shares = {
+            name: arc_rates(res.times[:n_steps], curve, band).share_within_delta
+            for name, band in (("share_delta_over_10", config.delta / 10.0),
+                               ("share_delta_times_10", config.delta * 10.0))
+        }  # fmt: skip
+        per_path = path_curve(res.positions, res.controls, target)
+        path_rates = arc_rates(res.times[:n_steps], per_path, config.delta)
+        dim = params.dim
         c0 = cheap_constant(dt, params.gamma, kernel_bound(params))
         predicted = centre_mode_rate(
             kernel_from_params(params).weights, params.n_agents, params.gamma, dt
@@ -288,6 +343,8 @@ def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray
         lhs, rhs = theorem_sides(res.positions, res.controls, target, params.gamma, dt, c0)
         rows.append(
             {
+                "seed": seed,
+                "start": start_kind,
                 "kernel": setting.kernel,
                 "epsilon": setting.epsilon,
                 "sigma": setting.sigma,
@@ -298,22 +355,31 @@ def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray
                 "iterations": res.iterations,
                 "rel_grad": res.relative_gradient_norm,
                 **asdict(rates),
+                **shares,
                 "predicted_entry_rate": predicted,
                 "min_D": float(np.min(curve)),
+                "min_D_path": float(np.min(per_path)),
+                "share_path_within_delta": path_rates.share_within_delta,
+                "path_exit_time_bound": (
+                    config.delta / (dim * setting.sigma**2) if setting.sigma > 0 else math.inf
+                ),
                 "cheap_bound": bound,
                 "bound_over_V": bound / res.cost,
                 "thm_lhs": lhs,
                 "thm_rhs": rhs,
                 "seconds": res.wall_time,
                 "curve": curve,
+                "path_curve": per_path,
                 "times": res.times[:n_steps],
             }
         )
         if config.progress:
             print(
-                f"  {setting.label:40s} T={horizon:<4g} m={n_steps:<4d} V={res.cost:.5f} "
-                f"it={res.iterations:<4d} conv={res.converged} entry={rates.entry_rate:7.2f} "
+                f"  seed={seed} {start_kind:7s} {setting.label:40s} T={horizon:<4g} "
+                f"m={n_steps:<4d} V={res.cost:.5f} it={res.iterations:<4d} conv={res.converged} "
+                f"entry={rates.entry_rate:7.2f} (ours: {predicted:.2f}) "
                 f"exit={rates.exit_rate:7.2f} share={rates.share_within_delta:.2f} "
+                f"path share={path_rates.share_within_delta:.2f} "
                 f"({res.wall_time:.1f} s)",
                 flush=True,
             )
@@ -321,7 +387,8 @@ def run_setting(setting: Setting, config: TurnpikePropertyConfig, x0: np.ndarray
 
 
 def plot(rows: list[dict], settings: list[Setting], delta: float, path: Path) -> None:
-    """One panel per setting: log D_n against t_n, one line per T, the delta band dashed."""
+    """One panel per setting: log D_n against t_n, one line per T, the delta band dashed; with
+    noise the per-path Dp_n dotted. The first seed and start only."""
     from matplotlib.figure import Figure
 
     kernels = sorted({(s.kernel, s.epsilon) for s in settings})
@@ -332,8 +399,13 @@ def plot(rows: list[dict], settings: list[Setting], delta: float, path: Path) ->
         for j, (kernel, eps) in enumerate(kernels):
             ax = axes[i][j]
             for row in rows:
-                if (row["kernel"], row["epsilon"], row["sigma"]) == (kernel, eps, sigma):
-                    ax.semilogy(row["times"], row["curve"], label=f"T={row['T']:g}")
+                if (row["kernel"], row["epsilon"], row["sigma"]) != (kernel, eps, sigma):
+                    continue
+                if (row["seed"], row["start"]) != (rows[0]["seed"], rows[0]["start"]):
+                    continue
+                (line,) = ax.semilogy(row["times"], row["curve"], label=f"T={row['T']:g}")
+                if sigma > 0:
+                    ax.semilogy(row["times"], row["path_curve"], ":", color=line.get_color())
             ax.axhline(delta, color="k", ls="--", lw=0.8)
             ax.set_title(f"{kernel} eps={eps:g}, sigma={sigma:g}", fontsize=9)
             ax.set_xlabel("t")
@@ -345,10 +417,33 @@ def plot(rows: list[dict], settings: list[Setting], delta: float, path: Path) ->
 
 
 COLUMNS = (
-    "kernel", "epsilon", "sigma", "T", "m", "V", "converged", "iterations", "rel_grad",
-    "entry_rate", "predicted_entry_rate", "exit_rate", "share_within_delta", "plateau", "min_D",
-    "cheap_bound", "bound_over_V", "thm_lhs", "thm_rhs", "seconds",
+    "seed", "start", "kernel", "epsilon", "sigma", "T", "m", "V", "converged", "iterations",
+    "rel_grad", "entry_rate", "predicted_entry_rate", "exit_rate", "share_within_delta",
+    "share_delta_over_10", "share_delta_times_10", "plateau", "min_D", "min_D_path",
+    "share_path_within_delta", "path_exit_time_bound", "cheap_bound", "bound_over_V", "thm_lhs",
+    "thm_rhs", "seconds",
 )  # fmt: skip
+#: the quantities `seed_summary` gives mean, min and max of, across seeds and starts
+SUMMARIZED = (
+    "share_within_delta", "share_delta_over_10", "share_delta_times_10",
+    "share_path_within_delta", "entry_rate", "V",
+)  # fmt: skip
+
+
+def seed_summary(rows: list[dict]) -> str:
+    """Markdown: per setting and T, mean [min, max] of `SUMMARIZED` across seeds and starts."""
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault((row["kernel"], row["epsilon"], row["sigma"], row["T"]), []).append(row)
+    head = ["kernel", "epsilon", "sigma", "T", "runs", *SUMMARIZED]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for (kernel, eps, sigma, horizon), group in groups.items():
+        cells = [kernel, f"{eps:g}", f"{sigma:g}", f"{horizon:g}", str(len(group))]
+        for name in SUMMARIZED:
+            values = np.array([r[name] for r in group], dtype=float)
+            cells.append(f"{np.mean(values):.3g} [{np.min(values):.3g}, {np.max(values):.3g}]")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def write_tables(rows: list[dict], out: Path) -> None:
@@ -369,8 +464,10 @@ def write_tables(rows: list[dict], out: Path) -> None:
     lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += ["| " + " | ".join(fmt(row[c]) for c in COLUMNS) + " |" for row in rows]
     (out / "turnpike_property.md").write_text("\n".join(lines) + "\n")
+    (out / "turnpike_property_seeds.md").write_text(seed_summary(rows))
     curves = {
-        f"{r['kernel']}_eps{r['epsilon']:g}_sigma{r['sigma']:g}_T{r['T']:g}": r["curve"]
+        f"seed{r['seed']}_{r['start']}_{r['kernel']}_eps{r['epsilon']:g}_sigma{r['sigma']:g}"
+        f"_T{r['T']:g}": r["curve"]
         for r in rows
     }
     np.savez(out / "curves.npz", **curves)
@@ -381,11 +478,19 @@ def reproduce(out: Path, config: TurnpikePropertyConfig) -> list[dict]:
     from agent_envs.simulator import uniform_positions
 
     out.mkdir(parents=True, exist_ok=True)
-    x0 = uniform_positions(np.random.default_rng(config.seed), config.n_agents, 1)
     start = time.perf_counter()
     rows: list[dict] = []
-    for setting in config.settings:
-        rows += run_setting(setting, config, x0)
+    for seed in range(config.seed, config.seed + config.n_seeds):
+        for kind in config.starts:
+            rng = np.random.default_rng(seed)
+            # the paper's start draws exactly as before, so the default run is unchanged
+            x0 = (
+                uniform_positions(rng, config.n_agents, 1)
+                if kind == "uniform"
+                else initial_state(kind, rng, config.n_agents)
+            )
+            for setting in config.settings:
+                rows += run_setting(setting, config, x0, seed, kind)
     write_tables(rows, out)
     plot(rows, config.settings, config.delta, out / "turnpike_property.png")
     meta = {**asdict(config), "seconds": time.perf_counter() - start}
