@@ -1,5 +1,5 @@
 """`reproduce cheap-control-bound` (issue 21): the counterexample to Lemma lem:cheap, the noise
-floor and the corrected bound (docs/TURNPIKE_THEORY.md), on small cases."""
+floor and the corrected bound (docs/cheap-control-bound.md), on small cases."""
 
 from __future__ import annotations
 

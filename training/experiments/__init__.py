@@ -6,7 +6,7 @@
   Gymnasium env and as the paper's closed loop.
 - `turnpike_property`: the turnpike theorem measured on optimal solutions.
 - `cheap_control_bound`: Lemma `lem:cheap` measured: its counterexamples, the noise floor, a
-  corrected bound (docs/TURNPIKE_THEORY.md) and the proof's contraction under SERB.
+  corrected bound (docs/cheap-control-bound.md) and the proof's contraction under SERB.
 
 Each module has a frozen config dataclass (one field per option of `agent-envs reproduce NAME`,
 validated on construction) and ``reproduce(out_dir, ...)`` (writes tables and figures); the

@@ -1,7 +1,7 @@
 """`agent-envs reproduce cheap-control-bound`: Lemma `lem:cheap` measured, and a corrected bound.
 
 Paper: Cassini & Segala, "The turnpike control in stochastic multi-agent dynamics: a discrete-time
-approach with exponential integrators", arXiv 2503.09549. docs/TURNPIKE_THEORY.md has the
+approach with exponential integrators", arXiv 2503.09549. docs/cheap-control-bound.md has the
 derivations; this module computes every quantity of them on the symmetric kernel `eq:symmker`
 with SERB (`eq:exp_int_discr`, the frozen linearization L(x) = (P(x) - diag(P(x) 1)) / N).
 

@@ -18,7 +18,7 @@ at one tau (so m = T / tau grows with T), and the run reports, per setting:
 - the per-path quantity the theorem is about when there is noise: Dp_n = E||x*^n - x~||^2 +
   ||u*^n - u~||^2 (the mean over the K paths of each path's squared distance, not the squared
   distance of the mean), its minimum and its share within delta. For every deterministic
-  control E||x^n - x~||^2 >= d sigma^2 t_n (the centre's random walk, docs/TURNPIKE_THEORY.md),
+  control E||x^n - x~||^2 >= d sigma^2 t_n (the centre's random walk, docs/cheap-control-bound.md),
   so Dp stays within delta at most until t = delta / (d sigma^2) (`path_exit_time_bound`);
 - V against the cheap-control bound of Lemma `lem:cheap` (`eq:cheap`):
   V <= C0 E[gamma/(2N) ||x^0 - x~||^2], C0 = 2 tau (1 + gamma beta_p) / (gamma (1 - e^{-2 beta
