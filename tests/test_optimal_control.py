@@ -295,6 +295,37 @@ def test_non_convergence_warns_and_is_flagged():
     assert res.iterations == 1
 
 
+def test_stiff_em_whose_gradient_overflows_is_a_failed_solve():
+    """Stiff EM (eps = 0.001, m = 400, tau lambda >> 2): the forward simulation stays bounded
+    (the kernel saturates far apart) but the backward pass overflows to inf at u = 0. The
+    objective then stands in a penalty with a zero gradient, which passed the relative gradient
+    test after 0 iterations (converged=True) before the fix: the README's "stiff EM does not
+    solve (converged=False)"."""
+    params = SwarmParams(n_agents=10, epsilon=0.001, sigma=0.01)
+    with pytest.warns(RuntimeWarning, match="did not converge: failed: at u = 0: .*non-finite"):
+        res = solve_optimal_control(params, "em", n_steps=400, n_paths=2, max_iterations=20)
+    assert not res.converged
+    assert res.failure is not None and "non-finite gradient" in res.failure
+    assert np.isfinite(res.cost)
+
+
+def test_stiff_em_at_the_paper_setting_does_not_solve():
+    """The README's case (eps = 0.05, m = 20, tau lambda ~ 100): gradients of ~1e11 at u = 0,
+    the line search fails; finite numbers, so no `failure`, but never `converged`."""
+    params = SwarmParams(n_agents=10, epsilon=0.05, sigma=0.01)
+    with pytest.warns(RuntimeWarning, match="did not converge"):
+        res = solve_optimal_control(params, "em", n_steps=20, n_paths=2, max_iterations=20)
+    assert not res.converged
+    assert res.failure is None
+    assert res.relative_gradient_norm > 1e-6
+
+
+def test_a_finite_solve_reports_no_failure():
+    params = SwarmParams(n_agents=4, epsilon=1.0, sigma=0.0)
+    res = solve_optimal_control(params, n_steps=5, n_paths=1)
+    assert res.converged and res.failure is None
+
+
 def test_baselines_import_without_torch_and_solve_names_the_extra():
     code = (
         "import sys\n"
