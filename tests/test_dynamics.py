@@ -136,3 +136,67 @@ def test_a_user_kernel_returning_a_read_only_array_is_not_written_into():
     lin = model.frozen_linearization(x)
     np.testing.assert_allclose(lin, 2.0 * (np.ones((n, n)) - n * np.eye(n)) / n)
     np.testing.assert_array_equal(kernel.matrix, np.full((n, n), 2.0))
+
+
+# ------------------------------------------------ the kernel's contract (mutation testing)
+@pytest.mark.parametrize(
+    ("alpha", "weights"),
+    [
+        (0.0, 1.0),
+        (-0.5, 1.0),
+        (0.3, 0.0),
+        (0.3, -1.0),
+        (0.3, [1.0, -2.0]),
+        (0.3, [1.0, np.nan]),
+        (0.3, np.ones((2, 2))),
+    ],
+)
+def test_kernel_rejects_bad_alpha_and_weights(alpha, weights):
+    with pytest.raises(ValueError, match=r"alpha|weights"):
+        CuckerSmaleKernel(alpha, weights)
+
+
+@pytest.mark.parametrize(
+    ("weights", "symmetric"),
+    [
+        (2.0, True),
+        ([2.0], True),
+        ([2.0, 2.0, 2.0], True),
+        ([1.0, 2.0, 3.0], False),
+        ([3.0, 2.0, 1.0], False),
+        ([2.0, 1.0, 1.0], False),
+    ],
+)
+def test_kernel_is_symmetric_exactly_for_equal_weights(weights, symmetric):
+    assert CuckerSmaleKernel(0.3, weights).symmetric is symmetric
+
+
+@pytest.mark.parametrize(
+    ("eps_min", "eps_max", "symmetric"), [(0.1, 0.5, False), (0.5, 0.1, False), (0.2, 0.2, True)]
+)
+def test_nonsymmetric_kernel_flag(eps_min, eps_max, symmetric):
+    kernel = CuckerSmaleKernel.nonsymmetric_kernel(0.3, eps_min, eps_max, 4)
+    assert kernel.symmetric is symmetric
+    np.testing.assert_allclose(kernel.weights, 1.0 / np.linspace(eps_min, eps_max, 4))
+
+
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_kernel_on_single_pairs_and_a_batch_of_one(dim):
+    """Shapes (1, 1, d) and (1, N, 1, d) take the same formula as (N, 1, d): the d = 1 fast
+    paths must not be chosen by a leading axis of length 1."""
+    x = np.random.default_rng(dim).uniform(-1, 1, (4, dim))
+    kernel = CuckerSmaleKernel.nonsymmetric_kernel(0.3, 0.1, 0.5, 4)
+    full = kernel.value(x[:, None, :], x[None, :, :])
+    gx = kernel.grad_x(x[:, None, :], x[None, :, :])
+    batch = kernel.value(x[None, :, None, :], x[None, None, :, :])
+    np.testing.assert_allclose(batch[0], full, rtol=1e-14)
+    np.testing.assert_allclose(kernel.grad_x(x[None, :, None, :], x[None, None, :, :])[0], gx)
+    single = CuckerSmaleKernel(0.3, 2.0)
+    for k in range(4):
+        for q in range(4):
+            diff = x[k] - x[q]
+            want = 2.0 / (0.09 + float(diff @ diff))
+            got = single.value(x[k][None, None, :], x[q][None, None, :])
+            assert got.shape == (1, 1) and got[0, 0] == pytest.approx(want, rel=1e-13)
+            g = single.grad_x(x[k][None, None, :], x[q][None, None, :])[0, 0]
+            np.testing.assert_allclose(g, -2.0 * 2.0 * diff / (0.09 + diff @ diff) ** 2)

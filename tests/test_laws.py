@@ -300,3 +300,19 @@ def test_costs_against_their_formulas():
         for a in range(n)
     )
     assert float(turnpike_distance(mean, u[0, 0], target)) == pytest.approx(want, rel=1e-13)
+
+
+@pytest.mark.parametrize("dim", [1, 2])
+def test_kernel_on_torch_against_the_formula(dim):
+    """The torch path (the differentiable one): same formula, weights moved to the tensor's
+    library."""
+    torch = pytest.importorskip("torch")
+    n = 5
+    x = np.random.default_rng(30 + dim).uniform(-1, 1, (n, dim))
+    xt = torch.as_tensor(x)
+    for kernel, w in _kernels(n):
+        got = kernel.value(xt[:, None, :], xt[None, :, :])
+        assert isinstance(got, torch.Tensor)
+        np.testing.assert_allclose(got.numpy(), _kernel_formula(x, 0.3, w), rtol=1e-13)
+        gx = kernel.grad_x(xt[:, None, :], xt[None, :, :])
+        np.testing.assert_allclose(gx.numpy(), _grad_x_formula(x, 0.3, w), rtol=1e-12, atol=1e-14)
