@@ -200,3 +200,19 @@ def test_kernel_on_single_pairs_and_a_batch_of_one(dim):
             assert got.shape == (1, 1) and got[0, 0] == pytest.approx(want, rel=1e-13)
             g = single.grad_x(x[k][None, None, :], x[q][None, None, :])[0, 0]
             np.testing.assert_allclose(g, -2.0 * 2.0 * diff / (0.09 + diff @ diff) ** 2)
+
+
+def test_kernel_follows_the_protocol_and_is_radial():
+    """`InteractionKernel` is a runtime-checkable protocol (users' kernels are checked with
+    isinstance); the Cucker-Smale kernel depends on |x_k - x_l| only, so with the symmetric
+    weights its exact Jacobian is symmetric (which lets "eigh" serve it)."""
+    from agent_envs.dynamics.kernels import InteractionKernel
+
+    kernel = CuckerSmaleKernel.symmetric_kernel(0.3, 0.2)
+    assert isinstance(kernel, InteractionKernel) and kernel.radial is True
+    assert not isinstance(object(), InteractionKernel)
+    model = SwarmModel(_params("symmetric", 2))
+    x = np.random.default_rng(4).uniform(-1, 1, (7, 2))
+    _, lin = model.drift_and_linearization(0.0, x, None, "exact")
+    assert lin.symmetric is True
+    np.testing.assert_allclose(lin.matrix, lin.matrix.T, atol=1e-12)

@@ -313,6 +313,8 @@ def test_kernel_on_torch_against_the_formula(dim):
     for kernel, w in _kernels(n):
         got = kernel.value(xt[:, None, :], xt[None, :, :])
         assert isinstance(got, torch.Tensor)
+        if not kernel.symmetric:  # the weights live in the tensor's library (CUDA needs it)
+            assert isinstance(kernel._weights_like(xt), torch.Tensor)
         np.testing.assert_allclose(got.numpy(), _kernel_formula(x, 0.3, w), rtol=1e-13)
         gx = kernel.grad_x(xt[:, None, :], xt[None, :, :])
         np.testing.assert_allclose(gx.numpy(), _grad_x_formula(x, 0.3, w), rtol=1e-12, atol=1e-14)
