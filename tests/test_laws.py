@@ -318,3 +318,21 @@ def test_kernel_on_torch_against_the_formula(dim):
         np.testing.assert_allclose(got.numpy(), _kernel_formula(x, 0.3, w), rtol=1e-13)
         gx = kernel.grad_x(xt[:, None, :], xt[None, :, :])
         np.testing.assert_allclose(gx.numpy(), _grad_x_formula(x, 0.3, w), rtol=1e-12, atol=1e-14)
+
+
+def test_costs_batched_and_on_torch():
+    """Batched inputs (..., N, d) reduce over the last two axes only; on torch the target may be
+    a list or a numpy array (moved to the tensor's library) and the result is a tensor."""
+    rng = np.random.default_rng(8)
+    mean, u = rng.normal(size=(3, 4, 2)), rng.normal(size=(3, 4, 2))
+    target = [0.7, -0.2]
+    want = [turnpike_distance(mean[j], u[j], np.array(target)) for j in range(3)]
+    np.testing.assert_allclose(turnpike_distance(mean, u, np.array(target)), want, rtol=1e-13)
+    torch = pytest.importorskip("torch")
+    x, ut = torch.as_tensor(mean), torch.as_tensor(u)
+    for tgt in (target, np.array(target)):
+        got = running_cost(x, ut, tgt, 0.1)
+        assert isinstance(got, torch.Tensor)
+        np.testing.assert_allclose(got.numpy(), running_cost(mean, u, np.array(target), 0.1))
+        got = turnpike_distance(x, ut, tgt)
+        np.testing.assert_allclose(got.numpy(), want, rtol=1e-13)
