@@ -336,3 +336,56 @@ def test_costs_batched_and_on_torch():
         np.testing.assert_allclose(got.numpy(), running_cost(mean, u, np.array(target), 0.1))
         got = turnpike_distance(x, ut, tgt)
         np.testing.assert_allclose(got.numpy(), want, rtol=1e-13)
+
+
+# ------------------------------------------------------- one step of each scheme
+def _phi(a: np.ndarray, order: int, terms: int = 60) -> np.ndarray:
+    """phi_p(A) = sum_j A^j / (j + p)! by its Taylor series (||A|| ~ 1 here, 60 terms)."""
+    out, power = np.zeros_like(a), np.eye(len(a))
+    for j in range(terms):
+        out = out + power / math.factorial(j + order)
+        power = power @ a
+    return out
+
+
+def _frozen(x: np.ndarray, alpha: float, w: np.ndarray) -> np.ndarray:
+    """L(x) = (P - diag(P 1)) / N from the kernel formula."""
+    p = _kernel_formula(x, alpha, w)
+    return (p - np.diag(p.sum(axis=1))) / len(x)
+
+
+@pytest.mark.parametrize("control", ["none", "constant", "with_rate"])
+def test_one_step_of_each_scheme_against_its_formula(control):
+    """x+ of EM/EE (x + tau F + sigma dW), Heun (predictor X = x + tau F(x, u) + sigma dW,
+    x + tau/2 (F(x, u) + F(X, u + tau v)) + sigma dW), ERB (x + tau phi1(tau L) F + sigma dW)
+    and SERB (x + tau phi1(tau L)(F + sigma L dW) + sigma dW), both + tau^2 phi2(tau L) v with
+    a control rate v; the frozen L(x) and phi_p from the formulas above; non-stiff."""
+    from agent_envs.integrators import make_integrator
+
+    n, d, alpha, eps, sigma, tau = 5, 2, 0.5, 0.4, 0.3, 0.1
+    params = SwarmParams(n_agents=n, dim=d, alpha=alpha, epsilon=eps, sigma=sigma)
+    model, w = SwarmModel(params), np.full(n, 1 / eps)
+    rng = np.random.default_rng(40)
+    x, dw = rng.uniform(-1, 1, (n, d)), rng.normal(scale=math.sqrt(tau), size=(n, d))
+    u = None if control == "none" else rng.normal(size=(n, d))
+    v = rng.normal(size=(n, d)) if control == "with_rate" else None
+    zero = np.zeros((n, d))
+    u0 = zero if u is None else u
+    u1 = u0 if v is None else u0 + tau * v
+    v0 = zero if v is None else v
+
+    lin = _frozen(x, alpha, w)
+    f = lin @ x + u0
+    pred = x + tau * f + sigma * dw
+    phi1, phi2 = _phi(tau * lin, 1), _phi(tau * lin, 2)
+    want = {
+        "em": x + tau * f + sigma * dw,
+        "ee": x + tau * f + sigma * dw,
+        "heun": x + 0.5 * tau * (f + _frozen(pred, alpha, w) @ pred + u1) + sigma * dw,
+        "erb": x + tau * phi1 @ f + tau**2 * phi2 @ v0 + sigma * dw,
+        "serb": x + tau * phi1 @ (f + sigma * lin @ dw) + tau**2 * phi2 @ v0 + sigma * dw,
+    }
+    for name, expected in want.items():
+        scheme = make_integrator(name, jacobian="frozen")
+        got = scheme.step(model, x, u, 0.0, tau, dw, du_dt=v)
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12, err_msg=name)
