@@ -70,6 +70,7 @@ def test_deterministic_order(name, jacobian, expected, kernel):
         np.max(np.abs(_integrate(scheme, model, x0, m, dw, params.horizon)[0] - ref)) for m in STEPS
     ]
     assert _order(errors) == pytest.approx(expected, abs=0.25), errors
+    assert scheme.deterministic_order == expected  # the metadata says what was measured
 
 
 @pytest.mark.parametrize(
