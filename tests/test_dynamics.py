@@ -216,3 +216,14 @@ def test_kernel_follows_the_protocol_and_is_radial():
     _, lin = model.drift_and_linearization(0.0, x, None, "exact")
     assert lin.symmetric is True
     np.testing.assert_allclose(lin.matrix, lin.matrix.T, atol=1e-12)
+
+
+def test_matrix_free_exact_jacobian_beyond_d1_is_a_named_error():
+    """The matrix-free exact Jacobian exists for d = 1 only: forced matrix-free in d = 2, the
+    exact linearization is refused with the dense size it would need (here 0.0 GiB)."""
+    model = SwarmModel(_params("symmetric", 2, n=5), "matrix_free")
+    x = np.random.default_rng(0).uniform(-1, 1, (5, 2))
+    with pytest.raises(ValueError, match=r"only for d = 1 .* needs 0\.0 GiB"):
+        model.drift_and_linearization(0.0, x, None, "exact")
+    f, _ = model.drift_and_linearization(0.0, x, None, "frozen")  # the frozen one exists
+    np.testing.assert_allclose(f, SwarmModel(_params("symmetric", 2, n=5)).drift(0.0, x))
