@@ -220,10 +220,42 @@ def test_kernel_follows_the_protocol_and_is_radial():
 
 def test_matrix_free_exact_jacobian_beyond_d1_is_a_named_error():
     """The matrix-free exact Jacobian exists for d = 1 only: forced matrix-free in d = 2, the
-    exact linearization is refused with the dense size it would need (here 0.0 GiB)."""
-    model = SwarmModel(_params("symmetric", 2, n=5), "matrix_free")
-    x = np.random.default_rng(0).uniform(-1, 1, (5, 2))
-    with pytest.raises(ValueError, match=r"only for d = 1 .* needs 0\.0 GiB"):
-        model.drift_and_linearization(0.0, x, None, "exact")
-    f, _ = model.drift_and_linearization(0.0, x, None, "frozen")  # the frozen one exists
-    np.testing.assert_allclose(f, SwarmModel(_params("symmetric", 2, n=5)).drift(0.0, x))
+    exact linearization is refused with the dense size it would need, (2 + 3d)(N d)^2 floats
+    (N = 5000: 6.0 GiB); nothing of that size is allocated."""
+    model = SwarmModel(_params("symmetric", 2, n=5000), "matrix_free")
+    with pytest.raises(ValueError, match=r"only for d = 1 .* needs 6\.0 GiB"):
+        model.drift_and_linearization(0.0, np.zeros((5000, 2)), None, "exact")
+
+
+def test_forced_matrix_free_drift_matches_the_dense_one_with_a_control():
+    params = _params("symmetric", 2, n=6)
+    rng = np.random.default_rng(0)
+    x, u = rng.uniform(-1, 1, (3, 6, 2)), rng.normal(size=(3, 6, 2))
+    free, dense = SwarmModel(params, "matrix_free"), SwarmModel(params, "dense")
+    assert free.matrix_free(x) and not dense.matrix_free(x)
+    f_free, _ = free.drift_and_linearization(0.0, x, u, "frozen")
+    f_dense, _ = dense.drift_and_linearization(0.0, x, u, "frozen")
+    np.testing.assert_allclose(f_free, f_dense, rtol=1e-10, atol=1e-12)
+    torch = pytest.importorskip("torch")
+    with pytest.raises(ValueError, match="numpy states"):
+        free.matrix_free(torch.as_tensor(x))
+
+
+@pytest.mark.parametrize(
+    ("dim", "n_agents", "n_paths", "matrix_free"),
+    [
+        (1, 499, 1, False),
+        (1, 500, 1, True),  # AUTO_MATRIX_FREE_MIN_AGENTS
+        (1, 600, 1, True),
+        (2, 1999, 1, False),
+        (2, 2000, 1, True),
+        (1, 400, 500, False),  # 8 (2 + d) P N^2 bytes: 1.9e9 < 2 GiB
+        (1, 400, 600, True),  # 2.3e9 > 2 GiB: over the dense memory budget
+    ],
+)
+def test_auto_goes_matrix_free_from_the_documented_sizes(dim, n_agents, n_paths, matrix_free):
+    """`linear_operator="auto"`: matrix-free for numpy states from N = 500 (d = 1) and
+    N = 2000 (d = 2), or when a step's dense matrices would exceed 2 GiB (the class doc)."""
+    model = SwarmModel(SwarmParams(n_agents=n_agents, dim=dim))
+    x = np.broadcast_to(np.zeros((1, n_agents, dim)), (n_paths, n_agents, dim))  # no copy
+    assert model.matrix_free(x) is matrix_free
