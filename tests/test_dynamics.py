@@ -106,8 +106,9 @@ def test_user_kernel_is_accepted():
 
 def test_bad_state_shape_is_rejected():
     model = SwarmModel(SwarmParams(n_agents=5))
-    with pytest.raises(ValueError, match=r"\(\.\.\., 5, 1\)"):
-        model.drift(0.0, np.zeros((4, 1)))
+    for shape in [(4, 1), (6, 1), (5, 2), (5,)]:  # fewer or more agents or coordinates
+        with pytest.raises(ValueError, match=r"\(\.\.\., 5, 1\)"):
+            model.drift(0.0, np.zeros(shape))
 
 
 def test_a_user_kernel_returning_a_read_only_array_is_not_written_into():
