@@ -149,3 +149,22 @@ def test_hot_path_limits_blas_threads_and_restores_them():
         after = [lib["num_threads"] for lib in controller.select(user_api="blas").info()]
     assert inside == [1] * len(inside)
     assert after == before
+
+
+@pytest.mark.parametrize("integrator", ["erb", "serb"])
+def test_eigh_is_refused_for_a_non_symmetric_matrix_and_auto_is_not(integrator):
+    """phi_method="eigh" needs a symmetric L (frozen) or a symmetric radial kernel (exact):
+    refused with the non-symmetric kernel, naming phi_method; "auto" and "expm" run."""
+    params = SwarmParams(n_agents=4, kernel="nonsymmetric")
+    for jacobian in ("frozen", "exact"):
+        with pytest.raises(ValueError, match="phi_method='eigh' needs a symmetric"):
+            simulate(params, integrator, jacobian=jacobian, phi_method="eigh", n_steps=2)
+        for method in ("auto", "expm"):  # run (the exact Jacobian may diverge at m = 2)
+            traj = simulate(params, integrator, jacobian=jacobian, phi_method=method, n_steps=2)
+            assert traj.positions.shape == (3, 20, 4, 1)
+    # a symmetric kernel takes eigh with either Jacobian
+    symmetric = SwarmParams(n_agents=4)
+    for jacobian in ("frozen", "exact"):
+        simulate(symmetric, integrator, jacobian=jacobian, phi_method="eigh", n_steps=2)
+    # the explicit schemes have no phi-functions: eigh is not checked against the kernel
+    simulate(params, "em", phi_method="eigh", n_steps=2)
