@@ -390,3 +390,17 @@ def test_one_step_of_each_scheme_against_its_formula(control, sigma):
         scheme = make_integrator(name, jacobian="frozen")
         got = scheme.step(model, x, u, 0.0, tau, dw, du_dt=v)
         np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12, err_msg=name)
+
+
+def test_default_initial_positions_are_uniform_on_the_cube():
+    """The paper's start, U[-1, 1]^d: 4000 draws (through simulate's seeds, d = 2 x 2 paths of
+    1000 agents), within [-1, 1], mean 0 and variance 1/3 within 5 SE (SE of the mean
+    sqrt(1/(3n)); of the variance sqrt((E x^4 - (1/3)^2)/n) = sqrt((1/5 - 1/9)/n))."""
+    params = SwarmParams(n_agents=1000, dim=2, epsilon=1.0, alpha=1.0)
+    x = np.concatenate(
+        [simulate(params, "em", n_steps=1, n_paths=1, seed=s).positions[0, 0] for s in (0, 1)]
+    ).reshape(-1)
+    n = x.size
+    assert x.min() >= -1.0 and x.max() <= 1.0 and x.min() < -0.99 and x.max() > 0.99
+    assert abs(x.mean()) <= N_SE * math.sqrt(1 / 3 / n)
+    assert abs(np.mean(x**2) - 1 / 3) <= N_SE * math.sqrt((1 / 5 - 1 / 9) / n)

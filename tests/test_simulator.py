@@ -168,3 +168,62 @@ def test_eigh_is_refused_for_a_non_symmetric_matrix_and_auto_is_not(integrator):
         simulate(symmetric, integrator, jacobian=jacobian, phi_method="eigh", n_steps=2)
     # the explicit schemes have no phi-functions: eigh is not checked against the kernel
     simulate(params, "em", phi_method="eigh", n_steps=2)
+
+
+class _SymmetricUserKernel:
+    """A user kernel p = 1 / (1 + |x - y|^2) that says it is symmetric but not radial."""
+
+    symmetric = True
+
+    def value(self, xk, xl):
+        return 1.0 / (1.0 + ((xl - xk) ** 2).sum(axis=-1))
+
+    def grad_x(self, xk, xl):
+        r = xl - xk
+        return (2.0 / (1.0 + (r**2).sum(axis=-1)) ** 2)[..., None] * r
+
+    def grad_y(self, xk, xl):
+        return -self.grad_x(xk, xl)
+
+
+def test_eigh_with_a_symmetric_user_kernel_that_is_not_radial():
+    """The frozen L(x) of a symmetric kernel is symmetric (eigh allowed); its exact Jacobian is
+    symmetric only for a radial kernel, which this one does not declare (eigh refused)."""
+    params = SwarmParams(n_agents=4, kernel=_SymmetricUserKernel())
+    simulate(params, "serb", jacobian="frozen", phi_method="eigh", n_steps=2)
+    with pytest.raises(ValueError, match="phi_method='eigh'"):
+        simulate(params, "serb", jacobian="exact", phi_method="eigh", n_steps=2)
+
+
+def test_shapes_the_contract_accepts_and_names():
+    params1, params2 = SwarmParams(n_agents=4), SwarmParams(n_agents=4, dim=2)
+    x0 = np.linspace(-0.5, 0.5, 4)
+    a = simulate(params1, "em", n_steps=3, n_paths=2, seed=1, initial_positions=x0)
+    b = simulate(params1, "em", n_steps=3, n_paths=2, seed=1, initial_positions=x0[:, None])
+    np.testing.assert_array_equal(a.positions, b.positions)  # (N,) and (N, 1) in d = 1
+    u = np.full((3, 4), 0.5)
+    c = simulate(params1, "em", n_steps=3, n_paths=2, seed=1, initial_positions=x0, control=u)
+    d = simulate(
+        params1, "em", n_steps=3, n_paths=2, seed=1, initial_positions=x0, control=u[..., None]
+    )
+    np.testing.assert_array_equal(c.positions, d.positions)  # control (m, N) in d = 1
+    with pytest.raises(ValueError, match=r"\(4,\) or \(4, 1\)"):
+        simulate(params1, initial_positions=np.zeros(5))
+    with pytest.raises(ValueError, match=r"must have shape \(4, 2\), got \(4,\)"):
+        simulate(params2, initial_positions=np.zeros(4))
+    for shape in [(3, 3, 4, 1), (3, 1, 4, 1), (4, 2, 4, 1)]:
+        with pytest.raises(ValueError, match="increments must have shape"):
+            simulate(params1, n_steps=3, n_paths=2, increments=np.zeros(shape))
+    default = simulate(params1, "em", n_paths=1, seed=0)  # n_steps = 50 by default
+    assert default.times.shape == (51,) and default.positions.shape == (51, 1, 4, 1)
+    assert simulate(params1, "em", n_steps=1, seed=0).positions.shape[1] == 20  # n_paths
+
+
+def test_torch_inputs_must_be_real_floating_point():
+    torch = pytest.importorskip("torch")
+    params = SwarmParams(n_agents=4)
+    for bad in (torch.zeros(4, dtype=torch.int64), torch.zeros(4, dtype=torch.complex128)):
+        with pytest.raises(TypeError, match="initial_positions must be a real floating"):
+            simulate(params, initial_positions=bad, n_steps=1)
+    traj = simulate(params, initial_positions=torch.zeros(4, dtype=torch.float64), n_steps=1)
+    assert isinstance(traj.positions, torch.Tensor)
