@@ -109,6 +109,9 @@ def test_divergence_is_flagged_not_silent():
     assert traj.divergence_step is not None and 1 <= traj.divergence_step <= 5
     assert traj.diverged_paths.tolist() == [True]
     assert np.all(np.isfinite(traj.positions[: traj.divergence_step]))
+    # the rows after the divergence are NaN, the shapes those of a finished run
+    assert traj.positions.shape == (6, 1, 20, 1) and traj.controls.shape == (5, 1, 20, 1)
+    assert np.all(np.isnan(traj.positions[traj.divergence_step :]))
 
 
 @pytest.mark.parametrize(
@@ -227,3 +230,21 @@ def test_torch_inputs_must_be_real_floating_point():
             simulate(params, initial_positions=bad, n_steps=1)
     traj = simulate(params, initial_positions=torch.zeros(4, dtype=torch.float64), n_steps=1)
     assert isinstance(traj.positions, torch.Tensor)
+
+
+def test_per_path_controls_and_wrong_control_shapes():
+    params = SwarmParams(n_agents=4)
+    u = np.random.default_rng(0).normal(size=(3, 2, 4, 1))  # (m, n_paths, N, d)
+    traj = simulate(params, "em", n_steps=3, n_paths=2, seed=0, control=u)
+    np.testing.assert_array_equal(traj.controls, u)
+    for shape in [(3, 3, 1), (3, 5, 1), (2, 4, 1), (3, 2, 1, 4, 1)]:
+        with pytest.raises(ValueError, match="control must be None, a callable"):
+            simulate(params, "em", n_steps=3, n_paths=2, control=np.zeros(shape))
+
+
+def test_batch_size_limit_names_n_paths_times_n_times_d():
+    """n_paths N d <= 1e8: 101 paths of 10^6 agents are refused before anything is drawn
+    (the wrong-shaped increments would be refused next, with another message)."""
+    params = SwarmParams(n_agents=10**6, epsilon=1.0)
+    with pytest.raises(ValueError, match=r"n_paths \* N \* d"):
+        simulate(params, n_steps=1, n_paths=101, increments=np.zeros((1, 1, 1, 1)))
