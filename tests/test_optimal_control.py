@@ -277,6 +277,8 @@ def test_box_bound_is_active_when_small():
         ({"gtol": -1.0}, ValueError, "gtol"),
         ({"max_iterations": 0}, ValueError, "max_iterations"),
         ({"initial_controls": np.zeros((2, 4, 1))}, ValueError, "initial_controls"),
+        ({"threads": 0}, ValueError, "threads"),
+        ({"memory": 0}, ValueError, "memory"),
     ],
 )
 def test_bad_input_is_named(kwargs, error, match):
@@ -465,3 +467,64 @@ def test_optimal_references_run_only_when_asked_for():
     assert parse_policy_specs(["optimal", "mpc"]) == {"optimal": "optimal", "mpc": "mpc"}
     assert CompareConfig(optimum="").optimum_policies == []
     assert CompareConfig().optimum_policies == ["optimal", "mpc"]
+
+
+# ------------------------------------------------------- details (mutation run)
+def test_projected_gradient_zeroes_only_components_pushing_against_an_active_bound():
+    from agent_envs.baselines.optimal_control import projected_gradient
+
+    u = np.array([2.0, 2.0, 3.0, -2.0, -2.0, -3.0, 0.0, 1.9])
+    g = np.array([-0.5, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, -0.5])
+    want = np.array([0.0, 0.5, 0.0, 0.0, -0.5, 0.0, -0.5, -0.5])
+    np.testing.assert_array_equal(projected_gradient(u, g, 2.0), want)
+
+
+def test_warm_start_relative_gradient_is_against_the_gradient_at_zero():
+    """The reference of the relative gradient norm is max|projected gradient| at u = 0, also
+    when the solve starts elsewhere (a warm start); evaluations are counted; the wall time is
+    the solve's."""
+    import time
+
+    from agent_envs.baselines.optimal_control import projected_gradient
+
+    params = SwarmParams(n_agents=3, epsilon=1.0, sigma=0.0)
+    start = np.full((4, 3, 1), 0.5)
+    began = time.perf_counter()
+    res = solve_optimal_control(
+        params, n_steps=4, n_paths=1, initial_controls=start, max_iterations=1, warn=False
+    )
+    elapsed = time.perf_counter() - began
+    objective = DiscreteCostObjective(
+        params, "serb", "frozen", "eigh", 4, 1, 0, res.positions[0, 0]
+    )
+    _, g_zero = objective(np.zeros(12))
+    reference = np.max(np.abs(projected_gradient(np.zeros(12), g_zero, 150.0)))
+    assert res.relative_gradient_norm == pytest.approx(res.gradient_norm / reference, rel=1e-9)
+    assert res.evaluations >= res.iterations + 2  # the start, u = 0, and the iterations
+    assert 0.0 < res.wall_time <= elapsed
+    # a (m, N) warm start in d = 1 is the same start
+    again = solve_optimal_control(
+        params, n_steps=4, n_paths=1, initial_controls=start[..., 0], max_iterations=1, warn=False
+    )
+    np.testing.assert_array_equal(again.controls, res.controls)
+
+
+def test_minimize_in_box_at_an_optimal_start_has_relative_gradient_zero():
+    """u = 0 optimal with a zero gradient: the reference is 0 and the relative gradient is 0
+    (converged), not 0 / 0; the box's solution of a shifted quadratic is found."""
+    from agent_envs.baselines.optimal_control import minimize_in_box
+
+    run = minimize_in_box(lambda u: (float(u @ u), 2 * u), np.zeros(3), 1.0, 1e-6, 10, 5)
+    assert run.relative == 0.0 and run.gradient_norm == 0.0 and run.failure is None
+    np.testing.assert_array_equal(run.result.x, 0.0)
+    shifted = minimize_in_box(
+        lambda u: (float((u - 2.0) @ (u - 2.0)), 2 * (u - 2.0)), np.zeros(3), 1.0, 1e-6, 10, 5
+    )
+    np.testing.assert_allclose(shifted.result.x, 1.0)  # the bound is active
+    assert shifted.relative == 0.0  # its gradient pushes against the bound: projected to 0
+
+
+def test_threads_none_keeps_torch_setting():
+    previous = torch.get_num_threads()
+    res = solve_optimal_control(SwarmParams(n_agents=3), n_steps=2, n_paths=1, threads=None)
+    assert torch.get_num_threads() == previous and np.isfinite(res.cost)
