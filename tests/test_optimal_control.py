@@ -323,8 +323,12 @@ def test_stiff_em_at_the_paper_setting_does_not_solve():
 
 
 def test_a_finite_solve_reports_no_failure():
+    import warnings
+
     params = SwarmParams(n_agents=4, epsilon=1.0, sigma=0.0)
-    res = solve_optimal_control(params, n_steps=5, n_paths=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a converged solve warns about nothing
+        res = solve_optimal_control(params, n_steps=5, n_paths=1)
     assert res.converged and res.failure is None
 
 
@@ -507,6 +511,13 @@ def test_warm_start_relative_gradient_is_against_the_gradient_at_zero():
         params, n_steps=4, n_paths=1, initial_controls=start[..., 0], max_iterations=1, warn=False
     )
     np.testing.assert_array_equal(again.controls, res.controls)
+    assert res.mean_positions.shape == (5, 3, 1)  # a property: E x^n over the paths
+    np.testing.assert_array_equal(res.mean_positions, res.positions.mean(axis=1))
+    # a warm start below zero: the reference is still the gradient at u = 0
+    low = solve_optimal_control(
+        params, n_steps=4, n_paths=1, initial_controls=-start, max_iterations=1, warn=False
+    )
+    assert low.relative_gradient_norm == pytest.approx(low.gradient_norm / reference, rel=1e-9)
 
 
 def test_minimize_in_box_at_an_optimal_start_has_relative_gradient_zero():
@@ -522,9 +533,75 @@ def test_minimize_in_box_at_an_optimal_start_has_relative_gradient_zero():
     )
     np.testing.assert_allclose(shifted.result.x, 1.0)  # the bound is active
     assert shifted.relative == 0.0  # its gradient pushes against the bound: projected to 0
+    # an interior optimum: stopped by our relative test (the callback), not L-BFGS-B's own
+    c = np.array([1.0, 10.0, 100.0])
+    inner = minimize_in_box(
+        lambda u: (float(c @ (u - 0.3) ** 2), 2 * c * (u - 0.3)), np.zeros(3), 1.0, 1e-6, 50, 5
+    )
+    assert "StopIteration" in inner.result.message and inner.result.nit < 50
+    assert inner.relative <= 1e-6
+    np.testing.assert_allclose(inner.result.x, 0.3, rtol=1e-5)
 
 
 def test_threads_none_keeps_torch_setting():
     previous = torch.get_num_threads()
     res = solve_optimal_control(SwarmParams(n_agents=3), n_steps=2, n_paths=1, threads=None)
     assert torch.get_num_threads() == previous and np.isfinite(res.cost)
+
+
+def test_objective_counts_evaluations_and_warns_once_about_a_failed_backward_pass():
+    params = SwarmParams(n_agents=10, epsilon=0.001, sigma=0.01)
+    x0 = simulate(params, "em", n_steps=400, n_paths=1, seed=0).positions[0, 0]
+    objective = DiscreteCostObjective(params, "em", "frozen", "eigh", 400, 2, 0, x0)
+    assert objective.evaluations == 0 and objective.last_failure is None
+    with pytest.warns(RuntimeWarning, match="non-finite gradient") as record:
+        for _ in range(2):
+            value, grad = objective(np.zeros(400 * 10))
+            assert value == objective.penalty and not np.any(grad)
+    assert len([w for w in record if "non-finite gradient" in str(w.message)]) == 1
+    assert objective.evaluations == 2 and "non-finite gradient" in objective.last_failure
+
+
+def test_differentiated_phi_method():
+    """Dense strategies whose gradients are tested: eigh for a symmetric linearization (with
+    the exact Jacobian only for a radial kernel), expm otherwise; an explicit one is kept."""
+    from agent_envs.baselines.optimal_control import differentiated_phi_method
+
+    sym, nonsym = SwarmParams(n_agents=4), SwarmParams(n_agents=4, kernel="nonsymmetric")
+
+    class NotRadial(ConstantKernel):
+        radial = False  # symmetric, but its exact Jacobian is not taken as symmetric
+
+    user = SwarmParams(n_agents=4, kernel=NotRadial(1.0))
+    assert differentiated_phi_method(sym, "frozen", None) == "eigh"
+    assert differentiated_phi_method(sym, "exact", "auto") == "eigh"
+    assert differentiated_phi_method(nonsym, "frozen", None) == "expm"
+    assert differentiated_phi_method(nonsym, "exact", None) == "expm"
+    assert differentiated_phi_method(user, "frozen", None) == "eigh"
+    assert differentiated_phi_method(user, "exact", None) == "expm"
+    assert differentiated_phi_method(sym, "frozen", "krylov") == "krylov"
+
+
+def test_torch_threads_sets_and_restores():
+    from agent_envs.baselines.optimal_control import torch_threads
+
+    previous = torch.get_num_threads()
+    with torch_threads(torch, 1):
+        assert torch.get_num_threads() == 1
+    assert torch.get_num_threads() == previous
+    with torch_threads(torch, None):
+        assert torch.get_num_threads() == previous
+
+
+def test_documented_defaults():
+    """The defaults the README and docstrings quote (gtol 1e-6, 500 iterations, memory 20, one
+    torch thread, the env's action bound)."""
+    import inspect
+
+    defaults = {
+        k: v.default for k, v in inspect.signature(solve_optimal_control).parameters.items()
+    }
+    assert defaults["gtol"] == 1e-6 and defaults["max_iterations"] == 500
+    assert defaults["memory"] == 20 and defaults["threads"] == 1
+    assert defaults["integrator"] == "serb" and defaults["jacobian"] == "frozen"
+    assert defaults["max_control"] == 150.0
