@@ -100,6 +100,12 @@ def test_integrator_instance_with_conflicting_options_is_rejected():
     assert traj.jacobian == "exact"
     with pytest.raises(ValueError, match="jacobian"):
         simulate(params, scheme, jacobian="frozen", n_steps=3)
+    frozen = make_integrator("serb", jacobian="frozen", phi_method="expm")
+    with pytest.raises(ValueError, match="jacobian='exact' conflicts"):
+        simulate(params, frozen, jacobian="exact", n_steps=3)
+    with pytest.raises(ValueError, match="phi_method='auto' conflicts"):
+        simulate(params, frozen, phi_method="auto", n_steps=3)
+    simulate(params, frozen, jacobian="frozen", phi_method="expm", n_steps=3)  # agreeing
 
 
 def test_divergence_is_flagged_not_silent():
@@ -248,3 +254,37 @@ def test_batch_size_limit_names_n_paths_times_n_times_d():
     params = SwarmParams(n_agents=10**6, epsilon=1.0)
     with pytest.raises(ValueError, match=r"n_paths \* N \* d"):
         simulate(params, n_steps=1, n_paths=101, increments=np.zeros((1, 1, 1, 1)))
+    wide = SwarmParams(n_agents=5 * 10**6, dim=2, epsilon=1.0)  # N d = 10^7: 11 paths too many
+    with pytest.raises(ValueError, match=r"n_paths \* N \* d"):
+        simulate(wide, n_steps=1, n_paths=11, increments=np.zeros((1, 1, 1, 1)))
+
+
+def test_positions_on_the_threshold_are_inside_and_mean_positions_averages_paths():
+    """|x| <= R is inside (the message says so); mean_positions is E x^n over the paths."""
+    params = SwarmParams(n_agents=4, epsilon=1.0, sigma=0.0)
+    x0 = np.array([5.0, -5.0, 0.0, 1.0])
+    traj = simulate(
+        params, "em", n_steps=1, n_paths=3, seed=0, initial_positions=x0, divergence_threshold=5.0
+    )
+    np.testing.assert_array_equal(traj.positions[0, :, :, 0], np.tile(x0, (3, 1)))
+    with pytest.raises(ValueError, match=r"\|x\| <= 5"):
+        simulate(params, initial_positions=x0 * 1.01, divergence_threshold=5.0)
+    noisy = simulate(SwarmParams(n_agents=4), "em", n_steps=2, n_paths=3, seed=0)
+    assert noisy.mean_positions.shape == (3, 4, 1)
+    np.testing.assert_array_equal(noisy.mean_positions, noisy.positions.mean(axis=1))
+
+
+def test_a_control_callable_of_the_wrong_shape_is_named():
+    params = SwarmParams(n_agents=4)
+    with pytest.raises(ValueError, match="control at step 0 has shape"):
+        simulate(params, "em", n_steps=2, control=lambda t, x: np.zeros(3))
+    torch = pytest.importorskip("torch")
+    x0 = torch.zeros(4, dtype=torch.float64)
+    with pytest.raises(ValueError, match="control at step 0 has shape"):
+        simulate(
+            params,
+            "em",
+            n_steps=2,
+            initial_positions=x0,
+            control=lambda t, x: torch.zeros(3, dtype=torch.float64),
+        )
