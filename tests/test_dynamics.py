@@ -260,3 +260,54 @@ def test_auto_goes_matrix_free_from_the_documented_sizes(dim, n_agents, n_paths,
     model = SwarmModel(SwarmParams(n_agents=n_agents, dim=dim))
     x = np.broadcast_to(np.zeros((1, n_agents, dim)), (n_paths, n_agents, dim))  # no copy
     assert model.matrix_free(x) is matrix_free
+
+
+class _AnisotropicKernel:
+    """p(x, y) = 1 / (1 + r^T A r), r = y - x, A not the identity: symmetric in (x, y) but
+    not radial, so the exact Jacobian's blocks r (dp/dy)^T are not symmetric matrices."""
+
+    symmetric = True
+    a = np.array([[1.0, 0.5], [0.5, 2.0]])
+
+    def _q(self, xk, xl):
+        r = xl - xk
+        return r, 1.0 + np.einsum("...i,ij,...j->...", r, self.a, r)
+
+    def value(self, xk, xl):
+        return 1.0 / self._q(xk, xl)[1]
+
+    def grad_y(self, xk, xl):
+        r, q = self._q(xk, xl)
+        return -2.0 * (r @ self.a) / q[..., None] ** 2
+
+    def grad_x(self, xk, xl):
+        return -self.grad_y(xk, xl)
+
+
+def test_exact_jacobian_of_a_non_radial_kernel_matches_finite_differences():
+    """The blocks' orientation (row = coordinate of agent k, column = of agent l) matters
+    only when they are not symmetric: checked with an anisotropic kernel in d = 2."""
+    model = SwarmModel(SwarmParams(n_agents=5, dim=2, kernel=_AnisotropicKernel()))
+    x = np.random.default_rng(3).uniform(-1, 1, (5, 2))
+    np.testing.assert_allclose(model.jacobian(x), _fd_jacobian(model, x), rtol=1e-6, atol=1e-6)
+
+
+def test_matrix_free_serb_step_in_d2_matches_the_dense_one():
+    from agent_envs.integrators import make_integrator
+
+    params = _params("symmetric", 2, n=6)
+    rng = np.random.default_rng(1)
+    x, u, dw = rng.uniform(-1, 1, (3, 6, 2)), rng.normal(size=(3, 6, 2)), rng.normal(size=(3, 6, 2))
+    scheme = make_integrator("serb", phi_method="krylov")
+    free = scheme.step(SwarmModel(params, "matrix_free"), x, u, 0.0, 0.01, 0.1 * dw)
+    dense = scheme.step(SwarmModel(params, "dense"), x, u, 0.0, 0.01, 0.1 * dw)
+    np.testing.assert_allclose(free, dense, rtol=1e-7, atol=1e-9)
+
+
+def test_dense_memory_budget_is_exceeded_not_reached():
+    """needed > 2 GiB goes matrix-free; exactly 2 GiB (d = 2, N = 2^13, one path: 8 (2 + d)
+    N^2 = 2^31 bytes) stays dense, for a user kernel (the N rule covers only Cucker-Smale)."""
+    params = SwarmParams(n_agents=2**13, dim=2, kernel=_AnisotropicKernel())
+    model = SwarmModel(params)
+    assert model.matrix_free(np.broadcast_to(np.zeros((1, 2**13, 2)), (1, 2**13, 2))) is False
+    assert model.matrix_free(np.broadcast_to(np.zeros((1, 2**13, 2)), (2, 2**13, 2))) is True
