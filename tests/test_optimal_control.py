@@ -277,6 +277,7 @@ def test_box_bound_is_active_when_small():
         ({"gtol": -1.0}, ValueError, "gtol"),
         ({"max_iterations": 0}, ValueError, "max_iterations"),
         ({"initial_controls": np.zeros((2, 4, 1))}, ValueError, "initial_controls"),
+        ({"initial_controls": np.zeros((4, 4, 1))}, ValueError, "initial_controls"),
         ({"threads": 0}, ValueError, "threads"),
         ({"memory": 0}, ValueError, "memory"),
     ],
@@ -492,7 +493,7 @@ def test_warm_start_relative_gradient_is_against_the_gradient_at_zero():
     from agent_envs.baselines.optimal_control import projected_gradient
 
     params = SwarmParams(n_agents=3, epsilon=1.0, sigma=0.0)
-    start = np.full((4, 3, 1), 0.5)
+    start = np.full((4, 3, 1), 1.0)
     began = time.perf_counter()
     res = solve_optimal_control(
         params, n_steps=4, n_paths=1, initial_controls=start, max_iterations=1, warn=False
@@ -539,6 +540,11 @@ def test_minimize_in_box_at_an_optimal_start_has_relative_gradient_zero():
         lambda u: (float(c @ (u - 0.3) ** 2), 2 * c * (u - 0.3)), np.zeros(3), 1.0, 1e-6, 50, 5
     )
     assert "StopIteration" in inner.result.message and inner.result.nit < 50
+    # a zero reference with a non-zero gradient at the end: not converged (inf), not 0
+    stopped = minimize_in_box(
+        lambda u: (float(c @ (u * u)), 2 * c * u), np.full(3, 0.5), 1.0, 1e-6, 1, 5
+    )
+    assert stopped.gradient_norm > 0 and stopped.relative == np.inf
     assert inner.relative <= 1e-6
     np.testing.assert_allclose(inner.result.x, 0.3, rtol=1e-5)
 
@@ -605,3 +611,20 @@ def test_documented_defaults():
     assert defaults["memory"] == 20 and defaults["threads"] == 1
     assert defaults["integrator"] == "serb" and defaults["jacobian"] == "frozen"
     assert defaults["max_control"] == 150.0
+    assert defaults["n_steps"] == 50 and defaults["n_paths"] == 20 and defaults["seed"] == 0
+
+
+def test_warm_start_is_clipped_to_the_box_and_memory_one_is_allowed():
+    from agent_envs.baselines.optimal_control import _initial_controls
+
+    clipped = _initial_controls(np.array([[[200.0]], [[-200.0]], [[0.5]]]), (3, 1, 1), 150.0)
+    np.testing.assert_array_equal(clipped[:, 0, 0], [150.0, -150.0, 0.5])
+    res = solve_optimal_control(SwarmParams(n_agents=3), n_steps=2, n_paths=1, memory=1)
+    assert np.isfinite(res.cost)
+
+
+def test_the_non_convergence_warning_points_at_the_caller():
+    params = SwarmParams(n_agents=6, epsilon=0.05, sigma=0.01)
+    with pytest.warns(RuntimeWarning, match="did not converge") as record:
+        solve_optimal_control(params, n_steps=8, n_paths=2, max_iterations=1)
+    assert record[0].filename == __file__
