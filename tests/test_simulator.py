@@ -243,7 +243,7 @@ def test_per_path_controls_and_wrong_control_shapes():
     u = np.random.default_rng(0).normal(size=(3, 2, 4, 1))  # (m, n_paths, N, d)
     traj = simulate(params, "em", n_steps=3, n_paths=2, seed=0, control=u)
     np.testing.assert_array_equal(traj.controls, u)
-    for shape in [(3, 3, 1), (3, 5, 1), (2, 4, 1), (3, 2, 1, 4, 1)]:
+    for shape in [(3, 3, 1), (3, 5, 1), (2, 4, 1), (4, 4, 1), (3, 2, 1, 4, 1)]:
         with pytest.raises(ValueError, match="control must be None, a callable"):
             simulate(params, "em", n_steps=3, n_paths=2, control=np.zeros(shape))
 
@@ -288,3 +288,34 @@ def test_a_control_callable_of_the_wrong_shape_is_named():
             initial_positions=x0,
             control=lambda t, x: torch.zeros(3, dtype=torch.float64),
         )
+
+
+def test_more_contract_details():
+    """Defaults and messages the mutation run found unchecked: R = 1e4 by default (|x| <= R
+    inside), a scalar start refused, a callable's control checked for a real dtype, the shape
+    a 2-D control was given in, params kept out of the repr, linear_operator only with the
+    default model, the batch limit counting N d (not N^d), the wall time measured."""
+    import time
+
+    from agent_envs import SwarmModel
+
+    params = SwarmParams(n_agents=4)
+    simulate(params, "em", n_steps=1, initial_positions=[1e4, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="divergence threshold"):
+        simulate(params, "em", n_steps=1, initial_positions=[1.0001e4, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="initial_positions"):
+        simulate(params, initial_positions=0.5)
+    for bad in ("a", 1j):
+        with pytest.raises(TypeError, match="control at step 0"):
+            simulate(params, "em", n_steps=2, control=lambda t, x, bad=bad: bad)
+    with pytest.raises(ValueError, match=r"got shape \(2, 4\)"):
+        simulate(params, "em", n_steps=3, control=np.zeros((2, 4)))
+    began = time.perf_counter()
+    traj = simulate(params, "em", n_steps=2, n_paths=2, seed=0, linear_operator="dense")
+    assert 0.0 < traj.wall_time <= time.perf_counter() - began
+    assert "params=" not in repr(traj)
+    with pytest.raises(ValueError, match="linear_operator applies to the default SwarmModel"):
+        simulate(params, n_steps=1, model=SwarmModel(params), linear_operator="dense")
+    wide = SwarmParams(n_agents=10**4, dim=2, epsilon=1.0)  # 2 paths x N d = 4e4 <= 1e8
+    with pytest.raises(ValueError, match="increments must have shape"):
+        simulate(wide, n_steps=1, n_paths=2, increments=np.zeros((1, 1, 1, 1)))
