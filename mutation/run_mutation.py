@@ -78,7 +78,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "simulator": (
         "agent_envs/simulator.py",
-        ["tests/test_laws.py", "tests/test_simulator.py"],
+        ["tests/test_laws.py", "tests/test_simulator.py", "tests/test_simulator_contract.py"],
     ),
     "episode": (
         "agent_envs/envs/episode.py",
