@@ -21,7 +21,10 @@ started from `initial_controls` (a warm start) or u = 0.
 Convergence: the projected gradient g (components that push against an active bound zeroed)
 must satisfy max|g| <= gtol * max|g(u = 0)|, i.e. the gradient has been reduced by the factor
 gtol relative to the uncontrolled start (`relative_gradient_norm`). Otherwise a RuntimeWarning
-is issued and `converged` is False.
+is issued and `converged` is False. A non-finite cost or gradient at u = 0 or at the returned
+control is a failed solve, never a converged one (`converged=False`, the reason in `failure`):
+the objective stands in a penalty with a zero gradient there, which would otherwise pass the
+gradient test after 0 iterations (stiff EM, whose backward pass overflows).
 
 torch is needed only here (the `train` extra) and is imported when solving. The solve runs
 torch with `threads` intra-op threads (default 1, restored afterwards): these problems are many
@@ -105,6 +108,9 @@ class OptimalControlResult:
         message: the optimizer's own stopping message.
         wall_time: seconds spent in the solve.
         times: (m + 1,) the time grid.
+        failure: why the solve failed numerically (a non-finite cost or gradient at u = 0 or
+            at `controls`, or a diverged final simulation), else None; a failed solve is
+            never `converged`.
     """
 
     controls: np.ndarray
@@ -119,6 +125,7 @@ class OptimalControlResult:
     message: str
     wall_time: float
     times: np.ndarray
+    failure: str | None = None
 
     @property
     def mean_positions(self) -> np.ndarray:
@@ -139,7 +146,8 @@ class DiscreteCostObjective:
     Every call simulates the K paths from x^0 with the increments of `seed` (the same on every
     call: the sample-average problem is deterministic) and back-propagates the sample-mean
     discrete cost, on the torch `device` (default CPU). A diverged forward simulation
-    (non-finite cost) returns `penalty` and a zero gradient, so the line search backs off.
+    (non-finite cost) or a non-finite gradient returns `penalty` and a zero gradient, so the
+    line search backs off; `last_failure` says which (None after a finite evaluation).
     """
 
     def __init__(
@@ -171,6 +179,7 @@ class DiscreteCostObjective:
         self.dt = params.horizon / n_steps
         self.penalty = float(penalty)
         self.evaluations = 0
+        self.last_failure: str | None = None
         self._warned_gradient = False
 
     def cost(self, controls: Any) -> Any:
@@ -199,11 +208,17 @@ class DiscreteCostObjective:
             flat.reshape(self.shape), dtype=torch.float64, device=self.device, requires_grad=True
         )
         value = self.cost(u)
+        self.last_failure = None
         if not bool(torch.isfinite(value)):
+            self.last_failure = "non-finite cost (the simulation diverged)"
             return self.penalty, np.zeros_like(flat)
         value.backward()
         grad = u.grad.detach().cpu().numpy().reshape(-1)
         if not np.all(np.isfinite(grad)):
+            self.last_failure = (
+                f"finite cost {float(value.detach()):.6g} but a non-finite gradient "
+                "(the backward pass overflowed or failed)"
+            )
             if not self._warned_gradient:
                 self._warned_gradient = True
                 warnings.warn(
@@ -225,6 +240,7 @@ class BoxMinimization:
     gradient_norm: float
     relative: float
     f_start: float
+    failure: str | None = None
 
 
 def minimize_in_box(
@@ -238,20 +254,27 @@ def minimize_in_box(
     """L-BFGS-B on |u_i| <= bound from `start`, stopped at the relative KKT residual `gtol`.
 
     `objective(flat) -> (value, gradient)`. The reference is max|projected gradient| at u = 0.
+    When the objective has an attribute `last_failure` (a reason, or None after a finite
+    evaluation), a failure at u = 0 or at the returned point is the result's `failure`.
     """
     import scipy.optimize
 
-    f_start, g_start = objective(start)
+    def evaluate(flat: np.ndarray) -> tuple[tuple[float, np.ndarray], str | None]:
+        value = objective(flat)
+        return value, getattr(objective, "last_failure", None)
+
+    (f_start, g_start), start_failure = evaluate(start)
     if np.any(start != 0.0):
-        _, g_zero = objective(np.zeros(start.size))
+        (_, g_zero), zero_failure = evaluate(np.zeros(start.size))
     else:
-        g_zero = g_start
+        g_zero, zero_failure = g_start, start_failure
     reference = float(np.max(np.abs(projected_gradient(np.zeros(start.size), g_zero, bound))))
-    cache = {"x": start.copy(), "value": (f_start, g_start)}
+    cache = {"x": start.copy(), "value": (f_start, g_start), "failure": start_failure}
 
     def fun(flat: np.ndarray) -> tuple[float, np.ndarray]:
         if not np.array_equal(flat, cache["x"]):
-            cache["x"], cache["value"] = flat.copy(), objective(flat)
+            cache["x"] = flat.copy()
+            cache["value"], cache["failure"] = evaluate(flat)
         return cache["value"]
 
     def stop_when_converged(flat: np.ndarray) -> None:
@@ -279,7 +302,12 @@ def minimize_in_box(
     grad = fun(result.x)[1]
     grad_norm = float(np.max(np.abs(projected_gradient(result.x, grad, bound))))
     relative = grad_norm / reference if reference > 0 else (0.0 if grad_norm == 0 else np.inf)
-    return BoxMinimization(result, grad_norm, float(relative), float(f_start))
+    failure = None
+    if zero_failure is not None:
+        failure = f"at u = 0: {zero_failure}"
+    elif cache["failure"] is not None:
+        failure = f"at the returned control: {cache['failure']}"
+    return BoxMinimization(result, grad_norm, float(relative), float(f_start), failure)
 
 
 def differentiated_phi_method(params: SwarmParams, jacobian: str, phi_method: str | None) -> str:
@@ -399,6 +427,7 @@ def solve_optimal_control(
     with torch_threads(objective.torch, threads):
         run = minimize_in_box(objective, start.reshape(-1), bound, gtol, max_iterations, memory)
     result, grad_norm, relative, f_start = run.result, run.gradient_norm, run.relative, run.f_start
+    failure = run.failure
     controls = np.clip(result.x, -bound, bound).reshape(shape)
     wall = time.perf_counter() - began
     final = simulate(
@@ -424,11 +453,17 @@ def solve_optimal_control(
         )
     )
     # a diverged final state makes the objective return its penalty with a zero gradient
-    converged = bool(relative <= gtol) and not final.diverged and bool(np.isfinite(cost))
+    if failure is None and (final.diverged or not np.isfinite(cost)):
+        failure = "the final simulation diverged (non-finite or exploding state)"
+    converged = bool(relative <= gtol) and failure is None
     if not converged and warn:
+        why = (
+            f"relative projected gradient norm {relative:.3g} > gtol = {gtol:g}"
+            if failure is None
+            else f"failed: {failure}"
+        )
         warnings.warn(
-            f"solve_optimal_control did not converge: relative projected gradient norm "
-            f"{relative:.3g} > gtol = {gtol:g} after {result.nit} iterations "
+            f"solve_optimal_control did not converge: {why} after {result.nit} iterations "
             f"({result.message})",
             RuntimeWarning,
             stacklevel=2,
@@ -446,4 +481,5 @@ def solve_optimal_control(
         message=str(result.message),
         wall_time=wall,
         times=final.times,
+        failure=failure,
     )

@@ -113,24 +113,37 @@ def test_agent_rewards_add_up_to_the_gym_reward(dim, n_paths):
 
 
 def test_decentralized_turnpike_equals_the_centralized_one():
-    """Each agent's turnpike control from its own observation = the Gym controller's u_k."""
+    """The baselines' TurnpikeController, acting on each agent's own PettingZoo observation
+    (`act`), returns the actions it returns on the Gym observation (`predict`), step after step
+    of both envs from the same seed; and both are the cheap control of `eq:cheap_ctr`
+    computed here from the true state: u_k = beta (xbar - E x_k) - E[(1/N) sum_l p(x_k, x_l)
+    (x_l - x_k)], until the controller switches off at tbar (then u = 0)."""
+    from agent_envs.baselines import TurnpikeController
+    from agent_envs.dynamics.swarm import SwarmModel
+
     kwargs = {"n_agents": 8, "n_steps": 10, "n_paths": 2}
     gym_env, par_env = SwarmEnv(**kwargs), swarm_v0.parallel_env(**kwargs)
     gym_obs, _ = gym_env.reset(seed=3)
     obs, _ = par_env.reset(seed=3)
-    beta = 12.0
+    gym_ctrl, par_ctrl = TurnpikeController(gym_env), TurnpikeController(par_env)
+    model, beta = SwarmModel(par_env.params), 12.0
+    switched = 0
     for _ in range(10):
-        parts = split_observation(gym_obs, 8, 1)
-        u = beta * (parts["target"] - parts["positions"]) - parts["interaction_drift"]
-        actions = {}
-        for agent, agent_obs in obs.items():
-            own = split_agent_observation(agent_obs, 1)
-            u_k = beta * (own["target"] - own["position"]) - own["interaction_drift"]
-            actions[agent] = (u_k / par_env.max_control).astype(np.float32)
+        gym_action, _ = gym_ctrl.predict(gym_obs, deterministic=True)
+        actions = par_ctrl.act(obs)
         stacked = np.stack([actions[a] for a in par_env.possible_agents])
-        np.testing.assert_array_equal(stacked, (u / gym_env.max_control).astype(np.float32))
-        gym_obs, *_ = gym_env.step(stacked.reshape(-1))
+        np.testing.assert_array_equal(stacked.reshape(-1), gym_action)
+        x = par_env.positions  # (n_paths, N, d): the state itself, not the observation
+        cheap = beta * (0.7 - x.mean(axis=0)) - model.interaction_drift(x).mean(axis=0)
+        want = np.clip(cheap / par_env.max_control, -1, 1).astype(np.float32)
+        if np.all(stacked == 0):
+            switched += 1  # after tbar
+        else:
+            np.testing.assert_allclose(stacked, want, rtol=1e-5, atol=1e-6)
+        gym_obs, *_ = gym_env.step(gym_action)
         obs, *_ = par_env.step(actions)
+        np.testing.assert_array_equal(par_env.positions, gym_env.unwrapped.positions)
+    assert 0 < switched < 10  # the control was on, then off (tbar inside the horizon)
 
 
 # ------------------------------------------------------------- episode end

@@ -64,7 +64,12 @@ def test_evaluate_policies_table_and_identities(small_results):
         # total cost = -sum(rewards) = tau sum_n c(x^n, u^n) (the env's reward identity)
         costs = ep.loc[ep.policy == name, "total_cost"].to_numpy()
         np.testing.assert_allclose(costs, dt * np.nansum(tr["running_cost"], axis=1), rtol=1e-9)
-    # turnpike vs factory with beta = 4 differ; tbar only for switching policies
+    # turnpike (beta = 12) and factory (beta = 4) differ in cost and control on every seed;
+    # tbar only for switching policies
+    for column in ("total_cost", "control_energy"):
+        turnpike = ep.loc[ep.policy == "turnpike", column].to_numpy()
+        factory = ep.loc[ep.policy == "factory", column].to_numpy()
+        assert np.all(np.abs(turnpike - factory) > 1e-6 * np.abs(turnpike)), column
     assert np.all(ep.loc[ep.policy == "zero", "turnpike_time"].isna())
     assert np.all(ep.loc[ep.policy == "turnpike", "turnpike_time"] > 0)
 

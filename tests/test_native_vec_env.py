@@ -67,10 +67,16 @@ def test_sb3_adapter_matches_dummy_vec_env(horizon_as_termination):
     assert adapter.get_attr("n_steps") == dummy.get_attr("n_steps")
     assert adapter.get_attr("step_index") == dummy.get_attr("step_index")
     assert adapter.get_attr("max_control", indices=[0]) == [10.0]
-    assert (
-        adapter.env_method("reset", seed=0)
-        and adapter.env_is_wrapped(sb3.common.monitor.Monitor) == [True] * 3
-    )
+    # env_method calls the native env's method once per index (the module's contract): three
+    # batched resets with seed 0, each the reset a fresh native env gives for seed 0
+    results = adapter.env_method("reset", seed=0)
+    assert len(results) == 3
+    fresh_obs, _ = adapter.venv.reset(seed=0)
+    for obs, info in results:
+        np.testing.assert_array_equal(obs, fresh_obs)
+        assert set(info) >= {"positions"}
+    assert len(adapter.env_method("reset", seed=0, indices=[1])) == 1
+    assert adapter.env_is_wrapped(sb3.common.monitor.Monitor) == [True] * 3
     with pytest.raises(AttributeError):
         adapter.get_attr("no_such_attribute")
 

@@ -277,6 +277,9 @@ def test_box_bound_is_active_when_small():
         ({"gtol": -1.0}, ValueError, "gtol"),
         ({"max_iterations": 0}, ValueError, "max_iterations"),
         ({"initial_controls": np.zeros((2, 4, 1))}, ValueError, "initial_controls"),
+        ({"initial_controls": np.zeros((4, 4, 1))}, ValueError, "initial_controls"),
+        ({"threads": 0}, ValueError, "threads"),
+        ({"memory": 0}, ValueError, "memory"),
     ],
 )
 def test_bad_input_is_named(kwargs, error, match):
@@ -293,6 +296,41 @@ def test_non_convergence_warns_and_is_flagged():
     assert not res.converged
     assert res.relative_gradient_norm > 1e-6
     assert res.iterations == 1
+
+
+def test_stiff_em_whose_gradient_overflows_is_a_failed_solve():
+    """Stiff EM (eps = 0.001, m = 400, tau lambda >> 2): the forward simulation stays bounded
+    (the kernel saturates far apart) but the backward pass overflows to inf at u = 0. The
+    objective then stands in a penalty with a zero gradient, which passed the relative gradient
+    test after 0 iterations (converged=True) before the fix: the README's "stiff EM does not
+    solve (converged=False)"."""
+    params = SwarmParams(n_agents=10, epsilon=0.001, sigma=0.01)
+    with pytest.warns(RuntimeWarning, match="did not converge: failed: at u = 0: .*non-finite"):
+        res = solve_optimal_control(params, "em", n_steps=400, n_paths=2, max_iterations=20)
+    assert not res.converged
+    assert res.failure is not None and "non-finite gradient" in res.failure
+    assert np.isfinite(res.cost)
+
+
+def test_stiff_em_at_the_paper_setting_does_not_solve():
+    """The README's case (eps = 0.05, m = 20, tau lambda ~ 100): gradients of ~1e11 at u = 0,
+    the line search fails; finite numbers, so no `failure`, but never `converged`."""
+    params = SwarmParams(n_agents=10, epsilon=0.05, sigma=0.01)
+    with pytest.warns(RuntimeWarning, match="did not converge"):
+        res = solve_optimal_control(params, "em", n_steps=20, n_paths=2, max_iterations=20)
+    assert not res.converged
+    assert res.failure is None
+    assert res.relative_gradient_norm > 1e-6
+
+
+def test_a_finite_solve_reports_no_failure():
+    import warnings
+
+    params = SwarmParams(n_agents=4, epsilon=1.0, sigma=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a converged solve warns about nothing
+        res = solve_optimal_control(params, n_steps=5, n_paths=1)
+    assert res.converged and res.failure is None
 
 
 def test_baselines_import_without_torch_and_solve_names_the_extra():
@@ -434,3 +472,159 @@ def test_optimal_references_run_only_when_asked_for():
     assert parse_policy_specs(["optimal", "mpc"]) == {"optimal": "optimal", "mpc": "mpc"}
     assert CompareConfig(optimum="").optimum_policies == []
     assert CompareConfig().optimum_policies == ["optimal", "mpc"]
+
+
+# ------------------------------------------------------- details (mutation run)
+def test_projected_gradient_zeroes_only_components_pushing_against_an_active_bound():
+    from agent_envs.baselines.optimal_control import projected_gradient
+
+    u = np.array([2.0, 2.0, 3.0, -2.0, -2.0, -3.0, 0.0, 1.9])
+    g = np.array([-0.5, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, -0.5])
+    want = np.array([0.0, 0.5, 0.0, 0.0, -0.5, 0.0, -0.5, -0.5])
+    np.testing.assert_array_equal(projected_gradient(u, g, 2.0), want)
+
+
+def test_warm_start_relative_gradient_is_against_the_gradient_at_zero():
+    """The reference of the relative gradient norm is max|projected gradient| at u = 0, also
+    when the solve starts elsewhere (a warm start); evaluations are counted; the wall time is
+    the solve's."""
+    import time
+
+    from agent_envs.baselines.optimal_control import projected_gradient
+
+    params = SwarmParams(n_agents=3, epsilon=1.0, sigma=0.0)
+    start = np.full((4, 3, 1), 1.0)
+    began = time.perf_counter()
+    res = solve_optimal_control(
+        params, n_steps=4, n_paths=1, initial_controls=start, max_iterations=1, warn=False
+    )
+    elapsed = time.perf_counter() - began
+    objective = DiscreteCostObjective(
+        params, "serb", "frozen", "eigh", 4, 1, 0, res.positions[0, 0]
+    )
+    _, g_zero = objective(np.zeros(12))
+    reference = np.max(np.abs(projected_gradient(np.zeros(12), g_zero, 150.0)))
+    assert res.relative_gradient_norm == pytest.approx(res.gradient_norm / reference, rel=1e-9)
+    assert res.evaluations >= res.iterations + 2  # the start, u = 0, and the iterations
+    assert 0.0 < res.wall_time <= elapsed
+    # a (m, N) warm start in d = 1 is the same start
+    again = solve_optimal_control(
+        params, n_steps=4, n_paths=1, initial_controls=start[..., 0], max_iterations=1, warn=False
+    )
+    np.testing.assert_array_equal(again.controls, res.controls)
+    assert res.mean_positions.shape == (5, 3, 1)  # a property: E x^n over the paths
+    np.testing.assert_array_equal(res.mean_positions, res.positions.mean(axis=1))
+    # a warm start below zero: the reference is still the gradient at u = 0
+    low = solve_optimal_control(
+        params, n_steps=4, n_paths=1, initial_controls=-start, max_iterations=1, warn=False
+    )
+    assert low.relative_gradient_norm == pytest.approx(low.gradient_norm / reference, rel=1e-9)
+
+
+def test_minimize_in_box_at_an_optimal_start_has_relative_gradient_zero():
+    """u = 0 optimal with a zero gradient: the reference is 0 and the relative gradient is 0
+    (converged), not 0 / 0; the box's solution of a shifted quadratic is found."""
+    from agent_envs.baselines.optimal_control import minimize_in_box
+
+    run = minimize_in_box(lambda u: (float(u @ u), 2 * u), np.zeros(3), 1.0, 1e-6, 10, 5)
+    assert run.relative == 0.0 and run.gradient_norm == 0.0 and run.failure is None
+    np.testing.assert_array_equal(run.result.x, 0.0)
+    shifted = minimize_in_box(
+        lambda u: (float((u - 2.0) @ (u - 2.0)), 2 * (u - 2.0)), np.zeros(3), 1.0, 1e-6, 10, 5
+    )
+    np.testing.assert_allclose(shifted.result.x, 1.0)  # the bound is active
+    assert shifted.relative == 0.0  # its gradient pushes against the bound: projected to 0
+    # an interior optimum: stopped by our relative test (the callback), not L-BFGS-B's own
+    c = np.array([1.0, 10.0, 100.0])
+    inner = minimize_in_box(
+        lambda u: (float(c @ (u - 0.3) ** 2), 2 * c * (u - 0.3)), np.zeros(3), 1.0, 1e-6, 50, 5
+    )
+    assert "StopIteration" in inner.result.message and inner.result.nit < 50
+    # a zero reference with a non-zero gradient at the end: not converged (inf), not 0
+    stopped = minimize_in_box(
+        lambda u: (float(c @ (u * u)), 2 * c * u), np.full(3, 0.5), 1.0, 1e-6, 1, 5
+    )
+    assert stopped.gradient_norm > 0 and stopped.relative == np.inf
+    assert inner.relative <= 1e-6
+    np.testing.assert_allclose(inner.result.x, 0.3, rtol=1e-5)
+
+
+def test_threads_none_keeps_torch_setting():
+    previous = torch.get_num_threads()
+    res = solve_optimal_control(SwarmParams(n_agents=3), n_steps=2, n_paths=1, threads=None)
+    assert torch.get_num_threads() == previous and np.isfinite(res.cost)
+
+
+def test_objective_counts_evaluations_and_warns_once_about_a_failed_backward_pass():
+    params = SwarmParams(n_agents=10, epsilon=0.001, sigma=0.01)
+    x0 = simulate(params, "em", n_steps=400, n_paths=1, seed=0).positions[0, 0]
+    objective = DiscreteCostObjective(params, "em", "frozen", "eigh", 400, 2, 0, x0)
+    assert objective.evaluations == 0 and objective.last_failure is None
+    with pytest.warns(RuntimeWarning, match="non-finite gradient") as record:
+        for _ in range(2):
+            value, grad = objective(np.zeros(400 * 10))
+            assert value == objective.penalty and not np.any(grad)
+    assert len([w for w in record if "non-finite gradient" in str(w.message)]) == 1
+    assert objective.evaluations == 2 and "non-finite gradient" in objective.last_failure
+
+
+def test_differentiated_phi_method():
+    """Dense strategies whose gradients are tested: eigh for a symmetric linearization (with
+    the exact Jacobian only for a radial kernel), expm otherwise; an explicit one is kept."""
+    from agent_envs.baselines.optimal_control import differentiated_phi_method
+
+    sym, nonsym = SwarmParams(n_agents=4), SwarmParams(n_agents=4, kernel="nonsymmetric")
+
+    class NotRadial(ConstantKernel):
+        radial = False  # symmetric, but its exact Jacobian is not taken as symmetric
+
+    user = SwarmParams(n_agents=4, kernel=NotRadial(1.0))
+    assert differentiated_phi_method(sym, "frozen", None) == "eigh"
+    assert differentiated_phi_method(sym, "exact", "auto") == "eigh"
+    assert differentiated_phi_method(nonsym, "frozen", None) == "expm"
+    assert differentiated_phi_method(nonsym, "exact", None) == "expm"
+    assert differentiated_phi_method(user, "frozen", None) == "eigh"
+    assert differentiated_phi_method(user, "exact", None) == "expm"
+    assert differentiated_phi_method(sym, "frozen", "krylov") == "krylov"
+
+
+def test_torch_threads_sets_and_restores():
+    from agent_envs.baselines.optimal_control import torch_threads
+
+    previous = torch.get_num_threads()
+    with torch_threads(torch, 1):
+        assert torch.get_num_threads() == 1
+    assert torch.get_num_threads() == previous
+    with torch_threads(torch, None):
+        assert torch.get_num_threads() == previous
+
+
+def test_documented_defaults():
+    """The defaults the README and docstrings quote (gtol 1e-6, 500 iterations, memory 20, one
+    torch thread, the env's action bound)."""
+    import inspect
+
+    defaults = {
+        k: v.default for k, v in inspect.signature(solve_optimal_control).parameters.items()
+    }
+    assert defaults["gtol"] == 1e-6 and defaults["max_iterations"] == 500
+    assert defaults["memory"] == 20 and defaults["threads"] == 1
+    assert defaults["integrator"] == "serb" and defaults["jacobian"] == "frozen"
+    assert defaults["max_control"] == 150.0
+    assert defaults["n_steps"] == 50 and defaults["n_paths"] == 20 and defaults["seed"] == 0
+
+
+def test_warm_start_is_clipped_to_the_box_and_memory_one_is_allowed():
+    from agent_envs.baselines.optimal_control import _initial_controls
+
+    clipped = _initial_controls(np.array([[[200.0]], [[-200.0]], [[0.5]]]), (3, 1, 1), 150.0)
+    np.testing.assert_array_equal(clipped[:, 0, 0], [150.0, -150.0, 0.5])
+    res = solve_optimal_control(SwarmParams(n_agents=3), n_steps=2, n_paths=1, memory=1)
+    assert np.isfinite(res.cost)
+
+
+def test_the_non_convergence_warning_points_at_the_caller():
+    params = SwarmParams(n_agents=6, epsilon=0.05, sigma=0.01)
+    with pytest.warns(RuntimeWarning, match="did not converge") as record:
+        solve_optimal_control(params, n_steps=8, n_paths=2, max_iterations=1)
+    assert record[0].filename == __file__

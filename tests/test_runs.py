@@ -90,11 +90,61 @@ def test_check_output_dir(tmp_path):
         check_output_dir(tmp_path / "f")
     with pytest.raises(ValueError, match="is a file"):
         check_output_dir(tmp_path / "f" / "sub", "--out")
-    if os.geteuid() != 0:  # root may write anywhere
-        locked = tmp_path / "locked"
+
+
+def _unprivileged_exit_code(check) -> int:
+    """Run `check()` in a forked child as an ordinary user (as is, when not root); the exit code
+    is check's (0, or 1 for an exception). Forking keeps the imported code: a root-only
+    interpreter path (pyenv under /root) could not be exec'd by the unprivileged user."""
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - in the child
+        code = 1
+        try:
+            if os.geteuid() == 0:
+                os.setgroups([])
+                os.setgid(65534)  # nobody / nogroup
+                os.setuid(65534)
+            code = check()
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    return os.waitstatus_to_exitcode(status)
+
+
+def test_check_output_dir_refuses_a_folder_without_write_permission():
+    """CI runs as root, who may write anywhere: the check then runs in a child that dropped to
+    the user nobody, on a folder nobody owns with mode 0o500 (read and search, no write)."""
+    import tempfile
+
+    base = Path(tempfile.mkdtemp(prefix="agent-envs-perm-"))
+    try:
+        base.chmod(0o755)
+        locked = base / "locked"
         locked.mkdir(mode=0o500)
-        with pytest.raises(ValueError, match="no permission"):
-            check_output_dir(locked / "out")
+        locked.chmod(0o500)  # read and search, no write, for its owner
+        if os.geteuid() == 0:
+            os.chown(locked, 65534, 65534)  # owned by the user the check runs as
+
+        def refused() -> int:
+            try:
+                check_output_dir(locked / "out")
+            except ValueError as error:
+                return 0 if "no permission" in str(error) else 2
+            return 3
+
+        assert _unprivileged_exit_code(refused) == 0
+        # the same user is not refused where it may write (a folder it owns, mode 0o700)
+        free = base / "free"
+        free.mkdir(mode=0o700)
+        if os.geteuid() == 0:
+            os.chown(free, 65534, 65534)
+
+        def allowed() -> int:
+            return 0 if check_output_dir(free / "out") == free / "out" else 4
+
+        assert _unprivileged_exit_code(allowed) == 0
+    finally:
+        shutil.rmtree(base, ignore_errors=True)
 
 
 def test_manifest_detects_truncation_and_tampering(tmp_path):

@@ -100,6 +100,12 @@ def test_integrator_instance_with_conflicting_options_is_rejected():
     assert traj.jacobian == "exact"
     with pytest.raises(ValueError, match="jacobian"):
         simulate(params, scheme, jacobian="frozen", n_steps=3)
+    frozen = make_integrator("serb", jacobian="frozen", phi_method="expm")
+    with pytest.raises(ValueError, match="jacobian='exact' conflicts"):
+        simulate(params, frozen, jacobian="exact", n_steps=3)
+    with pytest.raises(ValueError, match="phi_method='auto' conflicts"):
+        simulate(params, frozen, phi_method="auto", n_steps=3)
+    simulate(params, frozen, jacobian="frozen", phi_method="expm", n_steps=3)  # agreeing
 
 
 def test_divergence_is_flagged_not_silent():
@@ -109,6 +115,9 @@ def test_divergence_is_flagged_not_silent():
     assert traj.divergence_step is not None and 1 <= traj.divergence_step <= 5
     assert traj.diverged_paths.tolist() == [True]
     assert np.all(np.isfinite(traj.positions[: traj.divergence_step]))
+    # the rows after the divergence are NaN, the shapes those of a finished run
+    assert traj.positions.shape == (6, 1, 20, 1) and traj.controls.shape == (5, 1, 20, 1)
+    assert np.all(np.isnan(traj.positions[traj.divergence_step :]))
 
 
 @pytest.mark.parametrize(
