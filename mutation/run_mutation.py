@@ -35,7 +35,7 @@ by `is`/`is not`, unary minus replaced by `~`/`not`, and cosmic-ray's VariableRe
 VariableInserter (random variable swaps, many per line). Everything else of `core/` runs.
 
 Not in CI (tens of minutes on 2 cores). The score and every surviving mutant, killed by a new
-test or explained as equivalent, are in docs/MUTATION.md.
+test or explained as equivalent, are in docs/mutation.md.
 """
 
 from __future__ import annotations

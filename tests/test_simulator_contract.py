@@ -1,4 +1,4 @@
-"""simulate's input contract and defaults, test by test from the mutation run (docs/MUTATION.md):
+"""simulate's input contract and defaults, test by test from the mutation run (docs/mutation.md):
 shapes accepted and refused with messages naming them, the eigh checks, the batch limit, the
 divergence threshold, torch inputs, the integrator-instance conflicts."""
 
