@@ -20,7 +20,7 @@ The few pieces the standard lacks or where the libraries differ live here and no
 - `hot_path_threads`: the BLAS thread pools limited to `HOT_PATH_BLAS_THREADS` (1) while the core
   steps, restored afterwards. The core's matrices are small (N x N, N ~ 100): with more than one
   BLAS thread per process, several processes on a loaded machine oversubscribe the cores and every
-  small product waits for its threads (README, "Benchmarks", has the measurement:
+  small product waits for its threads (docs/benchmarks.md, "BLAS threads", has the measurement:
   benchmarks/bench_blas_threads.py). threadpoolctl (the library scikit-learn uses for the same job)
   finds the BLAS libraries numpy and scipy loaded; one controller is built on first use and only the
   pools whose size differs are touched, so a call costs a few microseconds. torch's own intra-op

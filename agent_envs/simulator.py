@@ -53,8 +53,8 @@ DEFAULT_DIVERGENCE_THRESHOLD = 1e4
 DEFAULT_N_STEPS = 50
 #: Default bound on each coordinate of u_k: an env action a in [-1, 1] is the control
 #: u = 150 a. It leaves the turnpike cheap control (eq:cheap_ctr, beta = 12) unclipped in the
-#: paper's settings: benchmarks/max_control.py measures its largest |u|, README.md ("Why
-#: max_control = 150") has the figures.
+#: paper's settings: benchmarks/max_control.py measures its largest |u|, docs/envs/gymnasium.md
+#: ("Why max_control = 150") has the figures.
 DEFAULT_MAX_CONTROL = 150.0
 #: Default phi-function strategy of the exponential integrators (`phi_functions`).
 DEFAULT_PHI_METHOD = "auto"

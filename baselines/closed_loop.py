@@ -1,6 +1,6 @@
 """The swarm under continuous cheap feedback: the closed loop the paper integrates in [0, tbar].
 
-Why the closed loop (README.md, "Paper's controlled experiments", has the measurements): an env
+Why the closed loop (docs/paper.md, "Paper's controlled experiments", has the measurements): an env
 holds each action constant over a time step (zero-order hold). With Euler-Maruyama the held cheap
 control gives exactly the explicit Euler scheme of `eq:dyn_mean`. With SERB/ERB the exponential
 integrator treats the interaction implicitly (phi1(tau L)) while the held control cancels it

@@ -29,7 +29,7 @@ gradient test after 0 iterations (stiff EM, whose backward pass overflows).
 torch is needed only here (the `train` extra) and is imported when solving. The solve runs
 torch with `threads` intra-op threads (default 1, restored afterwards): these problems are many
 small batched matrix operations, where extra threads mostly add synchronisation (measured in
-the README, "Solver cost").
+docs/benchmarks.md, "The optimal-control solver").
 """
 
 from __future__ import annotations
@@ -317,8 +317,9 @@ def differentiated_phi_method(params: SwarmParams, jacobian: str, phi_method: st
     tested against finite differences: "eigh" when the linearization is symmetric (symmetric
     kernel; with the exact Jacobian also radial), "expm" otherwise. "auto" would pick Krylov
     for large batched problems, whose torch backward gave non-finite gradients at N = 100 with
-    20 paths (README, "Solver cost"). The final `simulate` that produces `positions` and `cost`
-    uses the caller's `phi_method`, so the cost contract holds either way.
+    20 paths (docs/benchmarks.md, "The optimal-control solver"). The final `simulate` that
+    produces `positions` and `cost` uses the caller's `phi_method`, so the cost contract holds
+    either way.
     """
     if phi_method not in (None, "auto"):
         return phi_method

@@ -1,4 +1,4 @@
-"""Render the GIF on the docs' front page: one swarm, one seed, three controllers side by side.
+"""Render the GIF on the docs' front page: one swarm, one seed, four controllers side by side.
 
     python docs/make_animation.py                   # writes docs/figures/swarm_controllers.gif
     python docs/make_animation.py --n-agents 20 --seed 3 --out /tmp/swarm.gif
@@ -9,6 +9,8 @@ every agent's path-mean position against time, the target dashed) after each ste
 
 - the optimal open-loop control (`agent_envs.baselines.OptimalController`: the plan solved
   from the episode's start, then replayed; needs torch, the ``train`` extra),
+- `apg`, the learned feedback law (`agent_envs.training.apg`, trained here on the env's own
+  kwargs for 150 iterations, seed 0: some 20 s on one core),
 - the proportional controller beta (xbar - E x_k) until the turnpike time, then 0,
 - the paper's turnpike controller (the cheap control `eq:cheap_ctr`, which also cancels the
   interaction drift, until the turnpike time of `eq:tptime`, then 0).
@@ -37,8 +39,25 @@ from agent_envs.baselines import (
 )
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "figures" / "swarm_controllers.gif"
+
+
+def apg_controller(env: gym.Env) -> object:
+    """An `apg` law trained for this env (its N and m; 150 iterations, seed 0), as a policy."""
+    import tempfile
+
+    from agent_envs.training.apg import APGConfig, train_apg
+    from agent_envs.training.apg_policy import load_apg_policy
+
+    base = env.unwrapped
+    kwargs = {"n_agents": base.params.n_agents, "n_steps": base.n_steps}
+    run = Path(tempfile.mkdtemp(prefix="apg-animation-")) / "run"
+    train_apg(APGConfig(env_kwargs=kwargs, iterations=150, progress=False), run)
+    return load_apg_policy(run)
+
+
 CONTROLLERS = {
     "optimal control": OptimalController,
+    "apg (learned)": apg_controller,
     "proportional": ProportionalController,
     "turnpike (paper)": TurnpikeController,
 }

@@ -1,6 +1,7 @@
 """The README and docs cannot go stale: every `agent-envs ...` command they quote parses with
-the CLI's own parser (nothing runs), and the paper sweep's tables in the README agree with the
-committed result files they come from (docs/results/paper-sweep/*.csv).
+the CLI's own parser (nothing runs), and the paper-scale tables (the README's headline table,
+the Results page's sweep tables) agree with the committed result files they come from
+(docs/results/paper-sweep/*.csv, docs/results/apg/results.json).
 
 A number in the README counts as agreeing when it is the source value rounded to the digits
 printed (|printed - source| <= half a unit of the last printed digit).
@@ -18,6 +19,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("**/*.md"))]
 RESULTS = ROOT / "docs" / "results" / "paper-sweep"
+APG_RESULTS = ROOT / "docs" / "results" / "apg" / "results.json"
+#: where the sweep's full tables live (the README is a landing page with the headline table)
+RESULTS_PAGE = ROOT / "docs" / "results.md"
 
 # ------------------------------------------------------------------ commands
 
@@ -132,10 +136,12 @@ def agrees(printed: str, value: float, scale: float = 1.0) -> bool:
     return abs(float(text) - value * scale) <= 0.5 * 10.0 ** (-decimals) * 1.0001
 
 
-def readme_table(after_heading: str, first_header_cell: str) -> list[list[str]]:
-    """The rows (cells stripped of ** and whitespace) of the first table under the heading
-    `after_heading` whose header starts with `first_header_cell`."""
-    text = (ROOT / "README.md").read_text()
+def readme_table(
+    after_heading: str, first_header_cell: str, page: Path = RESULTS_PAGE
+) -> list[list[str]]:
+    """The rows (cells stripped of ** and whitespace) of the first table of `page` under the
+    heading `after_heading` whose header starts with `first_header_cell`."""
+    text = page.read_text()
     section = text[text.index(after_heading) :]
     lines = section.splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith(f"| {first_header_cell} |"))
@@ -158,7 +164,7 @@ def test_paper_sweep_main_table_matches_the_result_files():
     for r in read_csv("trial_wall_times.csv"):
         if r["setting"] == "main":
             walls.setdefault(r["policy"], []).append(float(r["wall time [s]"]))
-    rows = readme_table("### Results at the paper's scale", "policy")
+    rows = readme_table("## Results at the paper's scale", "policy")
     assert len(rows) == 10
     for cells in rows:
         policy = cells[0].split()[0]
@@ -210,6 +216,52 @@ def test_paper_sweep_contrast_costs_match_the_result_files():
     assert agrees(_numbers(main[4])[0], sum(gaps) / 3, 100.0), main
     for cell, policy in zip(main[5:8], ("proportional", "turnpike", "zero"), strict=True):
         assert agrees(_numbers(cell)[0], float(summary[policy]["gap_to_optimal"]), 100.0), cell
+
+
+def test_readme_headline_table_matches_the_result_files():
+    """The README's headline table: every sweep row's mean cost and per-seed gaps against the
+    sweep's files, the apg row against bench_apg's results (same test seeds)."""
+    import json
+
+    across = {(r["setting"], r["policy"]): r for r in read_csv("across_seeds.csv")}
+    summary = {r["policy"]: r for r in read_csv("summary.csv")}
+    apg = json.loads(APG_RESULTS.read_text())["paper"]
+    rows = readme_table("## The headline result: the paper's scale", "policy", ROOT / "README.md")
+    assert [cells[0].split()[0] for cells in rows] == [
+        "optimal",
+        "mpc",
+        "apg",
+        "proportional",
+        "ppo-shared",
+        "ppo-swarm",
+        "zero",
+        "turnpike",
+    ]
+    for cells in rows:
+        policy = cells[0].split()[0]
+        gap_numbers = _numbers(cells[2])
+        if policy == "apg":
+            runs = sorted(apg["runs"], key=lambda r: r["seed"])
+            mean_cost = sum(r["mean_cost"] for r in runs) / len(runs)
+            assert agrees(cells[1], mean_cost), cells
+            for printed, run in zip(gap_numbers[:3], runs, strict=True):
+                assert agrees(printed, run["gap"]["mean"], 100.0), (cells, run["seed"])
+            assert agrees(gap_numbers[3], max(r["gap"]["max"] for r in runs), 100.0), cells
+            assert apg["optimal_mean_cost"] == pytest.approx(
+                float(summary["optimal"]["mean_cost"]), rel=1e-9
+            )  # the same optimum V on the same seeds as the sweep
+            continue
+        assert agrees(cells[1], float(across[("main", policy)]["mean_cost"])), cells
+        if policy in summary:
+            gap = float(summary[policy]["gap_to_optimal"])
+            if gap_numbers[0] in ("0", "-0.00%"):
+                assert abs(gap) < 5e-5, cells
+            else:
+                assert agrees(gap_numbers[0], gap, 100.0), cells
+        else:
+            for printed, seed in zip(gap_numbers, range(3), strict=True):
+                gap = float(summary[f"{policy} (seed {seed})"]["gap_to_optimal"])
+                assert agrees(printed, gap, 100.0), (cells, seed)
 
 
 def test_table_checker_can_fail():

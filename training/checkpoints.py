@@ -212,7 +212,7 @@ def checkpoint_callback(save_freq: int, run_dir: str | Path, off_policy: bool) -
 
     It replaces SB3's `CheckpointCallback` (same file names) to write atomically, record the
     hashes and keep only the newest replay buffer: SB3 pickles the whole preallocated buffer,
-    whose size grows with N and `buffer_size` (README.md has the sizes).
+    whose size grows with N and `buffer_size` (docs/learners/sb3.md has the sizes).
     """
     from stable_baselines3.common.callbacks import BaseCallback
 

@@ -7,8 +7,8 @@ of every (algorithm, env id) pair, resolved into SB3 keyword arguments by `resol
 The default hyperparameters live in one place, the rl-zoo3 YAML files shipped in
 `training/hyperparams/{algo}.yml` (entries per env id), read as rl-zoo3 reads them: what
 `agent-envs train` uses is what `python -m rl_zoo3.train --conf-file
-training/hyperparams/ppo.yml` trains with. The measurements behind them (N = 10, m = 20; README,
-"Training agents") are in the files' comments.
+training/hyperparams/ppo.yml` trains with. The measurements behind them (N = 10, m = 20;
+docs/learners/sb3.md) are in the files' comments.
 """
 
 from __future__ import annotations

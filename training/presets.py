@@ -20,7 +20,7 @@ Presets:
   PPO, ``ppo-swarm`` (PPO with the training layer's own hyperparameters) and ``apg``; 3 training
   seeds;
   contrasts eps = 1, max_control = 150 and train-on-EM / evaluate-on-SERB. The published study
-  (README "Results at the paper's scale", docs/results/paper-sweep).
+  (docs/results.md "Results at the paper's scale", docs/results/paper-sweep).
 
 Renamed: before, ``compare --preset paper`` was another setting than ``sweep --preset paper``
 (max_control = 150 and 400k PPO steps against 25 and 32 768); it never produced a published
@@ -243,12 +243,12 @@ PAPER_ENV = {
     # proportional controller's 20.2), so learners with the zoo's action noise (tuned for
     # actions of the order of their bound) spend their budget on controls of ~100: 25 leaves
     # the optimal control, MPC and the proportional controller unclipped and clips the turnpike
-    # controller (65-67) -- README "Results at the paper's scale"
+    # controller (65-67) -- docs/results.md "Results at the paper's scale"
     "max_control": 25.0,
 }
 
 # Budgets (SB3 timesteps) of the paper preset, sized so that the whole preset ends in about
-# 1.5 h on 2 cores (README "The paper preset: what it runs"; it took 59 min): PPO gets 8
+# 1.5 h on 2 cores (docs/presets.md "The paper preset: what it runs"; it took 59 min): PPO gets 8
 # rollouts of 4 x 1024; SAC and TD3 half the zoo's Pendulum-v1 n_timesteps (1e4 of 2e4; TD3's
 # random warm-up is cut further, below); parameter-shared PPO 6e5 agent-steps (SB3 ends on a
 # whole rollout: 188 rollouts of 3200 samples, 601 600 agent-steps, 6 016 swarm steps).

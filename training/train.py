@@ -142,7 +142,7 @@ def torch_threads(n: int):
     """Run with `n` torch intra-op threads (0: unchanged), restoring the previous number after.
 
     Small networks on a busy CPU run far faster with one thread than with torch's default of
-    one per core (the threads spin-wait; README.md, "Training agents", has the measurement).
+    one per core (the threads spin-wait; docs/learners/sb3.md has the measurement).
     """
     import torch
 

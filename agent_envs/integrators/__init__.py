@@ -28,7 +28,7 @@ INTEGRATORS: dict[str, type[Integrator]] = {
     )
 }
 
-#: The Jacobian choice we recommend for ERB/SERB, from our measurements (see README).
+#: The Jacobian choice we recommend for ERB/SERB, from our measurements (docs/paper.md).
 DEFAULT_JACOBIAN = "frozen"
 #: The integrator we recommend for stiff settings.
 DEFAULT_INTEGRATOR = "serb"

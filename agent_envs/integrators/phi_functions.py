@@ -29,7 +29,8 @@ n <= 80 (n <= 128 if it is not symmetric), where "expm" is still cheaper: the cr
 measured on numpy by benchmarks/bench_integrators.py (table 1) with one BLAS thread.
 For a gradient on torch (forward and backward, N = 100 batched over 20 paths),
 benchmarks/bench_gradient.py measures "krylov" cheapest, then "eigh", with "expm" far behind
-(matrix_exp's backward is a second exponential of a doubled matrix); the README has the numbers.
+(matrix_exp's backward is a second exponential of a doubled matrix); docs/benchmarks.md has
+the numbers.
 """
 
 from __future__ import annotations
