@@ -16,7 +16,38 @@ command line is `agent-envs reproduce uncontrolled|turnpike|turnpike-property|ch
 
 from __future__ import annotations
 
-from agent_envs.validation import MAX_AGENTS, MAX_BATCH_SIZE, MAX_PATHS, MAX_STEPS, check_int
+from dataclasses import dataclass
+
+from agent_envs.simulator import DEFAULT_MAX_CONTROL
+from agent_envs.training.config import option_field
+from agent_envs.validation import (
+    MAX_AGENTS,
+    MAX_BATCH_SIZE,
+    MAX_CONTROL_RANGE,
+    MAX_PATHS,
+    MAX_STEPS,
+    check_int,
+    check_positive,
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolverOptions:
+    """The optimal-control solver's options of the experiments that solve the problem
+    (`turnpike_property`, `cheap_control_bound`), and their progress lines."""
+
+    max_control: float = option_field(DEFAULT_MAX_CONTROL, "bound |u| <= max_control of the solver")
+    gtol: float = option_field(1e-6, "relative gradient tolerance of the solver")
+    max_iterations: int = option_field(500, "the solver's iterations per solve, at most")
+    progress: bool = option_field(
+        True, "no progress lines", flags=("--no-progress",), action="store_false"
+    )
+
+    def check_solver_options(self) -> None:
+        """ValueError/TypeError naming the option for a bad solver option."""
+        check_positive("--max-control", self.max_control, MAX_CONTROL_RANGE)
+        check_positive("--gtol", self.gtol)
+        check_int("--max-iterations", self.max_iterations, 1, 1_000_000)
 
 
 def check_sizes(

@@ -70,13 +70,12 @@ import numpy as np
 
 from agent_envs.baselines import DEFAULT_BETA
 from agent_envs.training.config import option_field
-from agent_envs.training.experiments import check_sizes
+from agent_envs.training.experiments import SolverOptions, check_sizes
 from agent_envs.training.experiments.turnpike_property import cheap_constant, kernel_bound
 from agent_envs.validation import (
     EPSILON_RANGE,
     HORIZON_RANGE,
     MAX_BATCH_SIZE,
-    MAX_CONTROL_RANGE,
     MAX_SEED,
     SIGMA_RANGE,
     check_int,
@@ -314,7 +313,7 @@ def fit_exponent(x: Any, y: Any) -> float:
 
 
 @dataclass(frozen=True, kw_only=True)
-class CheapControlBoundConfig:
+class CheapControlBoundConfig(SolverOptions):
     """Sizes and settings of the run (module docstring): the options of `agent-envs reproduce
     cheap-control-bound`; validated on construction."""
 
@@ -337,12 +336,6 @@ class CheapControlBoundConfig:
         SCALING_EPSILONS, "eps of the C_0 scaling rows"
     )
     seed: int = option_field(0, "x^0, the solver's paths and the evaluation paths")
-    max_control: float = option_field(150.0, "bound |u| <= max_control of the solver")
-    gtol: float = option_field(1e-6, "relative gradient tolerance of the solver")
-    max_iterations: int = option_field(500, "the solver's iterations per solve, at most")
-    progress: bool = option_field(
-        True, "no progress lines", flags=("--no-progress",), action="store_false"
-    )
 
     def __post_init__(self) -> None:
         from agent_envs.validation import Range
@@ -369,9 +362,7 @@ class CheapControlBoundConfig:
         for epsilon in self.scaling_epsilons:
             check_positive("--scaling-epsilons", epsilon, EPSILON_RANGE)
         check_int("--seed", self.seed, 0, MAX_SEED)
-        check_positive("--max-control", self.max_control, MAX_CONTROL_RANGE)
-        check_positive("--gtol", self.gtol)
-        check_int("--max-iterations", self.max_iterations, 1, 1_000_000)
+        self.check_solver_options()
         if not all((self.horizons, self.scaling_agents, self.scaling_epsilons)):
             raise ValueError(
                 "--horizons, --scaling-agents and --scaling-epsilons need a value each"

@@ -58,11 +58,10 @@ import numpy as np
 
 from agent_envs.baselines import DEFAULT_BETA, DEFAULT_DELTA
 from agent_envs.training.config import option_field
-from agent_envs.training.experiments import check_sizes
+from agent_envs.training.experiments import SolverOptions, check_sizes
 from agent_envs.validation import (
     EPSILON_RANGE,
     HORIZON_RANGE,
-    MAX_CONTROL_RANGE,
     MAX_SEED,
     SIGMA_RANGE,
     check_int,
@@ -220,7 +219,7 @@ class Setting:
 
 
 @dataclass(frozen=True, kw_only=True)
-class TurnpikePropertyConfig:
+class TurnpikePropertyConfig(SolverOptions):
     """Sizes and settings of the experiment (module docstring): the options of `agent-envs
     reproduce turnpike-property`; validated on construction."""
 
@@ -237,12 +236,6 @@ class TurnpikePropertyConfig:
     n_seeds: int = option_field(1, "repeat for the seeds seed .. seed + n_seeds - 1")
     starts: tuple[str, ...] = option_field(
         ("uniform",), "kinds of initial state x^0", choices=START_KINDS
-    )
-    max_control: float = option_field(150.0, "bound |u| <= max_control of the solver")
-    gtol: float = option_field(1e-6, "relative gradient tolerance")
-    max_iterations: int = option_field(500, "the solver's iterations per horizon, at most")
-    progress: bool = option_field(
-        True, "no progress lines", flags=("--no-progress",), action="store_false"
     )
 
     def __post_init__(self) -> None:
@@ -263,9 +256,7 @@ class TurnpikePropertyConfig:
         for epsilon in self.epsilons:
             check_positive("--epsilons", epsilon, EPSILON_RANGE)
         check_positive("--delta", self.delta)
-        check_positive("--max-control", self.max_control, MAX_CONTROL_RANGE)
-        check_positive("--gtol", self.gtol)
-        check_int("--max-iterations", self.max_iterations, 1, 1_000_000)
+        self.check_solver_options()
         for horizon in self.horizons:
             steps = horizon / self.tau
             if abs(steps - round(steps)) > 1e-9:
