@@ -516,113 +516,116 @@ def train_apg(
             _torch.set_num_threads(previous_threads)
 
 
-def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, Any]:
-    from torch.utils.tensorboard import SummaryWriter
-    from tqdm.auto import tqdm
+def _restore(trainer: _Trainer, run_dir: Path) -> int:
+    """Load the newest valid checkpoint into `trainer` (law, Adam, schedule, generator, books,
+    the learning curve up to it); return its iteration."""
+    remove_stale_temporaries(run_dir)
+    remove_stale_temporaries(run_dir / CHECKPOINT_DIR)
+    iteration, weights, books_path = _resume_point(run_dir)
+    state = torch.load(weights, map_location="cpu", weights_only=True)
+    books = json.loads(books_path.read_text())
+    trainer.law.load_state_dict(state["law"])
+    trainer.optimizer.load_state_dict(state["optimizer"])
+    trainer.scheduler.load_state_dict(state["scheduler"])
+    trainer.rng.bit_generator.state = books["generator"]
+    trainer.best_cost = float(books["best_cost"])
+    trainer._wall_offset = float(books["wall_time_s"])
+    trainer._cpu_offset = float(books.get("cpu_time_s", 0.0))
+    trainer.history = [
+        r
+        for r in read_learning_curve(run_dir / "learning_curve.csv")
+        if r.get("iteration", 0) <= iteration
+    ]
+    return iteration
 
-    trainer = _Trainer(config, run_dir)
-    start = 0
-    if resume:
-        remove_stale_temporaries(run_dir)
-        remove_stale_temporaries(run_dir / CHECKPOINT_DIR)
-        iteration, weights, books_path = _resume_point(run_dir)
-        state = torch.load(weights, map_location="cpu", weights_only=True)
-        books = json.loads(books_path.read_text())
-        trainer.law.load_state_dict(state["law"])
-        trainer.optimizer.load_state_dict(state["optimizer"])
-        trainer.scheduler.load_state_dict(state["scheduler"])
-        trainer.rng.bit_generator.state = books["generator"]
-        trainer.best_cost = float(books["best_cost"])
-        trainer._wall_offset = float(books["wall_time_s"])
-        trainer._cpu_offset = float(books.get("cpu_time_s", 0.0))
-        trainer.history = [
-            r
-            for r in read_learning_curve(run_dir / "learning_curve.csv")
-            if r.get("iteration", 0) <= iteration
-        ]
-        start = iteration
-    write_json_atomic(run_dir / "config.json", config.to_dict())
-    # the SB3 runs' env.json (N, d, m, integrator, ...): compare and sweep read it alike
-    write_json_atomic(run_dir / "env.json", env_description(GYM_ENV_ID, config.env_kwargs))
-    write_json_atomic(run_dir / LAW_DESCRIPTION, describe_law(trainer.spec))
-    writer = SummaryWriter(str(run_dir / "tb"))
-    m = trainer.env_config.n_steps
-    steps_per_iteration = config.episodes_per_iteration * m
-    bar = tqdm(
-        total=config.iterations, initial=start, desc="apg", unit="it", disable=not config.progress
-    )
 
-    def validate(iteration: int, train_cost: float, grad_norm: float) -> dict[str, Any]:
-        costs, diverged = trainer.validation_costs()
-        mean, ci = mean_ci95(costs) if len(costs) > 1 else (float(costs[0]), 0.0)
-        row: dict[str, Any] = {
-            "timesteps": iteration * steps_per_iteration,
-            "wall_time_s": round(trainer.wall_time(), 3),
-            "cost_mean": mean,
-            "cost_ci95": ci,
-            "diverged_rate": float(np.mean(diverged)),
+def _validate(
+    trainer: _Trainer, run_dir: Path, writer: Any, row_head: dict[str, Any]
+) -> dict[str, Any]:
+    """Validate the law on the validation seeds: a learning-curve row (the SB3 runs' columns
+    and `row_head`'s iteration, train_cost, grad_norm), TensorBoard, and the best law kept."""
+    costs, diverged = trainer.validation_costs()
+    mean, ci = mean_ci95(costs) if len(costs) > 1 else (float(costs[0]), 0.0)
+    row: dict[str, Any] = {
+        "timesteps": row_head["timesteps"],
+        "wall_time_s": round(trainer.wall_time(), 3),
+        "cost_mean": mean,
+        "cost_ci95": ci,
+        "diverged_rate": float(np.mean(diverged)),
+    }
+    for name, value in trainer.evaluate_references().items():
+        row[f"{name}_cost"] = value
+    if row.get("turnpike_cost"):
+        row["cost_ratio_to_turnpike"] = mean / row["turnpike_cost"]
+    row.update({k: v for k, v in row_head.items() if k != "timesteps"})
+    trainer.history.append(row)
+    write_learning_curve(run_dir / "learning_curve.csv", trainer.history)
+    for key, value in row.items():
+        if key.endswith("_cost") or key in ("cost_ci95", "diverged_rate"):
+            writer.add_scalar(f"eval/{key}", value, row["timesteps"])
+    writer.add_scalar("eval/cost", mean, row["timesteps"])
+    writer.flush()
+    if np.isfinite(mean) and mean < trainer.best_cost:
+        trainer.best_cost = mean
+        _write_law(run_dir, BEST_LAW, trainer.law)
+    return row
+
+
+def _iterate(trainer: _Trainer, run_dir: Path, start: int, writer: Any, bar: Any) -> None:
+    """Adam steps `start + 1 .. iterations`, validating every `eval_freq` and checkpointing
+    every `checkpoint_freq` (and at the end). Ctrl-C keeps the last whole iteration (not one
+    stopped inside its Adam step, whose weights may be half-updated), so a resume loses
+    nothing."""
+    config = trainer.config
+    per_iteration = config.episodes_per_iteration * trainer.env_config.n_steps
+
+    def head(iteration: int, train_cost: float, grad_norm: float) -> dict[str, Any]:
+        return {
+            "timesteps": iteration * per_iteration,
+            "iteration": iteration,
+            "train_cost": train_cost,
+            "grad_norm": grad_norm,
         }
-        for name, value in trainer.evaluate_references().items():
-            row[f"{name}_cost"] = value
-        if row.get("turnpike_cost"):
-            row["cost_ratio_to_turnpike"] = mean / row["turnpike_cost"]
-        row["iteration"] = iteration
-        row["train_cost"] = train_cost
-        row["grad_norm"] = grad_norm
-        trainer.history.append(row)
-        write_learning_curve(run_dir / "learning_curve.csv", trainer.history)
-        for key, value in row.items():
-            if key.endswith("_cost") or key in ("cost_ci95", "diverged_rate"):
-                writer.add_scalar(f"eval/{key}", value, row["timesteps"])
-        writer.add_scalar("eval/cost", mean, row["timesteps"])
-        writer.flush()
-        if np.isfinite(mean) and mean < trainer.best_cost:
-            trainer.best_cost = mean
-            _write_law(run_dir, BEST_LAW, trainer.law)
-        return row
 
     done, saved, in_step = start, start, False
     try:
         if start == 0:
-            validate(0, math.nan, math.nan)
-        train_cost = grad_norm = math.nan
+            _validate(trainer, run_dir, writer, head(0, math.nan, math.nan))
         for iteration in range(start + 1, config.iterations + 1):
             in_step = True
             train_cost, grad_norm = trainer.step()
             in_step, done = False, iteration
-            writer.add_scalar("train/cost", train_cost, iteration * steps_per_iteration)
-            writer.add_scalar("train/grad_norm", grad_norm, iteration * steps_per_iteration)
+            writer.add_scalar("train/cost", train_cost, iteration * per_iteration)
+            writer.add_scalar("train/grad_norm", grad_norm, iteration * per_iteration)
             writer.add_scalar(
-                "train/learning_rate",
-                trainer.scheduler.get_last_lr()[0],
-                iteration * steps_per_iteration,
+                "train/learning_rate", trainer.scheduler.get_last_lr()[0], iteration * per_iteration
             )
             bar.update(1)
             if iteration % config.eval_freq == 0 or iteration == config.iterations:
-                row = validate(iteration, train_cost, grad_norm)
+                row = _validate(trainer, run_dir, writer, head(iteration, train_cost, grad_norm))
                 bar.set_postfix_str(f"val {row['cost_mean']:.5g}")
             if iteration % config.checkpoint_freq == 0 or iteration == config.iterations:
                 _save_checkpoint(run_dir, iteration, trainer)
                 saved = iteration
     except KeyboardInterrupt:
-        # Ctrl-C: keep the last whole iteration (not one stopped inside its Adam step, whose
-        # weights may be half-updated), so --resume loses nothing
         if not in_step and done > saved:
             _save_checkpoint(run_dir, done, trainer)
         raise
-    finally:
-        bar.close()
-        writer.close()
-    _write_law(run_dir, FINAL_LAW, trainer.law)
-    summary = {
+
+
+def _summary(trainer: _Trainer, run_dir: Path) -> dict[str, Any]:
+    """summary.json of a finished run (with the SB3 runs' keys compare and sweep read)."""
+    config = trainer.config
+    steps = config.iterations * config.episodes_per_iteration * trainer.env_config.n_steps
+    return {
         "algo": "apg",
         "env_id": GYM_ENV_ID,
         "seed": config.seed,
         "iterations": config.iterations,
-        "timesteps": config.iterations * steps_per_iteration,
+        "timesteps": steps,
         # the SB3 runs' keys (compare's and sweep's training tables): env transitions simulated
         # in training, and the training wall time over every part of a resumed run
-        "swarm_steps": config.iterations * steps_per_iteration,
+        "swarm_steps": steps,
         "train_wall_time_s": round(trainer.wall_time(), 2),
         "best_validation_cost": trainer.best_cost,
         "final_validation_cost": trainer.history[-1]["cost_mean"] if trainer.history else None,
@@ -634,6 +637,29 @@ def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, A
         "final_law": FINAL_LAW,
         "run_dir": str(run_dir),
     }
+
+
+def _train_locked(config: APGConfig, run_dir: Path, resume: bool) -> dict[str, Any]:
+    from torch.utils.tensorboard import SummaryWriter
+    from tqdm.auto import tqdm
+
+    trainer = _Trainer(config, run_dir)
+    start = _restore(trainer, run_dir) if resume else 0
+    write_json_atomic(run_dir / "config.json", config.to_dict())
+    # the SB3 runs' env.json (N, d, m, integrator, ...): compare and sweep read it alike
+    write_json_atomic(run_dir / "env.json", env_description(GYM_ENV_ID, config.env_kwargs))
+    write_json_atomic(run_dir / LAW_DESCRIPTION, describe_law(trainer.spec))
+    writer = SummaryWriter(str(run_dir / "tb"))
+    bar = tqdm(
+        total=config.iterations, initial=start, desc="apg", unit="it", disable=not config.progress
+    )
+    try:
+        _iterate(trainer, run_dir, start, writer, bar)
+    finally:
+        bar.close()
+        writer.close()
+    _write_law(run_dir, FINAL_LAW, trainer.law)
+    summary = _summary(trainer, run_dir)
     write_json_atomic(run_dir / "summary.json", summary)
     return summary
 
