@@ -279,6 +279,85 @@ class TurnpikePropertyConfig(SolverOptions):
         ]
 
 
+def _solve_horizon(setting, config, x0, seed: int, horizon: float, previous) -> tuple:
+    """(params, m, result) of the optimal solve at one horizon, warm-started from `previous`
+    (the controls of the previous horizon, cut or padded with zeros to m steps)."""
+    from agent_envs.baselines.optimal_control import solve_optimal_control
+
+    n_steps = round(horizon / config.tau)
+    params = setting.params(config.n_agents, horizon)
+    warm = None
+    if previous is not None:
+        warm = np.zeros((n_steps, *previous.shape[1:]))
+        warm[: min(n_steps, previous.shape[0])] = previous[:n_steps]
+    res = solve_optimal_control(
+        params,
+        "serb",
+        n_steps=n_steps,
+        n_paths=1 if setting.sigma == 0.0 else config.n_paths,
+        seed=seed,
+        initial_positions=x0,
+        max_control=config.max_control,
+        initial_controls=warm,
+        gtol=config.gtol,
+        max_iterations=config.max_iterations,
+    )
+    return params, n_steps, res
+
+
+def _horizon_row(setting, config, x0, params, n_steps: int, res) -> dict:
+    """The measured quantities of one optimal solution: arcs and shares of D (and of the
+    per-path quantity), our predicted entry rate, the lemma's bound and the theorem's sides."""
+    from agent_envs.dynamics.swarm import kernel_from_params
+
+    target = params.target_vector
+    dt = params.horizon / n_steps
+    times = res.times[:n_steps]
+    curve = turnpike_curve(res.mean_positions, res.controls, target)
+    rates = arc_rates(times, curve, config.delta)
+    shares = {
+        name: arc_rates(times, curve, band).share_within_delta
+        for name, band in (("share_delta_over_10", config.delta / 10.0),
+                           ("share_delta_times_10", config.delta * 10.0))
+    }  # fmt: skip
+    per_path = path_curve(res.positions, res.controls, target)
+    path_rates = arc_rates(times, per_path, config.delta)
+    c0 = cheap_constant(dt, params.gamma, kernel_bound(params))
+    predicted = centre_mode_rate(
+        kernel_from_params(params).weights, params.n_agents, params.gamma, dt
+    )
+    bound = c0 * params.gamma / (2.0 * params.n_agents) * float(np.sum((x0 - target) ** 2))
+    lhs, rhs = theorem_sides(res.positions, res.controls, target, params.gamma, dt, c0)
+    return {
+        "kernel": setting.kernel,
+        "epsilon": setting.epsilon,
+        "sigma": setting.sigma,
+        "T": params.horizon,
+        "m": n_steps,
+        "V": res.cost,
+        "converged": res.converged,
+        "iterations": res.iterations,
+        "rel_grad": res.relative_gradient_norm,
+        **asdict(rates),
+        **shares,
+        "predicted_entry_rate": predicted,
+        "min_D": float(np.min(curve)),
+        "min_D_path": float(np.min(per_path)),
+        "share_path_within_delta": path_rates.share_within_delta,
+        "path_exit_time_bound": (
+            config.delta / (params.dim * setting.sigma**2) if setting.sigma > 0 else math.inf
+        ),
+        "cheap_bound": bound,
+        "bound_over_V": bound / res.cost,
+        "thm_lhs": lhs,
+        "thm_rhs": rhs,
+        "seconds": res.wall_time,
+        "curve": curve,
+        "path_curve": per_path,
+        "times": times,
+    }
+
+
 def run_setting(
     setting: Setting,
     config: TurnpikePropertyConfig,
@@ -287,90 +366,21 @@ def run_setting(
     start_kind: str = "uniform",
 ) -> list[dict]:
     """Solve every horizon of one setting (warm-started), return one row per T."""
-    from agent_envs.baselines.optimal_control import solve_optimal_control
-    from agent_envs.dynamics.swarm import kernel_from_params
-
     seed = config.seed if seed is None else seed
     rows, previous = [], None
     for horizon in config.horizons:
-        n_steps = round(horizon / config.tau)
-        params = setting.params(config.n_agents, horizon)
-        n_paths = 1 if setting.sigma == 0.0 else config.n_paths
-        warm = None
-        if previous is not None:
-            warm = np.zeros((n_steps, *previous.shape[1:]))
-            warm[: min(n_steps, previous.shape[0])] = previous[:n_steps]
-        res = solve_optimal_control(
-            params,
-            "serb",
-            n_steps=n_steps,
-            n_paths=n_paths,
-            seed=seed,
-            initial_positions=x0,
-            max_control=config.max_control,
-            initial_controls=warm,
-            gtol=config.gtol,
-            max_iterations=config.max_iterations,
-        )
+        params, n_steps, res = _solve_horizon(setting, config, x0, seed, horizon, previous)
         previous = res.controls
-        target = params.target_vector
-        dt = params.horizon / n_steps
-        curve = turnpike_curve(res.mean_positions, res.controls, target)
-        rates = arc_rates(res.times[:n_steps], curve, config.delta)
-        shares = {
-            name: arc_rates(res.times[:n_steps], curve, band).share_within_delta
-            for name, band in (("share_delta_over_10", config.delta / 10.0),
-                               ("share_delta_times_10", config.delta * 10.0))
-        }  # fmt: skip
-        per_path = path_curve(res.positions, res.controls, target)
-        path_rates = arc_rates(res.times[:n_steps], per_path, config.delta)
-        dim = params.dim
-        c0 = cheap_constant(dt, params.gamma, kernel_bound(params))
-        predicted = centre_mode_rate(
-            kernel_from_params(params).weights, params.n_agents, params.gamma, dt
-        )
-        start = float(np.sum((x0 - target) ** 2))
-        bound = c0 * params.gamma / (2.0 * params.n_agents) * start
-        lhs, rhs = theorem_sides(res.positions, res.controls, target, params.gamma, dt, c0)
-        rows.append(
-            {
-                "seed": seed,
-                "start": start_kind,
-                "kernel": setting.kernel,
-                "epsilon": setting.epsilon,
-                "sigma": setting.sigma,
-                "T": horizon,
-                "m": n_steps,
-                "V": res.cost,
-                "converged": res.converged,
-                "iterations": res.iterations,
-                "rel_grad": res.relative_gradient_norm,
-                **asdict(rates),
-                **shares,
-                "predicted_entry_rate": predicted,
-                "min_D": float(np.min(curve)),
-                "min_D_path": float(np.min(per_path)),
-                "share_path_within_delta": path_rates.share_within_delta,
-                "path_exit_time_bound": (
-                    config.delta / (dim * setting.sigma**2) if setting.sigma > 0 else math.inf
-                ),
-                "cheap_bound": bound,
-                "bound_over_V": bound / res.cost,
-                "thm_lhs": lhs,
-                "thm_rhs": rhs,
-                "seconds": res.wall_time,
-                "curve": curve,
-                "path_curve": per_path,
-                "times": res.times[:n_steps],
-            }
-        )
+        row = {"seed": seed, "start": start_kind}
+        row.update(_horizon_row(setting, config, x0, params, n_steps, res))
+        rows.append(row)
         if config.progress:
             print(
                 f"  seed={seed} {start_kind:7s} {setting.label:40s} T={horizon:<4g} "
                 f"m={n_steps:<4d} V={res.cost:.5f} it={res.iterations:<4d} conv={res.converged} "
-                f"entry={rates.entry_rate:7.2f} (ours: {predicted:.2f}) "
-                f"exit={rates.exit_rate:7.2f} share={rates.share_within_delta:.2f} "
-                f"path share={path_rates.share_within_delta:.2f} "
+                f"entry={row['entry_rate']:7.2f} (ours: {row['predicted_entry_rate']:.2f}) "
+                f"exit={row['exit_rate']:7.2f} share={row['share_within_delta']:.2f} "
+                f"path share={row['share_path_within_delta']:.2f} "
                 f"({res.wall_time:.1f} s)",
                 flush=True,
             )
