@@ -434,24 +434,14 @@ def measure(
     x0: np.ndarray,
     warm: np.ndarray | None = None,
 ) -> tuple[dict, np.ndarray]:
-    """One row: the optimum, its fresh-path cost, the floors, the bounds, the theorem's sides.
-
-    x0: (N, d), deterministic. Returns (row, optimal controls (m, N, d)).
-    """
-    from agent_envs.baselines.optimal_control import solve_optimal_control
-
+    """One row (the optimum, its fresh-path cost, the floors, the bounds, the theorem's sides)
+    from a deterministic x0 (N, d); returns (row, the optimal controls (m, N, d))."""
     params = _params(n_agents, horizon, sigma, epsilon)
     m = round(horizon / config.tau)
     dt = horizon / m
     target, gamma, dim = params.target_vector, params.gamma, params.dim
     noisy = sigma > 0.0
-    with warnings.catch_warnings():  # non-convergence is reported in the `converged` column
-        warnings.simplefilter("ignore", RuntimeWarning)
-        res = solve_optimal_control(
-            params, "serb", n_steps=m, n_paths=config.n_paths if noisy else 1, seed=config.seed,
-            initial_positions=x0, max_control=config.max_control, initial_controls=warm,
-            gtol=config.gtol, max_iterations=config.max_iterations,
-        )  # fmt: skip
+    res = _solve(params, config, m, x0, warm, noisy)
     paths = config.eval_paths if noisy else 1
     key = (m, n_agents, round(1e6 * sigma), round(1e6 * epsilon))
     costs, positions = _evaluate(params, m, x0, res.controls, paths, _rng(config, 1, *key))
@@ -470,12 +460,8 @@ def measure(
     sizes = {"sigma": sigma, "dt": dt, "m": m, "n_agents": n_agents, "dim": dim}
     upper = corrected_upper_bound(start, gamma=gamma, beta=config.beta, mu=mu, **sizes)
     upper_a4 = corrected_upper_bound(start, gamma=gamma, beta=config.beta, mu=mu_a4, **sizes)
-    lhs, lhs_se = _mean_se(_theorem_lhs(positions, res.controls, target, gamma, dt))
-    thm = theorem_terms(start, c0=c0, gamma=gamma, beta=config.beta, mu=mu, **sizes)
-    cross_lemma, cross_theorem = crossings(
-        start, c0=c0, sigma=sigma, dt=dt, n_agents=n_agents, dim=dim, gamma=gamma
-    )
-    tol = 1e-9 * max(res.cost, 1e-300)
+    theorem = _theorem_columns(start, positions, res.controls, target, c0, gamma, config, mu, sizes)
+    tol = 1e-9 * max(res.cost, 1e-300)  # floor_K <= V up to round-off
     row = {
         "case": case,
         "epsilon": epsilon,
@@ -503,16 +489,7 @@ def measure(
             and v_fresh - 3.0 * se <= upper
             and cert_cost - 3.0 * cert_se <= upper
         ),
-        "thm_lhs": lhs,
-        "thm_lhs_lower": thm["thm_lhs_lower"],
-        "thm_rhs_paper": thm["thm_rhs_paper"],
-        "thm_rhs_corrected": thm["thm_rhs_corrected"],
-        "theorem_holds": bool(lhs <= thm["thm_rhs_paper"]),
-        "corrected_theorem_holds": bool(
-            thm["thm_lhs_lower"] <= lhs + 3.0 * lhs_se and lhs <= thm["thm_rhs_corrected"]
-        ),
-        "T_cross_lemma": cross_lemma,
-        "T_cross_theorem": cross_theorem,
+        **theorem,
         "C0": c0,
         "converged": res.converged,
         "seconds": res.wall_time,
@@ -527,6 +504,44 @@ def measure(
     return row, res.controls
 
 
+def _theorem_columns(start, positions, controls, target, c0, gamma, config, mu, sizes) -> dict:
+    """The theorem's columns of a row: its left side on fresh paths (with its standard error),
+    the paper's and the corrected right sides, whether each holds, and the horizons past which
+    the floor crosses the lemma's and the theorem's bounds."""
+    dt, n_agents, dim, sigma = sizes["dt"], sizes["n_agents"], sizes["dim"], sizes["sigma"]
+    lhs, lhs_se = _mean_se(_theorem_lhs(positions, controls, target, gamma, dt))
+    thm = theorem_terms(start, c0=c0, gamma=gamma, beta=config.beta, mu=mu, **sizes)
+    cross_lemma, cross_theorem = crossings(
+        start, c0=c0, sigma=sigma, dt=dt, n_agents=n_agents, dim=dim, gamma=gamma
+    )
+    return {
+        "thm_lhs": lhs,
+        "thm_lhs_lower": thm["thm_lhs_lower"],
+        "thm_rhs_paper": thm["thm_rhs_paper"],
+        "thm_rhs_corrected": thm["thm_rhs_corrected"],
+        "theorem_holds": bool(lhs <= thm["thm_rhs_paper"]),
+        "corrected_theorem_holds": bool(
+            thm["thm_lhs_lower"] <= lhs + 3.0 * lhs_se and lhs <= thm["thm_rhs_corrected"]
+        ),
+        "T_cross_lemma": cross_lemma,
+        "T_cross_theorem": cross_theorem,
+    }
+
+
+def _solve(params, config: CheapControlBoundConfig, m: int, x0, warm, noisy: bool):
+    """The optimal solve of one row (K solver paths with noise, one without), its
+    non-convergence reported in the row's `converged` column rather than warned."""
+    from agent_envs.baselines.optimal_control import solve_optimal_control
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return solve_optimal_control(
+            params, "serb", n_steps=m, n_paths=config.n_paths if noisy else 1, seed=config.seed,
+            initial_positions=x0, max_control=config.max_control, initial_controls=warm,
+            gtol=config.gtol, max_iterations=config.max_iterations,
+        )  # fmt: skip
+
+
 def _max_diameter(positions: np.ndarray) -> float:
     """The largest |x_k - x_l| over all steps and paths of positions (..., N, d)."""
     x = np.asarray(positions, dtype=float)
@@ -537,6 +552,26 @@ def _max_diameter(positions: np.ndarray) -> float:
     return float(np.sqrt(np.nanmax(np.sum(diffs**2, axis=-1))))
 
 
+def _centre_control_costs(params, config: CheapControlBoundConfig, x0s, m_max: int):
+    """Cumulative costs dt sum_{n < k} c(x^n, u^n), k = 1..m_max, of the centre control from
+    each noise-free start of `x0s` (R, N, d) under SERB (frozen): shape (m_max, R)."""
+    from agent_envs.costs import running_cost
+    from agent_envs.dynamics.swarm import SwarmModel
+    from agent_envs.integrators import make_integrator
+
+    target, dt = params.target_vector, config.tau
+    cert = centre_control(np.zeros(params.dim) + x0s.mean(axis=(0, 1)), target, config.beta,
+                          dt, m_max, params.n_agents)  # fmt: skip
+    model, scheme = SwarmModel(params), make_integrator("serb", jacobian="frozen")
+    x, zeros = x0s.copy(), np.zeros_like(x0s)
+    step_costs = []
+    for n in range(m_max):
+        u = np.broadcast_to(cert[n], x.shape)
+        step_costs.append(running_cost(x, u, target, params.gamma))  # (R,)
+        x = scheme.step(model, x, u, n * dt, dt, zeros)
+    return dt * np.cumsum(np.stack(step_costs), axis=0)
+
+
 def random_start_rows(config: CheapControlBoundConfig) -> list[dict]:
     """Part 3: sigma = 0, x^0 iid uniform on [-1, 1] per realization, every T in --horizons.
 
@@ -545,9 +580,6 @@ def random_start_rows(config: CheapControlBoundConfig) -> list[dict]:
     bounds it from below (module docstring). The centre control does not depend on T, so one run
     over the longest horizon gives every T (prefix sums).
     """
-    from agent_envs.costs import running_cost
-    from agent_envs.dynamics.swarm import SwarmModel
-    from agent_envs.integrators import make_integrator
     from agent_envs.simulator import uniform_positions
 
     n_agents, longest = config.n_agents, max(config.horizons)
@@ -556,18 +588,8 @@ def random_start_rows(config: CheapControlBoundConfig) -> list[dict]:
     rng = _rng(config, 3)
     x0s = np.stack([uniform_positions(rng, n_agents, dim) for _ in range(config.eval_paths)])
     start = StartStatistics.of(x0s, target)
-    m_max = round(longest / config.tau)
     dt = config.tau
-    cert = centre_control(np.zeros(dim) + x0s.mean(axis=(0, 1)), target, config.beta, dt, m_max,
-                          n_agents)  # fmt: skip
-    model, scheme = SwarmModel(params), make_integrator("serb", jacobian="frozen")
-    x, zeros = x0s.copy(), np.zeros_like(x0s)
-    step_costs = []
-    for n in range(m_max):
-        u = np.broadcast_to(cert[n], x.shape)
-        step_costs.append(running_cost(x, u, target, gamma))  # (R,)
-        x = scheme.step(model, x, u, n * dt, dt, zeros)
-    cumulative = dt * np.cumsum(np.stack(step_costs), axis=0)  # (m_max, R)
+    cumulative = _centre_control_costs(params, config, x0s, round(longest / dt))  # (m_max, R)
     c0 = cheap_constant(dt, gamma, kernel_bound(params), config.beta)
     rhs = paper_rhs(c0, gamma, start.sq_dist0, n_agents)
     mu = fiedler_bound(config.epsilon, params.alpha, start.diameter)
@@ -628,6 +650,26 @@ def random_start_rows(config: CheapControlBoundConfig) -> list[dict]:
     return rows
 
 
+def _contraction_parts(traj, closed, params, dt: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """(cost, centre part N |E c^n - xbar|^2, disagreement part ||E y^n||^2) of a trajectory;
+    with `closed` (the closed loop, whose feedback is inside the drift) the controls are
+    recovered from it for the cost. A diverged run costs NaN."""
+    from agent_envs.costs import discrete_cost
+
+    positions = np.asarray(traj.positions)
+    controls = np.asarray(traj.controls)
+    target, n_agents = params.target_vector, positions.shape[-2]
+    if closed is not None:
+        controls = np.stack([closed.control(positions[n]) for n in range(controls.shape[0])])
+    cost = float(
+        np.mean(discrete_cost(positions, controls, target, params.gamma, dt))
+    ) if not traj.diverged else float("nan")  # fmt: skip
+    mean = positions.mean(axis=1)  # (m+1, N, d)
+    centre = n_agents * np.sum((mean.mean(axis=1) - target) ** 2, axis=-1)
+    disagreement = np.sum((mean - mean.mean(axis=1, keepdims=True)) ** 2, axis=(-2, -1))
+    return cost, centre, disagreement
+
+
 def contraction_rows(config: CheapControlBoundConfig, x0: np.ndarray) -> list[dict]:
     """L^n = ||E x^n - x~||^2 under four controls (module docstring), sigma in {0, --sigma}.
 
@@ -637,7 +679,6 @@ def contraction_rows(config: CheapControlBoundConfig, x0: np.ndarray) -> list[di
     """
     from agent_envs.baselines.closed_loop import CheapClosedLoopModel
     from agent_envs.baselines.turnpike import cheap_control_from_model
-    from agent_envs.costs import discrete_cost
     from agent_envs.dynamics.swarm import SwarmModel
     from agent_envs.simulator import simulate
 
@@ -671,16 +712,9 @@ def contraction_rows(config: CheapControlBoundConfig, x0: np.ndarray) -> list[di
                 params, "serb", n_steps=m, n_paths=paths, seed=_rng(config, 4, round(1e6 * sigma)),
                 initial_positions=x0, divergence_threshold=1e6, **kwargs,
             )  # fmt: skip
-            positions = np.asarray(traj.positions)
-            controls = np.asarray(traj.controls)
-            if "model" in kwargs:  # the feedback is inside the drift: recover it for the cost
-                controls = np.stack([closed.control(positions[n]) for n in range(m)])
-            cost = float(
-                np.mean(discrete_cost(positions, controls, target, params.gamma, dt))
-            ) if not traj.diverged else float("nan")  # fmt: skip
-            mean = positions.mean(axis=1)  # (m+1, N, d)
-            centre = n_agents * np.sum((mean.mean(axis=1) - target) ** 2, axis=-1)
-            disagreement = np.sum((mean - mean.mean(axis=1, keepdims=True)) ** 2, axis=(-2, -1))
+            cost, centre, disagreement = _contraction_parts(
+                traj, closed if "model" in kwargs else None, params, dt
+            )
             lyap = centre + disagreement
             rows.append(
                 {
