@@ -140,3 +140,23 @@ def test_cli_builds_light_subcommands_without_torch():
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT
     )
     assert proc.returncode == 0, proc.stderr
+
+
+#: The longest function the training layer may hold (issue 17: a function doing resume,
+#: metadata, model, callbacks, learning and summary at once was 170 lines).
+MAX_FUNCTION_LINES = 80
+
+
+def test_no_function_of_the_training_layer_is_longer_than_80_lines():
+    """Every function in training/ (definition to last line, docstring included) fits in
+    `MAX_FUNCTION_LINES`: a longer one does several jobs and is split by job."""
+    import ast
+
+    too_long = []
+    for path in sorted((ROOT / "training").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    too_long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({lines})")
+    assert not too_long, too_long
