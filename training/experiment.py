@@ -138,9 +138,10 @@ class ExperimentOptions:
             )
         if self.test_episodes is not None:
             check_int("--test-episodes", self.test_episodes, 2, MAX_TEST_EPISODES)
-        for seed in self.training_seeds(preset):
+        seeds = self.training_seeds(preset)
+        for seed in seeds:
             check_int("--seeds", seed, 0, MAX_SEED)
-        if len(set(self.training_seeds(preset))) != len(self.training_seeds(preset)):
+        if len(set(seeds)) != len(seeds):
             raise ValueError(f"--seeds lists a seed twice: {self.seeds!r}")
         vec_env = self.vec_env or preset.vec_env
         if vec_env not in VEC_ENV_CHOICES:
