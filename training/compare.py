@@ -111,18 +111,19 @@ class CompareConfig(GridArguments):
             )
         self.options()  # ValueError naming --learners, --timesteps-scale, --test-episodes, ...
 
-    def validate(self) -> CompareConfig:
+    def validate(self, trials: list[Trial] | None = None) -> CompareConfig:
         """Check everything before the first learner trains; returns self.
 
         The output folder, every selected learner's training configuration (hyperparameters,
-        seed, torch threads, ...; built by the experiment builder), and the env with
-        ``--env-kwargs`` and with ``--eval-env-kwargs`` (both are built once).
+        seed, torch threads, ...; built by the experiment builder, or `trials` when the caller
+        built them already), and the env with ``--env-kwargs`` and with ``--eval-env-kwargs``
+        (both are built once).
         """
         from agent_envs.training.environments import env_description
         from agent_envs.training.storage import check_output_dir
 
         check_output_dir(self.out_dir, "--out")
-        trials = self.trials()
+        trials = self.trials() if trials is None else trials
         check_envs(trials)
         env_kwargs = trials[0].eval_env_kwargs
         if self.eval_env_kwargs:
@@ -169,9 +170,11 @@ class CompareConfig(GridArguments):
         """The runs of this comparison (the experiment builder's), every TrainConfig checked."""
         return build_trials(get_preset(self.preset), self.options(), self.out_dir / "runs")
 
-    def selected_learners(self) -> list[Learner]:
+    def selected_learners(self, trials: list[Trial] | None = None) -> list[Learner]:
+        """The preset's learners that `trials` (default: this config's) train."""
         by_name = {lr.name: lr for lr in get_preset(self.preset).learners}
-        return [by_name[t.policy] for t in self.trials() if t.kind == LEARNER]
+        trials = self.trials() if trials is None else trials
+        return [by_name[t.policy] for t in trials if t.kind == LEARNER]
 
     def command(self) -> str:
         """The `agent-envs compare` command line of this config (non-default options only)."""
@@ -431,10 +434,10 @@ def compare(config: CompareConfig) -> dict[str, Any]:
     from agent_envs.training.train import torch_threads
 
     started = time.perf_counter()
-    config.validate()
+    trials = config.trials()  # the grid is built (every TrainConfig validated) once
+    config.validate(trials)
     preset = get_preset(config.preset)
-    trials = config.trials()
-    learners = {lr.name: lr for lr in config.selected_learners()}
+    learners = {lr.name: lr for lr in config.selected_learners(trials)}
     out = config.out_dir
     (out / "runs").mkdir(parents=True, exist_ok=True)
     env_kwargs = trials[0].eval_env_kwargs
