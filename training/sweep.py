@@ -130,13 +130,14 @@ class SweepConfig(GridArguments, RayArguments):
         check_int("--bootstrap-seed", self.bootstrap_seed, 0, MAX_SEED)
         self.training_seeds()  # ValueError naming --seeds
 
-    def validate(self) -> SweepConfig:
-        """Check the output folder and the whole grid before Ray starts; returns self."""
+    def validate(self, trials: list[Trial] | None = None) -> SweepConfig:
+        """Check the output folder and the whole grid (`trials` when the caller built it
+        already) before Ray starts; returns self."""
         from agent_envs.training.storage import check_output_dir
 
         check_output_dir(self.out_dir, "--out")
         if not self.resume:
-            check_envs(self.trials())
+            check_envs(self.trials() if trials is None else trials)
         return self
 
     @property
@@ -319,9 +320,12 @@ def run_tuner(config: SweepConfig, trials: list[Trial], out: Path):
 # ------------------------------------------------------------------------------------ the run
 
 
-def _load_or_save_grid(config: SweepConfig, out: Path) -> tuple[SweepConfig, list[Trial], str]:
+def _load_or_save_grid(
+    config: SweepConfig, out: Path, trials: list[Trial] | None = None
+) -> tuple[SweepConfig, list[Trial], str]:
     """(config, trials, the starting command) of this sweep: saved in OUT/sweep.json at the
-    first start, read back on resume (then only the Ray options come from `config`)."""
+    first start (`trials`, or the grid built here), read back on resume (then only the Ray
+    options come from `config`)."""
     path = out / SWEEP_FILE
     if config.resume:
         if not path.is_file():
@@ -345,7 +349,7 @@ def _load_or_save_grid(config: SweepConfig, out: Path) -> tuple[SweepConfig, lis
         raise ValueError(
             f"{out} already holds a sweep; pass --resume to continue it or choose another --out"
         )
-    trials = config.trials()
+    trials = config.trials() if trials is None else trials
     out.mkdir(parents=True, exist_ok=True)
     record = {
         "config": {f.name: getattr(config, f.name) for f in fields(config)},
@@ -381,13 +385,14 @@ def sweep(config: SweepConfig) -> dict[str, Any]:
     from agent_envs.training.sweep_report import write_sweep_report
 
     started = time.perf_counter()
-    config.validate()
+    built = None if config.resume else config.trials()  # built (and validated) once
+    config.validate(built)
     out = config.out_dir
     if config.dry_run:
-        trials = config.trials()
+        trials = built if built is not None else config.trials()
         print(describe_trials(trials))
         return {"trials": trials}
-    config, trials, command = _load_or_save_grid(config, out)
+    config, trials, command = _load_or_save_grid(config, out, built)
     n_learn = sum(t.kind == LEARNER for t in trials)
     print(
         f"sweep --preset {config.preset}: {n_learn} learner trials and "
