@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from agent_envs.baselines.turnpike import DEFAULT_BETA, DEFAULT_DELTA, turnpike_time
+from agent_envs.envs.interface import actions_from_controls
 from agent_envs.envs.observation import (
     agent_observation_size,
     observation_size,
@@ -41,6 +42,16 @@ def env_attribute(env: Any, name: str) -> Any:
     if hasattr(env, "get_wrapper_attr"):
         return env.get_wrapper_attr(name)
     raise AttributeError(name)
+
+
+def env_interface(env: Any) -> tuple[str, str]:
+    """(observation layout, action basis) of the env's `EpisodeConfig` (`agent_envs.envs.
+    interface`); the defaults ("absolute", "agents") without an env or a config."""
+    try:
+        config = env_attribute(env, "config")
+    except AttributeError:
+        return "absolute", "agents"
+    return getattr(config, "observation", "absolute"), getattr(config, "action_basis", "agents")
 
 
 class FeedbackController:
@@ -91,6 +102,12 @@ class FeedbackController:
             max_control if max_control is not None else env_attribute(env, "max_control")
         )
         self.n_steps = int(n_steps if n_steps is not None else env_attribute(env, "n_steps"))
+        self.observation_layout, self.action_basis = env_interface(env)
+        if self.observation_layout == "summary":
+            raise ValueError(
+                f"{type(self).__name__} needs the agents' positions; the env's "
+                "observation='summary' holds only the swarm's centre and spread"
+            )
         if not self.max_control > 0:
             raise ValueError(f"max_control must be > 0, got {self.max_control}")
         self.n_agents = self.params.n_agents
@@ -111,11 +128,11 @@ class FeedbackController:
     # -- sizes -------------------------------------------------------------------------------
     @property
     def gym_obs_dim(self) -> int:
-        return observation_size(self.n_agents, self.dim)
+        return observation_size(self.n_agents, self.dim, self.observation_layout)
 
     @property
     def agent_obs_dim(self) -> int:
-        return agent_observation_size(self.dim)
+        return agent_observation_size(self.dim, self.observation_layout)
 
     # -- the control law (subclasses) ---------------------------------------------------------
     def control(self, positions: np.ndarray, drift: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -171,13 +188,15 @@ class FeedbackController:
                 f"per-agent observations must have shape ({self.agent_obs_dim},), got "
                 f"{rows.shape[1:]}"
             )
-        n = self._step_index(split_agent_observation(rows, self.dim)["time_fraction"])
+        n = self._step_index(
+            split_agent_observation(rows, self.dim, self.observation_layout)["time_fraction"]
+        )
         if np.any(n == 0) or self._agent_episode_tbar is None:
             global_state = self._global_state()
             if self.fixed_turnpike_time is not None:
                 tb = float(self.fixed_turnpike_time)
             elif global_state is not None and np.all(n == 0):
-                tb = float(self._tbar_from_gym_rows(global_state[None])[0])
+                tb = float(self._tbar_from_gym_rows(global_state[None], "absolute")[0])
             elif np.all(n == 0) and len(agents) == self.n_agents:
                 tb = float(self._tbar_from_agent_rows(rows, np.ones(len(agents), bool))[0])
             else:
@@ -196,7 +215,7 @@ class FeedbackController:
             s = np.asarray(state_fn(), dtype=float)
         except Exception:
             return None
-        return s if s.shape == (self.gym_obs_dim,) else None
+        return s if s.shape == (observation_size(self.n_agents, self.dim),) else None
 
     def _step_index(self, time_fraction: np.ndarray) -> np.ndarray:
         return np.rint(np.asarray(time_fraction, dtype=float) * self.n_steps).astype(int)
@@ -210,8 +229,8 @@ class FeedbackController:
             return self._tbar_cache.copy()
         return np.full(size, np.nan)
 
-    def _tbar_from_gym_rows(self, rows: np.ndarray) -> np.ndarray:
-        parts = split_observation(rows, self.n_agents, self.dim)
+    def _tbar_from_gym_rows(self, rows: np.ndarray, layout: str) -> np.ndarray:
+        parts = split_observation(rows, self.n_agents, self.dim, layout)
         if self.fixed_turnpike_time is not None:
             return np.full(rows.shape[0], float(self.fixed_turnpike_time))
         return np.atleast_1d(
@@ -232,12 +251,17 @@ class FeedbackController:
                 "predict from the reset observation on, or pass turnpike_time=... explicitly."
             )
 
-    def _finish(self, u: np.ndarray, n: np.ndarray, tbar: np.ndarray) -> np.ndarray:
-        """Zero the control after tbar, scale to [-1, 1], clip (with one warning), float32."""
+    def _finish(
+        self, u: np.ndarray, n: np.ndarray, tbar: np.ndarray, basis: str = "agents"
+    ) -> np.ndarray:
+        """Zero the control after tbar, scale to [-1, 1] in the action `basis`, clip (with one
+        warning), float32."""
         if self.switch_off:
             on = n * self.dt < tbar - 1e-9
             u = np.where(on.reshape(on.shape + (1,) * (u.ndim - 1)), u, 0.0)
         a = u / self.max_control
+        if basis != "agents":
+            a = actions_from_controls(u, basis, self.max_control)
         clipped = np.abs(a) > 1.0
         self.n_actions += a.size
         n_clip = int(np.count_nonzero(clipped))
@@ -253,23 +277,23 @@ class FeedbackController:
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def _predict_gym(self, batch: np.ndarray, state) -> tuple[np.ndarray, np.ndarray]:
-        parts = split_observation(batch, self.n_agents, self.dim)
+        parts = split_observation(batch, self.n_agents, self.dim, self.observation_layout)
         n = self._step_index(parts["time_fraction"])
         tbar = self._initial_tbar(state, batch.shape[0])
         start = n == 0
         if np.any(start):
-            tbar[start] = self._tbar_from_gym_rows(batch[start])
+            tbar[start] = self._tbar_from_gym_rows(batch[start], self.observation_layout)
         self._check_tbar(tbar)
         self._tbar_cache = tbar.copy()
         u = self.control(parts["positions"], parts["interaction_drift"], parts["target"])
-        act = self._finish(u, n, tbar)
-        return act.reshape(batch.shape[0], self.n_agents * self.dim), tbar
+        act = self._finish(u, n, tbar, self.action_basis)
+        return act.reshape(batch.shape[0], -1), tbar
 
     def _predict_agents(
         self, batch: np.ndarray, state, tbar: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         d = self.dim
-        parts = split_agent_observation(batch, d)
+        parts = split_agent_observation(batch, d, self.observation_layout)
         x = parts["position"][:, None, :]  # (B, 1, d)
         drift = parts["interaction_drift"][:, None, :]
         target = parts["target"]
@@ -294,7 +318,9 @@ class FeedbackController:
             return np.full(int(np.count_nonzero(start)), float(self.fixed_turnpike_time))
         size, n_ag, d = batch.shape[0], self.n_agents, self.dim
         if size % n_ag == 0:
-            groups = split_agent_observation(batch.reshape(size // n_ag, n_ag, -1), d)
+            groups = split_agent_observation(
+                batch.reshape(size // n_ag, n_ag, -1), d, self.observation_layout
+            )
             tb = turnpike_time(
                 groups["position"],
                 groups["target"][:, 0, None, :],

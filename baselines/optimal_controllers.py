@@ -39,12 +39,13 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.baselines.feedback import env_attribute
+from agent_envs.baselines.feedback import env_attribute, env_interface
 from agent_envs.baselines.optimal_control import (
     DEFAULT_GTOL,
     DEFAULT_MAX_ITERATIONS,
     solve_optimal_control,
 )
+from agent_envs.envs.interface import action_rows, actions_from_controls
 from agent_envs.envs.observation import observation_size, split_observation
 from agent_envs.params import SwarmParams, check_int
 from agent_envs.simulator import SAMPLE_AVERAGE_PATHS
@@ -111,7 +112,15 @@ class PlanningController:
         self.gtol = gtol
         self.max_iterations = check_int("max_iterations", max_iterations, 1)
         self.dt = self.params.horizon / self.n_steps
-        self.obs_dim = observation_size(self.params.n_agents, self.params.dim)
+        self.observation_layout, self.action_basis = env_interface(env)
+        if self.observation_layout == "summary":
+            raise ValueError(
+                f"{type(self).__name__} plans from the agents' positions; the env's "
+                "observation='summary' holds only the swarm's centre and spread"
+            )
+        self.obs_dim = observation_size(
+            self.params.n_agents, self.params.dim, self.observation_layout
+        )
         #: per batch row: (step index the plan starts at, plan (m - n0, N, d))
         self._plans: dict[int, tuple[int, np.ndarray]] = {}
         #: the last solve's result (diagnostics)
@@ -178,13 +187,16 @@ class PlanningController:
             )
         single = obs.ndim == 1
         batch = obs[None] if single else obs
-        parts = split_observation(batch, self.params.n_agents, self.params.dim)
+        parts = split_observation(
+            batch, self.params.n_agents, self.params.dim, self.observation_layout
+        )
         steps = np.rint(parts["time_fraction"] * self.n_steps).astype(int)
-        actions = np.empty((batch.shape[0], self.params.n_agents * self.params.dim), np.float32)
+        rows = action_rows(self.action_basis, self.params.n_agents)
+        actions = np.empty((batch.shape[0], rows * self.params.dim), np.float32)
         for row in range(batch.shape[0]):
             step = int(min(steps[row], self.n_steps - 1))
             u = self.control_at(row, step, parts["positions"][row], parts["target"][row])
-            a = np.clip(u / self.max_control, -1.0, 1.0)
+            a = actions_from_controls(u, self.action_basis, self.max_control)
             actions[row] = a.reshape(-1).astype(np.float32)
         return (actions[0] if single else actions), state
 

@@ -92,6 +92,9 @@ class SwarmEvalCallback(EvalCallback):
         history: rows of an earlier ``learning_curve.csv`` to continue (resume).
         on_evaluation: called with each evaluation's row after it is logged (e.g. to report
             the validation cost to a tuner).
+        reference_env: where the references run (default `eval_env`): the same env with the
+            default interface when the learner's has other env options (observation layout,
+            action basis), which the references may not read.
     """
 
     def __init__(
@@ -105,6 +108,7 @@ class SwarmEvalCallback(EvalCallback):
         run_dir: str | os.PathLike,
         history: list[dict[str, Any]] | None = None,
         on_evaluation: Callable[[dict[str, Any]], None] | None = None,
+        reference_env: VecEnv | None = None,
         verbose: int = 0,
     ) -> None:
         run_dir = Path(run_dir)
@@ -120,6 +124,7 @@ class SwarmEvalCallback(EvalCallback):
         )
         self.policy_factory = policy_factory
         self.references = dict(references)
+        self.reference_env = eval_env if reference_env is None else reference_env
         self.eval_seed = int(eval_seed)
         self.run_dir = run_dir
         self.curve_path = run_dir / "learning_curve.csv"
@@ -145,7 +150,7 @@ class SwarmEvalCallback(EvalCallback):
         """Run every reference controller on the validation seeds (once; deterministic)."""
         if not self.reference_costs:
             for name, policy in self.references.items():
-                costs, _ = run_seeded_episodes(policy, self.eval_env, self.eval_seed)
+                costs, _ = run_seeded_episodes(policy, self.reference_env, self.eval_seed)
                 self.reference_costs[name] = costs
         return self.reference_costs
 

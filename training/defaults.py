@@ -57,12 +57,15 @@ __all__ = [
     "DEFAULT_TEST_SEEDS",
     "FEEDBACK_BASELINES",
     "GYM_ENV_ID",
+    "INTERFACE_OPTIONS",
     "MAX_SEEDS",
     "OFF_POLICY",
     "PETTINGZOO_ENV_ID",
     "algorithm_class",
     "check_algo",
     "check_env_id",
+    "default_interface",
+    "interface_of",
     "is_multiagent",
     "parse_env_kwargs",
     "parse_json_object",
@@ -209,3 +212,25 @@ def parse_seeds(
         twice = sorted(seed for seed, count in Counter(seeds).items() if count > 1)
         raise ValueError(f"{option} lists a seed twice: {', '.join(map(str, twice[:5]))}")
     return seeds
+
+
+#: The env kwargs that set the learner's interface (`agent_envs.envs.interface`), not the
+#: dynamics: a policy trained with them is evaluated on the default interface through
+#: `agent_envs.training.policies.InterfacePolicy` / `PerAgentPolicy`.
+INTERFACE_OPTIONS = ("observation", "action_basis", "agent_reward")
+
+
+def default_interface(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """`env_kwargs` without the interface options: the same dynamics, cost and draws with the
+    default observation ("absolute"), action basis ("agents") and agent reward ("own")."""
+    return {k: v for k, v in (env_kwargs or {}).items() if k not in INTERFACE_OPTIONS}
+
+
+def interface_of(env_kwargs: dict[str, Any] | None) -> dict[str, str]:
+    """The interface options a run's env kwargs set, with the defaults filled in."""
+    kwargs = env_kwargs or {}
+    return {
+        "observation": str(kwargs.get("observation", "absolute")),
+        "action_basis": str(kwargs.get("action_basis", "agents")),
+        "agent_reward": str(kwargs.get("agent_reward", "own")),
+    }

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from agent_envs.training.config import TrainConfig
-from agent_envs.training.defaults import GYM_ENV_ID, is_multiagent
+from agent_envs.training.defaults import GYM_ENV_ID, default_interface, is_multiagent
 
 
 def make_gym_env(
@@ -29,6 +29,15 @@ def make_gym_env(
         raise ValueError(f"{option} {env_kwargs}: {original}") from None
 
 
+def eval_env_kwargs(config: TrainConfig) -> dict[str, Any]:
+    """The kwargs of a run's validation env: its own for a Gymnasium learner; for the
+    parameter-shared learner the Gymnasium twin with the default interface (its per-agent
+    layout is rebuilt from the Gymnasium observation by `PerAgentPolicy`)."""
+    if is_multiagent(config.env_id):
+        return default_interface(config.env_kwargs)
+    return dict(config.env_kwargs)
+
+
 def eval_env_id(config: TrainConfig) -> str:
     """The Gymnasium env on which a run is evaluated (the PettingZoo env's Gymnasium twin)."""
     return GYM_ENV_ID if is_multiagent(config.env_id) else config.env_id
@@ -47,8 +56,13 @@ def env_description(
 ) -> dict[str, Any]:
     """N, d, n_steps, integrator and the full kwargs of the Gymnasium env a run uses.
 
-    Builds the env once, so it also validates `env_kwargs` (errors name `option`).
+    Builds the env once, so it also validates `env_kwargs` (errors name `option`); for the
+    PettingZoo id the PettingZoo env (its interface options) and then its Gymnasium twin.
     """
+    if is_multiagent(env_id):
+        _check_pettingzoo_kwargs(env_kwargs, option)
+        description = env_description(GYM_ENV_ID, default_interface(env_kwargs), option)
+        return {**description, "env_id": env_id, "env_kwargs": dict(env_kwargs or {})}
     try:
         env = make_gym_env(env_id, env_kwargs, option)
     except ValueError as exc:
@@ -70,6 +84,16 @@ def env_description(
         }
     finally:
         env.close()
+
+
+def _check_pettingzoo_kwargs(env_kwargs: dict[str, Any] | None, option: str) -> None:
+    """Build the PettingZoo env once: ValueError naming `option` for kwargs it refuses."""
+    from agent_envs import swarm_v0
+
+    try:
+        swarm_v0.parallel_env(**(env_kwargs or {})).close()
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{option} {env_kwargs}: {exc}") from None
 
 
 def make_training_env(config: TrainConfig, n_envs: int):

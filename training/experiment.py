@@ -276,7 +276,7 @@ def learner_config(
     return TrainConfig(
         algo=learner.algo,
         env_id=learner.env_id,
-        env_kwargs=train_kwargs,
+        env_kwargs={**train_kwargs, **learner.env_kwargs},
         timesteps=timesteps,
         seed=seed,
         out=str(runs_dir),
@@ -431,7 +431,8 @@ def check_envs(trials: Sequence[Trial], option: str = "--env-kwargs") -> None:
             key = json.dumps(kwargs, sort_keys=True)
             if kwargs is not None and key not in seen:
                 seen.add(key)
-                env_description(GYM_ENV_ID, kwargs, option)
+                env_id = GYM_ENV_ID if kwargs is trial.eval_env_kwargs else trial.train["env_id"]
+                env_description(env_id, kwargs, option)
 
 
 # ---------------------------------------------------------------------------- where trials write

@@ -27,8 +27,19 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.envs.observation import agent_observations_from_global
-from agent_envs.training.defaults import ALGORITHMS, algorithm_class
+from agent_envs.envs.interface import action_rows, controls_from_actions
+from agent_envs.envs.observation import (
+    agent_observation_size,
+    agent_observations_from_global,
+    global_observation,
+    split_observation,
+)
+from agent_envs.training.defaults import (
+    ALGORITHMS,
+    PETTINGZOO_ENV_ID,
+    algorithm_class,
+    interface_of,
+)
 from agent_envs.training.storage import find_manifest
 
 
@@ -239,26 +250,27 @@ class NormalizedObservationPolicy:
 
 
 class PerAgentPolicy:
-    """Runs a per-agent policy (PettingZoo observation (3d+1,), action (d,)) on the Gym env.
+    """Runs a per-agent policy (PettingZoo observation, action (d,)) on the Gym env.
 
-    Each Gym observation (B, 2Nd+d+1) is split into the N per-agent rows
-    ``[x_k | interaction drift on k | target | t/T]`` (the PettingZoo layout of
-    docs/ARCHITECTURE.md); the inner policy acts on all B*N rows at once and the actions are
-    concatenated agent-major into (B, N d). Parameter-shared multi-agent policies are thus scored
-    on the single-controller env, same seeds, same cost units.
+    Each Gym observation (B, 2Nd+d+1) (default layout) is split into the N per-agent rows of
+    `layout` (``[x_k | interaction drift on k | target | t/T]`` for "absolute"; see
+    `agent_envs.envs.interface`); the inner policy acts on all B*N rows at once and the
+    actions are concatenated agent-major into (B, N d). Parameter-shared multi-agent policies
+    are thus scored on the single-controller env, same seeds, same cost units.
     """
 
-    def __init__(self, policy: Any, n_agents: int, dim: int) -> None:
+    def __init__(self, policy: Any, n_agents: int, dim: int, layout: str = "absolute") -> None:
         self.policy = policy
         self.n_agents = n_agents
         self.dim = dim
+        self.layout = layout
 
     def agent_rows(self, observation: np.ndarray) -> np.ndarray:
-        """The (B N, 3d+1) per-agent rows of one (2Nd+d+1,) or a batch of Gym observations."""
+        """The (B N, size) per-agent rows of one (2Nd+d+1,) or a batch of Gym observations."""
         obs = np.asarray(observation, dtype=np.float32)
         batch = obs[None] if obs.ndim == 1 else obs
-        rows = agent_observations_from_global(batch, self.n_agents, self.dim)
-        return rows.reshape(-1, 3 * self.dim + 1)
+        rows = agent_observations_from_global(batch, self.n_agents, self.dim, self.layout)
+        return rows.reshape(-1, rows.shape[-1])
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
         obs = np.asarray(observation)
@@ -266,6 +278,115 @@ class PerAgentPolicy:
         actions, _ = self.policy.predict(rows, None, None, deterministic)
         actions = np.asarray(actions, dtype=np.float32).reshape(-1, self.n_agents * self.dim)
         return (actions[0] if obs.ndim == 1 else actions), None
+
+
+class InterfacePolicy:
+    """Runs a policy trained with other interface options on the default-interface Gym env.
+
+    The policy was trained on `agent_envs/Swarm-v0` with ``observation=layout`` and
+    ``action_basis=basis`` (`agent_envs.envs.interface`); the env it acts on has the defaults.
+    Each observation is mapped to the training layout (positions and drift read back from the
+    default layout, then laid out again, float32 round-off), and each action to the control u
+    it applies in the training env and back to ``u / max_control``, so the policy applies the
+    controls it would apply in its own env.
+    """
+
+    def __init__(
+        self,
+        policy: Any,
+        n_agents: int,
+        dim: int,
+        layout: str,
+        basis: str,
+        max_control: float,
+        observation_space: Any,
+    ) -> None:
+        self.policy = policy
+        self.n_agents, self.dim = n_agents, dim
+        self.layout, self.basis = layout, basis
+        self.max_control = float(max_control)
+        self.observation_space = observation_space
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """(..., 2Nd+d+1) default-layout observations -> the training layout."""
+        parts = split_observation(observation, self.n_agents, self.dim)
+        return global_observation(
+            parts["positions"],
+            parts["interaction_drift"],
+            parts["target"],
+            parts["time_fraction"],
+            self.observation_space,
+            self.layout,
+        )
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        obs = self.observation(np.asarray(observation, dtype=np.float64))
+        actions, state = self.policy.predict(obs, state, episode_start, deterministic)
+        a = np.asarray(actions, dtype=np.float64)
+        rows = action_rows(self.basis, self.n_agents)
+        u = controls_from_actions(
+            a.reshape(*a.shape[:-1], rows, self.dim), self.basis, self.max_control, self.n_agents
+        )
+        lead = a.shape[:-1]
+        return (u / self.max_control).reshape(*lead, -1).astype(np.float32), state
+
+
+def trained_interface(model_path: Path) -> dict[str, Any]:
+    """The env id (None when unknown) and interface options of the run a model belongs to (its
+    ``env.json``, JSON, next to the model or one folder up); the defaults when there is none."""
+    for folder in (model_path.parent, model_path.parent.parent):
+        env_json = folder / "env.json"
+        if env_json.is_file():
+            try:
+                description = json.loads(env_json.read_text())
+                kwargs = description.get("env_kwargs", {})
+                env_id = description.get("env_id")
+            except (OSError, ValueError, AttributeError):
+                kwargs, env_id = {}, None
+            kwargs = kwargs if isinstance(kwargs, dict) else {}
+            return {"env_id": env_id, **interface_of(kwargs)}
+    return {"env_id": None, **interface_of({})}
+
+
+def _adapt_to_env(policy: Any, model: Any, env: Any, path: Path, info: dict[str, Any]) -> Any:
+    """Wrap `policy` for `env`: per-agent models through `PerAgentPolicy`, a model trained with
+    other interface options through `InterfacePolicy`; ValueError when the shapes cannot
+    match."""
+    inner = env.unwrapped
+    n, d = inner.params.n_agents, inner.params.dim
+    trained = trained_interface(path)
+    config = getattr(inner, "config", None)
+    here = (getattr(config, "observation", "absolute"), getattr(config, "action_basis", "agents"))
+    obs_shape = tuple(model.observation_space.shape or ())
+    env_shape = tuple(env.observation_space.shape or ())
+    per_agent = (agent_observation_size(d, trained["observation"]),)
+    multiagent = trained["env_id"] == PETTINGZOO_ENV_ID or (
+        trained["env_id"] is None and obs_shape == per_agent and env_shape != per_agent
+    )
+    if multiagent:
+        if here != ("absolute", "agents"):
+            raise ValueError(
+                f"model {path} is a per-agent policy; evaluate it on the Gymnasium env's default "
+                "observation and action basis"
+            )
+        info["per_agent"] = True
+        return PerAgentPolicy(policy, n, d, trained["observation"])
+    wanted = (trained["observation"], trained["action_basis"])
+    if wanted != here:
+        if here != ("absolute", "agents"):
+            raise ValueError(
+                f"model {path} was trained with observation={wanted[0]!r}, "
+                f"action_basis={wanted[1]!r}; evaluate it on those or on the defaults"
+            )
+        policy = InterfacePolicy(policy, n, d, *wanted, inner.max_control, model.observation_space)
+        info["interface"] = {"observation": wanted[0], "action_basis": wanted[1]}
+        env_shape = obs_shape
+    if obs_shape != env_shape:
+        raise ValueError(
+            f"model {path} expects observations of shape {obs_shape}, the env gives {env_shape} "
+            "(was it trained with other env kwargs, e.g. n_agents?)"
+        )
+    return policy
 
 
 def check_model(spec: str | os.PathLike | ModelSpec) -> tuple[ModelSpec, str, Statistics | None]:
@@ -328,18 +449,7 @@ def load_sb3_policy(spec: str | os.PathLike, env: Any, device: str = "cpu") -> t
         policy = NormalizedObservationPolicy(policy, load_vecnormalize(stats.path))
         info["vecnormalize"] = str(stats.path)
         info["vecnormalize_source"] = stats.source
-    obs_shape = tuple(model.observation_space.shape or ())
-    env_shape = tuple(env.observation_space.shape or ())
-    inner = env.unwrapped
-    per_agent = (3 * inner.params.dim + 1,)
-    if obs_shape == per_agent and env_shape != per_agent:
-        policy = PerAgentPolicy(policy, inner.params.n_agents, inner.params.dim)
-        info["per_agent"] = True
-    elif obs_shape != env_shape:
-        raise ValueError(
-            f"model {path} expects observations of shape {obs_shape}, the env gives {env_shape} "
-            "(was it trained with other env kwargs, e.g. n_agents?)"
-        )
+    policy = _adapt_to_env(policy, model, env, path, info)
     return policy, info
 
 
@@ -376,14 +486,17 @@ def resolve_policy(
     raise TypeError(f"cannot make a policy from {spec!r}")
 
 
-def live_policy(model: Any, agent_shape: tuple[int, int] | None = None) -> Any:
+def live_policy(
+    model: Any, agent_shape: tuple[int, int] | None = None, layout: str = "absolute"
+) -> Any:
     """`model` as a PolicyPredictor on the raw Gymnasium env, following its live VecNormalize.
 
     `agent_shape` = (N, d) for a parameter-shared per-agent model (PettingZoo training), which
-    then acts on the Gymnasium env through `PerAgentPolicy`.
+    then acts on the default-interface Gymnasium env through `PerAgentPolicy` with its
+    per-agent `layout`.
     """
     stats = model.get_vec_normalize_env()
     policy = model if stats is None else NormalizedObservationPolicy(model, stats)
     if agent_shape is not None:
-        policy = PerAgentPolicy(policy, *agent_shape)
+        policy = PerAgentPolicy(policy, *agent_shape, layout)
     return policy

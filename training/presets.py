@@ -16,9 +16,10 @@ Presets:
   parameter-shared PPO with the training layer's hyperparameters, and ``apg``; the main job
   (`agent-envs compare --preset quick`, a few minutes on 2 cores).
 - ``paper``: the paper's scale (N = 100, m = 50, eps = 0.05, SERB, 20 Brownian paths,
-  max_control = 25): the zoo's tuned Pendulum-v1 entries for PPO, SAC, TD3 and parameter-shared
-  PPO, ``ppo-swarm`` (PPO with the training layer's own hyperparameters) and ``apg``; 3 training
-  seeds;
+  max_control = 25): PPO, SAC and TD3 on the summary observation with one common control, PPO on
+  the full state and control in the modes basis, parameter-shared PPO with the swarm
+  observation and the team reward (hyperparams/paper.yml; env options: docs/env-options.md), and
+  ``apg``; 3 training seeds;
   contrasts eps = 1, max_control = 150 and train-on-EM / evaluate-on-SERB. The published study
   (docs/results.md "Results at the paper's scale", docs/results/paper-sweep).
 
@@ -43,7 +44,11 @@ class Learner:
     `hyperparams` override the training layer's defaults (`config.default_hyperparams`) key by
     key; `timesteps` counts SB3 timesteps (agent-steps on the PettingZoo env). For the `apg`
     learner (algo "apg": `agent_envs.training.apg`) `timesteps` is the number of iterations
-    and `hyperparams` are `APGConfig` fields over its defaults.
+    and `hyperparams` are `APGConfig` fields over its defaults. `env_kwargs` are the learner's
+    own env options over the setting's: its interface (`agent_envs.envs.interface`:
+    observation layout, action basis, agent reward), which never changes the dynamics, the cost
+    or the draws; the learned policy is evaluated on the setting's env through
+    `agent_envs.training.policies.InterfacePolicy` / `PerAgentPolicy`.
     """
 
     name: str
@@ -53,6 +58,7 @@ class Learner:
     hyperparams: dict[str, Any] = field(default_factory=dict)
     n_envs: int | None = None
     description: str = ""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -209,22 +215,12 @@ _QUICK = Preset(
 
 # ------------------------------------------------------------------------------------- paper
 
-#: Where the paper preset's hyperparameters come from (hyperparams/zoo_pendulum.yml).
+#: Where the paper preset's hyperparameters come from (hyperparams/paper.yml).
 PAPER_HYPERPARAMS_SOURCE = (
-    "rl-zoo3 (2.9) tuned entries for Pendulum-v1 in hyperparams/ppo.yml, sac.yml and td3.yml "
-    "(shipped as training/hyperparams/zoo_pendulum.yml): "
-    "the closest of the zoo's tuned continuous-control tasks to this one (smooth dynamics, "
-    "dense quadratic cost, short episodes, budgets of 2e4-1e5 steps; PPO's entry already has "
-    "gamma = 0.9, the training layer's own choice for 50-step episodes). Keys the zoo entry "
-    "leaves out are set to Stable-Baselines3's defaults explicitly, so the training layer's "
-    "N = 10 tuning does not leak in. Changed from the zoo: the budgets (n_timesteps); "
-    "TD3's learning_starts (2 500 instead of 1e4, a quarter of the halved budget); "
-    "the replay buffers hold the whole budget (the zoo's 2e5 / SB3's 1e6 would never fill, and "
-    "SB3 allocates them up front: 1.6 GB per SAC run at N = 100); parameter-shared PPO takes "
-    "n_steps = 32 per agent so that a rollout holds 3200 samples (a multiple of the zoo's "
-    "batch of 64), near the zoo's 4 x 1024; "
-    "observation/reward normalization and the horizon-as-termination wrapper stay as in the "
-    "training layer."
+    "training/hyperparams/paper.yml: the training layer's hyperparameters (hyperparams/ppo.yml, "
+    "sac.yml, td3.yml) with the changes that file records and the study that chose them; "
+    "replay buffers hold the whole budget. Each learner's env options (observation layout, "
+    "action basis, agent reward; docs/env-options.md) are given with it."
 )
 
 #: The paper's setting (eq:serb for the integrator), 20 Brownian paths.
@@ -247,34 +243,43 @@ PAPER_ENV = {
     "max_control": 25.0,
 }
 
-# Budgets (SB3 timesteps) of the paper preset, sized so that the whole preset ends in about
-# 1.5 h on 2 cores (docs/presets.md "The paper preset: what it runs"; it took 59 min): PPO gets 8
-# rollouts of 4 x 1024; SAC and TD3 half the zoo's Pendulum-v1 n_timesteps (1e4 of 2e4; TD3's
-# random warm-up is cut further, below); parameter-shared PPO 6e5 agent-steps (SB3 ends on a
-# whole rollout: 188 rollouts of 3200 samples, 601 600 agent-steps, 6 016 swarm steps).
-PAPER_BUDGETS = {"ppo": 32_768, "sac": 10_000, "td3": 10_000, "ppo-shared": 600_000}
+# Budgets (SB3 timesteps; agent-steps for the parameter-shared learner) of the paper preset,
+# sized so that the whole preset ends in about an hour on 2 cores (docs/presets.md).
+PAPER_BUDGETS = {
+    "ppo": 98_304,
+    "ppo-modes": 98_304,
+    "sac": 20_000,
+    "td3": 20_000,
+    "ppo-shared": 1_228_800,
+}
+
+#: The single controller's interface in the paper preset: the swarm's centre offset, spread,
+#: target and time; one control broadcast to every agent (docs/env-options.md).
+SUMMARY_COMMON = {"observation": "summary", "action_basis": "common"}
+#: Full information in the centre-and-differences basis: nothing of the state or the control
+#: is left out, the common mode is one coordinate.
+MODES_MODES = {"observation": "modes", "action_basis": "modes"}
+#: The parameter-shared learner's interface: each agent sees its offset, its drift, the swarm's
+#: centre offset and spread; every agent is rewarded with the swarm's reward.
+SWARM_TEAM = {"observation": "swarm", "agent_reward": "team"}
 
 
-def _zoo_learner(
-    name: str,
-    algo: str,
-    env_id: str,
-    description: str,
-    n_envs: int | None = None,
-    **changes: Any,
+def _paper_learner(
+    name: str, algo: str, env_id: str, env_kwargs: dict[str, Any], description: str, **changes: Any
 ) -> Learner:
-    """A learner with rl-zoo3's Pendulum-v1 entry for `algo` (zoo_pendulum.yml), `changes`
-    applied over it, the paper budget of `name`, and `n_envs` (None: the entry's)."""
-    entry = dict(read_hyperparams_file("zoo_pendulum")[algo])
-    zoo_envs = int(entry.pop("n_envs"))
+    """A learner of the paper preset: its entry of hyperparams/paper.yml (n_envs apart),
+    `changes` over it, its budget and env options."""
+    entry = dict(read_hyperparams_file("paper")[name])
+    n_envs = int(entry.pop("n_envs"))
     return Learner(
         name,
         algo,
         env_id,
         PAPER_BUDGETS[name],
         {**entry, **changes},
-        zoo_envs if n_envs is None else n_envs,
+        n_envs,
         description,
+        env_kwargs,
     )
 
 
@@ -291,7 +296,7 @@ _PAPER = Preset(
             "eps1",
             "non-stiff contrast: eps = 1, SERB",
             env_kwargs={"epsilon": 1.0},
-            learners=("ppo-swarm", "apg"),
+            learners=("ppo", "sac", "apg"),
             # MPC re-solves at every step: the main setting only
             references=("optimal", "turnpike", "proportional", "zero"),
         ),
@@ -308,42 +313,46 @@ _PAPER = Preset(
             "trained with Euler-Maruyama, evaluated with SERB (eps = 0.05)",
             env_kwargs={"integrator": "em"},
             eval_env_kwargs={"integrator": "serb"},
-            learners=("ppo-swarm", "apg"),
+            learners=("ppo", "sac", "apg"),
         ),
     ),
     learners=(
-        _zoo_learner("ppo", "ppo", GYM_ENV_ID, "PPO, one controller"),
-        Learner(
-            "ppo-swarm",
+        _paper_learner(
+            "ppo",
             "ppo",
             GYM_ENV_ID,
-            PAPER_BUDGETS["ppo"],
-            {},
-            None,
-            "PPO, one controller, with the training layer's own hyperparameters (tuned on "
-            "this env at N = 10: small initial action noise, log_std_init = -3)",
+            SUMMARY_COMMON,
+            "PPO, one controller: summary observation, common control",
         ),
-        # the replay buffers hold the whole budget
-        _zoo_learner(
-            "sac", "sac", GYM_ENV_ID, "SAC, one controller", buffer_size=PAPER_BUDGETS["sac"]
+        _paper_learner(
+            "ppo-modes",
+            "ppo",
+            GYM_ENV_ID,
+            MODES_MODES,
+            "PPO, one controller: full state and control in the centre-and-differences basis",
         ),
-        # the zoo's random-action warm-up is 1e4 of a 2e4 budget; at a 1e4 budget that would
-        # leave no learning, so 2 500 (a quarter) leaves 7 500 learning steps
-        _zoo_learner(
+        _paper_learner(
+            "sac",
+            "sac",
+            GYM_ENV_ID,
+            SUMMARY_COMMON,
+            "SAC, one controller: summary observation, common control",
+            buffer_size=PAPER_BUDGETS["sac"],
+        ),
+        _paper_learner(
             "td3",
             "td3",
             GYM_ENV_ID,
-            "TD3, one controller",
+            SUMMARY_COMMON,
+            "TD3, one controller: summary observation, common control",
             buffer_size=PAPER_BUDGETS["td3"],
-            learning_starts=2_500,
         ),
-        _zoo_learner(
+        _paper_learner(
             "ppo-shared",
             "ppo",
             PETTINGZOO_ENV_ID,
-            "parameter-shared PPO, one agent per swarm member (SuperSuit)",
-            n_envs=1,  # one swarm of N agents: SuperSuit's vector env
-            n_steps=32,
+            SWARM_TEAM,
+            "parameter-shared PPO (SuperSuit): swarm observation, team reward",
         ),
         APG_LEARNER,
     ),

@@ -50,10 +50,18 @@ from typing import Any
 import numpy as np
 
 from agent_envs.training.config import TrainConfig, resolve_hyperparams, sb3_kwargs
-from agent_envs.training.defaults import OFF_POLICY, algorithm_class, is_multiagent
+from agent_envs.training.defaults import (
+    GYM_ENV_ID,
+    OFF_POLICY,
+    algorithm_class,
+    default_interface,
+    interface_of,
+    is_multiagent,
+)
 from agent_envs.training.environments import (
     env_description,
     eval_env_id,
+    eval_env_kwargs,
     make_eval_vec_env,
     make_training_env,
 )
@@ -107,12 +115,12 @@ def train(
             setattr(saved, name, getattr(config, name))
         saved.resume = str(run_dir)
         config = saved.validate()
-        description = env_description(eval_env_id(config), config.env_kwargs)
+        description = env_description(config.env_id, config.env_kwargs)
         lock = RunLock(run_dir).acquire()
     else:
         config.validate()
         check_output_dir(config.out, "--out")
-        description = env_description(eval_env_id(config), config.env_kwargs)
+        description = env_description(config.env_id, config.env_kwargs)
         run_dir = Path(config.out) / (config.run_name or default_run_name(config))
         create_run_directory(run_dir)  # exclusive: a second process stops here
         lock = RunLock(run_dir).acquire()
@@ -296,8 +304,12 @@ def _callbacks(config, run_dir: Path, sb3_envs: int, description: dict[str, Any]
     if config.eval_freq <= 0:
         return callbacks, None
     shape = (description["n_agents"], description["dim"]) if is_multiagent(config.env_id) else None
-    eval_vec = make_eval_vec_env(eval_env_id(config), config.env_kwargs, config.eval_episodes)
-    reference_env = eval_vec.envs[0]
+    eval_vec = make_eval_vec_env(eval_env_id(config), eval_env_kwargs(config), config.eval_episodes)
+    # the references act on the default interface: same dynamics, cost and draws (env options)
+    reference_vec = make_eval_vec_env(
+        GYM_ENV_ID, default_interface(config.env_kwargs), config.eval_episodes
+    )
+    reference_env = reference_vec.envs[0]
     references = {
         "turnpike": TurnpikeController(
             reference_env, beta=config.turnpike_beta, delta=config.turnpike_delta
@@ -307,8 +319,9 @@ def _callbacks(config, run_dir: Path, sb3_envs: int, description: dict[str, Any]
     }
     eval_callback = SwarmEvalCallback(
         eval_vec,
-        lambda m: live_policy(m, shape),
+        lambda m: live_policy(m, shape, interface_of(config.env_kwargs)["observation"]),
         references,
+        reference_env=reference_vec,
         eval_seed=config.eval_seed,
         eval_freq=max(config.eval_freq // sb3_envs, 1),
         run_dir=run_dir,

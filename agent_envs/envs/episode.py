@@ -38,6 +38,12 @@ from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
 from agent_envs.dynamics.operators import LinearizationOperator, check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel
+from agent_envs.envs.interface import (
+    action_rows,
+    check_env_options,
+    check_option,
+    controls_from_actions,
+)
 from agent_envs.envs.observation import global_observation
 from agent_envs.integrators import (
     DEFAULT_INTEGRATOR,
@@ -101,6 +107,9 @@ ENV_OPTION_NAMES = (
     "max_control",
     "divergence_threshold",
     "linear_operator",
+    "observation",
+    "action_basis",
+    "agent_reward",
 )
 
 
@@ -136,7 +145,10 @@ class EpisodeConfig:
 
     Ranges: 1 <= n_steps <= 1e9; 1 <= n_paths <= 1e6 with n_paths N d <= 1e8;
     0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it;
-    linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`). The first six
+    linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`); observation,
+    action_basis and agent_reward are the learner's interface (`agent_envs.envs.interface`:
+    each env takes its own values of them; none changes the dynamics, the cost or the random
+    draws). The first six
     fields are the env's `SimulationSpec` (`simulation`), checked by it, with its defaults (one
     Brownian path per episode: `ENV_N_PATHS`).
     """
@@ -150,6 +162,9 @@ class EpisodeConfig:
     max_control: float = DEFAULT_MAX_CONTROL
     divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD
     linear_operator: str = "auto"
+    observation: str = "absolute"
+    action_basis: str = "agents"
+    agent_reward: str = "own"
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, SwarmParams):
@@ -164,6 +179,18 @@ class EpisodeConfig:
         set_(self, "divergence_threshold", threshold)
         _check_target(self.params, threshold)
         check_linear_operator(self.linear_operator)
+        for name in ("observation", "action_basis", "agent_reward"):
+            check_option(name, getattr(self, name))
+
+    def check_env_kind(self, kind: str) -> None:
+        """ValueError when the env `kind` ("gymnasium" | "pettingzoo") does not take one of
+        the interface options' values (`interface.check_env_options`)."""
+        check_env_options(
+            kind,
+            observation=self.observation,
+            action_basis=self.action_basis,
+            agent_reward=self.agent_reward,
+        )
 
     @classmethod
     def from_kwargs(
@@ -535,12 +562,16 @@ class SwarmEpisode:
     def agent_rewards(self, outcome: StepOutcome) -> np.ndarray:
         """-tau/N (|x_k^n - xbar|^2 + gamma |u_k^n|^2), mean over the paths: (N,).
 
-        They add up to `reward(outcome)` (up to round-off).
+        They add up to `reward(outcome)` (up to round-off). With ``agent_reward="team"`` every
+        entry is `reward(outcome)`, the swarm's reward.
         """
+        if self.config.agent_reward == "team":
+            return np.full(self.n_agents, self.reward(outcome))
         return -(self.dt / self.n_agents) * self.agent_costs(outcome)
 
     def control_from_action(self, action: Any, name: str = "action") -> np.ndarray:
-        """u = max_control * clip(action, -1, 1) as an (N, d) float64 array.
+        """u = max_control * clip(action, -1, 1) as an (N, d) float64 array (in the config's
+        ``action_basis``: `agent_envs.envs.interface.controls_from_actions`).
 
         `action` must have N d entries, shaped (N d,) or (N, d) (or (N,) for d = 1), of a real
         numeric dtype (`agent_envs.validation.real_array`): strings, bools and complex numbers
@@ -549,10 +580,15 @@ class SwarmEpisode:
         large for a float, raises `ValueError`; a finite entry outside [-1, 1] is clipped.
         """
         n, d = self.config.params.n_agents, self.config.params.dim
+        rows = action_rows(self.config.action_basis, n)
         arr = real_array(name, action)
-        if arr.shape not in ((n * d,), (n, d)):
-            raise ValueError(f"{name} must have shape ({n * d},) or ({n}, {d}), got {arr.shape}")
-        return self.config.max_control * np.clip(arr, -1.0, 1.0).reshape(n, d)
+        if arr.shape not in ((rows * d,), (rows, d)):
+            raise ValueError(
+                f"{name} must have shape ({rows * d},) or ({rows}, {d}), got {arr.shape}"
+            )
+        return controls_from_actions(
+            arr.reshape(rows, d), self.config.action_basis, self.config.max_control, n
+        )
 
 
 class EpisodeAttributes:
@@ -618,9 +654,15 @@ class EpisodeAttributes:
         """n, the number of steps taken since reset."""
         return self.episode.step_index
 
-    def _global_observation(self, space: spaces.Box) -> np.ndarray:
-        """The Gymnasium observation vector (= the PettingZoo global state) of the episode."""
+    def _global_observation(self, space: spaces.Box, layout: str = "absolute") -> np.ndarray:
+        """The Gymnasium observation vector (= the PettingZoo global state, "absolute") of the
+        episode in `layout`."""
         ep = self.episode
         return global_observation(
-            ep.mean_positions, ep.mean_interaction_drift, ep.target, ep.time_fraction, space
+            ep.mean_positions,
+            ep.mean_interaction_drift,
+            ep.target,
+            ep.time_fraction,
+            space,
+            layout,
         )

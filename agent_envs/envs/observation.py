@@ -15,6 +15,10 @@ the interaction drift is averaged path by path, as the expectation in the cheap 
 ``u_k = beta (xbar - E x_k) - E (1/N) sum_l p(x_k, x_l)(x_l - x_k)`` is a function of the
 observation (of each agent's own observation in the PettingZoo env).
 
+These are the default layouts (``observation="absolute"``). The env kwarg ``observation``
+selects another (`agent_envs.envs.interface`: "relative", "modes", "summary" for the Gymnasium
+env; "relative", "swarm" for a PettingZoo agent); every function here takes it as `layout`.
+
 Bounds (finite, as the checkers want them): positions and target lie in
 ``[-divergence_threshold, divergence_threshold]`` (a state beyond it ends the episode and is
 never observed); the drift of the Cucker-Smale kernel ``w_l / (alpha^2 + |r|^2)`` obeys
@@ -32,18 +36,21 @@ import numpy as np
 from gymnasium import spaces
 
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
+from agent_envs.envs.interface import from_modes, modes_bound, swarm_summary, to_modes
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
-def observation_size(n_agents: int, dim: int) -> int:
-    """Length of the Gymnasium observation: 2 N d + d + 1."""
+def observation_size(n_agents: int, dim: int, layout: str = "absolute") -> int:
+    """Length of the Gymnasium observation: 2 N d + d + 1 (``"summary"``: 3 d + 1)."""
+    if layout == "summary":
+        return 3 * dim + 1
     return 2 * n_agents * dim + dim + 1
 
 
-def agent_observation_size(dim: int) -> int:
-    """Length of one PettingZoo agent's observation: 3 d + 1."""
-    return 3 * dim + 1
+def agent_observation_size(dim: int, layout: str = "absolute") -> int:
+    """Length of one PettingZoo agent's observation: 3 d + 1 (``"swarm"``: 5 d + 1)."""
+    return 5 * dim + 1 if layout == "swarm" else 3 * dim + 1
 
 
 def interaction_drift_bound(kernel: Any) -> float:
@@ -58,16 +65,31 @@ def interaction_drift_bound(kernel: Any) -> float:
     return FLOAT32_MAX
 
 
-def _bounds(n_blocks: int, dim: int, position_bound: float, drift_bound: float) -> np.ndarray:
-    """Upper bounds of `n_blocks` position and drift blocks of size dim, target, time."""
-    return np.concatenate(
-        [
-            np.full(n_blocks * dim, position_bound),
-            np.full(n_blocks * dim, drift_bound),
-            np.full(dim, position_bound),
-            [1.0],
+def _block(bound: float, size: int) -> np.ndarray:
+    return np.full(size, min(bound, FLOAT32_MAX))
+
+
+def _bounds(
+    n_blocks: int, dim: int, position_bound: float, drift_bound: float, layout: str = "absolute"
+) -> np.ndarray:
+    """Upper bounds of the layout's entries (`agent_envs.envs.interface`): positions or their
+    offsets from the target (|x - xbar| < 2 threshold), drift, target, [centre offset, spread],
+    time. In modes a coordinate is at most sqrt(N) times the largest entry
+    (`interface.modes_bound`)."""
+    offset = 2.0 * position_bound
+    if layout == "summary":
+        parts = [_block(offset, 2 * dim), _block(position_bound, dim)]
+    else:
+        scale = modes_bound(n_blocks) if layout == "modes" else 1.0
+        position = position_bound if layout == "absolute" else offset
+        parts = [
+            _block(scale * position, n_blocks * dim),
+            _block(scale * drift_bound, n_blocks * dim),
+            _block(position_bound, dim),
         ]
-    ).astype(np.float32)
+        if layout == "swarm":
+            parts.append(_block(offset, 2 * dim))
+    return np.concatenate([*parts, [1.0]]).astype(np.float32)
 
 
 def _box(high: np.ndarray, dim: int) -> spaces.Box:
@@ -77,15 +99,31 @@ def _box(high: np.ndarray, dim: int) -> spaces.Box:
 
 
 def observation_space(
-    n_agents: int, dim: int, position_bound: float, drift_bound: float
+    n_agents: int, dim: int, position_bound: float, drift_bound: float, layout: str = "absolute"
 ) -> spaces.Box:
-    """The Gymnasium observation space Box((2 N d + d + 1,), float32) (also the PZ state)."""
-    return _box(_bounds(n_agents, dim, position_bound, drift_bound), dim)
+    """The Gymnasium observation space Box((2 N d + d + 1,), float32) (also the PZ state);
+    Box((3 d + 1,)) for the ``"summary"`` layout."""
+    return _box(_bounds(n_agents, dim, position_bound, drift_bound, layout), dim)
 
 
-def agent_observation_space(dim: int, position_bound: float, drift_bound: float) -> spaces.Box:
-    """One PettingZoo agent's observation space Box((3 d + 1,), float32)."""
-    return _box(_bounds(1, dim, position_bound, drift_bound), dim)
+def agent_observation_space(
+    dim: int, position_bound: float, drift_bound: float, layout: str = "absolute"
+) -> spaces.Box:
+    """One PettingZoo agent's observation space Box((3 d + 1,), float32) (``"swarm"``: 5 d + 1)."""
+    return _box(_bounds(1, dim, position_bound, drift_bound, layout), dim)
+
+
+def _layout_blocks(layout: str, mean_positions: Any, mean_drift: Any, target: Any) -> list[Any]:
+    """The (..., k, d) blocks before the target and time of a Gymnasium layout."""
+    if layout == "absolute":
+        return [mean_positions, mean_drift]
+    offsets = mean_positions - target[..., None, :]
+    if layout == "relative":
+        return [offsets, mean_drift]
+    if layout == "modes":
+        return [to_modes(offsets), to_modes(mean_drift)]
+    centre, spread = swarm_summary(mean_positions, target)
+    return [centre[..., None, :], spread[..., None, :]]
 
 
 def global_observation(
@@ -94,38 +132,42 @@ def global_observation(
     target: np.ndarray,
     time_fraction: float | np.ndarray,
     space: spaces.Box,
+    layout: str = "absolute",
 ) -> np.ndarray:
     """The Gymnasium observation from path means, target and t/T; a new float32 array.
 
     Batched over leading (env) axes: mean_positions and mean_drift (..., N, d), target
-    (..., d), time_fraction a float or (...); returns (..., 2 N d + d + 1). torch tensors
-    give a float32 tensor on their device.
+    (..., d), time_fraction a float or (...); returns (..., 2 N d + d + 1) (``"summary"``:
+    (..., 3 d + 1)) in the `layout` of `agent_envs.envs.interface`. torch tensors give a
+    float32 tensor on their device.
     """
     lead = mean_positions.shape[:-2]
     if not isinstance(mean_positions, np.ndarray):
-        return _global_observation_tensor(mean_positions, mean_drift, target, time_fraction, space)
+        blocks = _layout_blocks(layout, mean_positions, mean_drift, target)
+        return _global_observation_tensor(blocks, target, time_fraction, space)
+    blocks = _layout_blocks(layout, mean_positions, mean_drift, np.asarray(target))
     obs = np.empty((*lead, *space.shape), dtype=np.float32)
-    nd = mean_positions.shape[-2] * mean_positions.shape[-1]
-    obs[..., :nd] = mean_positions.reshape(*lead, nd)
-    obs[..., nd : 2 * nd] = mean_drift.reshape(*lead, nd)
-    obs[..., 2 * nd : -1] = target
+    start = 0
+    for block in blocks:
+        size = block.shape[-2] * block.shape[-1]
+        obs[..., start : start + size] = block.reshape(*lead, size)
+        start += size
+    obs[..., start:-1] = target
     obs[..., -1] = time_fraction
     return np.clip(obs, space.low, space.high, out=obs)
 
 
 def _global_observation_tensor(
-    mean_positions: Any, mean_drift: Any, target: Any, time_fraction: Any, space: spaces.Box
+    blocks: list[Any], target: Any, time_fraction: Any, space: spaces.Box
 ) -> Any:
     """`global_observation` for torch tensors (same layout, float32 on their device)."""
     import torch
 
-    lead = tuple(mean_positions.shape[:-2])
-    nd = mean_positions.shape[-2] * mean_positions.shape[-1]
-    device = mean_positions.device
+    lead = tuple(blocks[0].shape[:-2])
+    device = blocks[0].device
     time_fraction = torch.as_tensor(time_fraction, dtype=torch.float64, device=device)
-    parts = [
-        mean_positions.reshape(*lead, nd),
-        mean_drift.reshape(*lead, nd),
+    parts = [block.reshape(*lead, block.shape[-2] * block.shape[-1]) for block in blocks]
+    parts += [
         torch.broadcast_to(torch.as_tensor(target, device=device), (*lead, target.shape[-1])),
         torch.broadcast_to(time_fraction, lead)[..., None],
     ]
@@ -141,28 +183,47 @@ def agent_observations(
     target: np.ndarray,
     time_fraction: float,
     space: spaces.Box,
+    layout: str = "absolute",
 ) -> np.ndarray:
-    """All agents' PettingZoo observations: one new (N, 3 d + 1) float32 array, row k = agent k."""
+    """All agents' PettingZoo observations: one new (N, size) float32 array, row k = agent k.
+
+    `layout` "absolute" | "relative" | "swarm" (`agent_envs.envs.interface`).
+    """
     n, d = mean_positions.shape
-    obs = np.empty((n, 3 * d + 1), dtype=np.float32)
-    obs[:, :d] = mean_positions
+    obs = np.empty((n, agent_observation_size(d, layout)), dtype=np.float32)
+    target = np.asarray(target)
+    obs[:, :d] = mean_positions if layout == "absolute" else mean_positions - target
     obs[:, d : 2 * d] = mean_drift
     obs[:, 2 * d : 3 * d] = target
+    if layout == "swarm":
+        centre, spread = swarm_summary(mean_positions, target)
+        obs[:, 3 * d : 4 * d] = centre
+        obs[:, 4 * d : 5 * d] = spread
     obs[:, -1] = time_fraction
     return np.clip(obs, space.low, space.high, out=obs)
 
 
-def split_observation(obs: Any, n_agents: int, dim: int) -> dict[str, np.ndarray]:
+def split_observation(
+    obs: Any, n_agents: int, dim: int, layout: str = "absolute"
+) -> dict[str, np.ndarray]:
     """Inverse of the Gymnasium layout, batched over leading axes.
 
     Args:
         obs: (..., 2 N d + d + 1), e.g. one observation or a VecEnv batch (n_envs, obs_dim).
         n_agents, dim: N and d of the env.
+        layout: the env's ``observation`` option; "relative" and "modes" are mapped back to
+            positions (x = offset + xbar) and drift (`interface.from_modes`), to float32
+            round-off. "summary" holds no agent's position: ValueError.
 
     Returns:
         dict with ``positions`` (..., N, d), ``interaction_drift`` (..., N, d), ``target``
         (..., d) and ``time_fraction`` (...), as float64 arrays.
     """
+    if layout == "summary":
+        raise ValueError(
+            "observation='summary' holds the swarm's centre and spread, not the agents' "
+            "positions; a controller that needs them acts on 'absolute', 'relative' or 'modes'"
+        )
     arr = np.asarray(obs, dtype=np.float64)
     size = observation_size(n_agents, dim)
     if arr.ndim < 1 or arr.shape[-1] != size:
@@ -171,54 +232,75 @@ def split_observation(obs: Any, n_agents: int, dim: int) -> dict[str, np.ndarray
         )
     lead = arr.shape[:-1]
     nd = n_agents * dim
+    positions = arr[..., :nd].reshape(*lead, n_agents, dim)
+    drift = arr[..., nd : 2 * nd].reshape(*lead, n_agents, dim)
+    target = arr[..., 2 * nd : 2 * nd + dim]
+    if layout == "modes":
+        positions, drift = from_modes(positions), from_modes(drift)
+    if layout != "absolute":
+        positions = positions + target[..., None, :]
     return {
-        "positions": arr[..., :nd].reshape(*lead, n_agents, dim),
-        "interaction_drift": arr[..., nd : 2 * nd].reshape(*lead, n_agents, dim),
-        "target": arr[..., 2 * nd : 2 * nd + dim],
+        "positions": positions,
+        "interaction_drift": drift,
+        "target": target,
         "time_fraction": arr[..., -1],
     }
 
 
-def split_agent_observation(obs: Any, dim: int) -> dict[str, np.ndarray]:
+def split_agent_observation(obs: Any, dim: int, layout: str = "absolute") -> dict[str, np.ndarray]:
     """Inverse of the PettingZoo per-agent layout, batched over leading axes.
 
-    Returns a dict with ``position`` (..., d), ``interaction_drift`` (..., d), ``target``
-    (..., d) and ``time_fraction`` (...), as float64 arrays.
+    Returns a dict with ``position`` (..., d) (absolute: offsets are mapped back),
+    ``interaction_drift`` (..., d), ``target`` (..., d) and ``time_fraction`` (...), as float64
+    arrays; the ``"swarm"`` layout adds ``centre_offset`` and ``spread`` (..., d).
     """
     arr = np.asarray(obs, dtype=np.float64)
-    size = agent_observation_size(dim)
+    size = agent_observation_size(dim, layout)
     if arr.ndim < 1 or arr.shape[-1] != size:
         raise ValueError(f"obs must have shape (..., {size}) for dim={dim}; got {arr.shape}")
-    return {
-        "position": arr[..., :dim],
+    target = arr[..., 2 * dim : 3 * dim]
+    position = arr[..., :dim] if layout == "absolute" else arr[..., :dim] + target
+    parts = {
+        "position": position,
         "interaction_drift": arr[..., dim : 2 * dim],
-        "target": arr[..., 2 * dim : 3 * dim],
+        "target": target,
         "time_fraction": arr[..., -1],
     }
+    if layout == "swarm":
+        parts["centre_offset"] = arr[..., 3 * dim : 4 * dim]
+        parts["spread"] = arr[..., 4 * dim : 5 * dim]
+    return parts
 
 
-def agent_observations_from_global(obs: Any, n_agents: int, dim: int) -> np.ndarray:
+def agent_observations_from_global(
+    obs: Any, n_agents: int, dim: int, layout: str = "absolute"
+) -> np.ndarray:
     """The N per-agent (PettingZoo) observations held in Gymnasium observations, batched.
 
     Args:
-        obs: (..., 2 N d + d + 1) Gymnasium observations.
+        obs: (..., 2 N d + d + 1) Gymnasium observations in the default ("absolute") layout.
         n_agents, dim: N and d of the env.
+        layout: the per-agent layout to build ("absolute" | "relative" | "swarm").
 
     Returns:
-        (..., N, 3 d + 1) float32: row k is ``[E x_k | E drift on k | target | t/T]``, the row
-        `agent_observations` builds from the same path means (without its clipping, which the
-        Gymnasium observation has already had).
+        (..., N, size) float32: row k is the row `agent_observations` builds from the same path
+        means in `layout` (without its clipping, which the Gymnasium observation has already
+        had; the swarm's centre and spread are taken from the float32 positions).
     """
     parts = split_observation(obs, n_agents, dim)
     lead = parts["positions"].shape[:-2]
     shape = (*lead, n_agents, dim)
-    rows = np.concatenate(
-        [
-            parts["positions"],
-            parts["interaction_drift"],
-            np.broadcast_to(parts["target"][..., None, :], shape),
-            np.broadcast_to(parts["time_fraction"][..., None, None], (*lead, n_agents, 1)),
-        ],
-        axis=-1,
-    )
-    return rows.astype(np.float32)
+    positions, target = parts["positions"], parts["target"]
+    blocks = [
+        positions if layout == "absolute" else positions - target[..., None, :],
+        parts["interaction_drift"],
+        np.broadcast_to(target[..., None, :], shape),
+    ]
+    if layout == "swarm":
+        centre, spread = swarm_summary(positions, target)
+        blocks += [
+            np.broadcast_to(centre[..., None, :], shape),
+            np.broadcast_to(spread[..., None, :], shape),
+        ]
+    blocks.append(np.broadcast_to(parts["time_fraction"][..., None, None], (*lead, n_agents, 1)))
+    return np.concatenate(blocks, axis=-1).astype(np.float32)

@@ -20,6 +20,7 @@ from agent_envs.envs.episode import (
     SwarmEpisode,
     reset_options,
 )
+from agent_envs.envs.interface import action_rows
 from agent_envs.envs.observation import (
     interaction_drift_bound,
     observation_space,
@@ -188,16 +189,19 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
+        self.config.check_env_kind("gymnasium")
         self.episode = SwarmEpisode(self.config)
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
         n, d = params.n_agents, params.dim
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(n * d,), dtype=np.float32)
+        rows = action_rows(self.config.action_basis, n)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(rows * d,), dtype=np.float32)
         self.observation_space = observation_space(
             n,
             d,
             self.config.divergence_threshold,
             interaction_drift_bound(self.episode.model.kernel),
+            self.config.observation,
         )
         self._renderer = (
             None
@@ -207,7 +211,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
 
     # ------------------------------------------------------------------ API
     def _observation(self) -> np.ndarray:
-        return self._global_observation(self.observation_space)
+        return self._global_observation(self.observation_space, self.config.observation)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

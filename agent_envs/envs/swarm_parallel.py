@@ -109,6 +109,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
+        self.config.check_env_kind("pettingzoo")
         self.episode = SwarmEpisode(self.config)
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
@@ -119,7 +120,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         bound = self.config.divergence_threshold
         drift_bound = interaction_drift_bound(self.episode.model.kernel)
         self.observation_spaces = {
-            agent: agent_observation_space(d, bound, drift_bound) for agent in self.possible_agents
+            agent: agent_observation_space(d, bound, drift_bound, self.config.observation)
+            for agent in self.possible_agents
         }
         self.action_spaces = {
             agent: spaces.Box(-1.0, 1.0, shape=(d,), dtype=np.float32)
@@ -159,6 +161,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             ep.target,
             ep.time_fraction,
             self._obs_space,
+            self.config.observation,
         )
         return dict(zip(self.possible_agents, rows, strict=True))
 

@@ -50,6 +50,7 @@ from agent_envs.envs.episode import (
     reset_options,
     start_positions,
 )
+from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import (
     global_observation,
     interaction_drift_bound,
@@ -204,6 +205,7 @@ class SwarmVectorEnv(VectorEnv):
             allowed = [m.value for m in AUTORESET_MODES]
             raise ValueError(f"autoreset_mode must be one of {allowed}, got {autoreset_mode!r}")
         self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
+        self.config.check_env_kind("gymnasium")
         self.num_envs = int(num_envs)
         self.device = "cpu" if self._device is None else str(self._device)
         self.render_mode = None
@@ -237,9 +239,14 @@ class SwarmVectorEnv(VectorEnv):
             self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
         )
         self.dt = self.config.dt
-        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(n * d,), dtype=np.float32)
+        rows = action_rows(self.config.action_basis, n)
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(rows * d,), dtype=np.float32)
         self.single_observation_space = observation_space(
-            n, d, self.config.divergence_threshold, interaction_drift_bound(self.model.kernel)
+            n,
+            d,
+            self.config.divergence_threshold,
+            interaction_drift_bound(self.model.kernel),
+            self.config.observation,
         )
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -330,6 +337,7 @@ class SwarmVectorEnv(VectorEnv):
             self._targets,
             self.step_index / self.config.n_steps,
             self.single_observation_space,
+            self.config.observation,
         )
 
     def _reset_envs(self, mask: np.ndarray, seeds: list[int | None], options: Any) -> None:
@@ -442,16 +450,18 @@ class SwarmVectorEnv(VectorEnv):
             # the dtype is checked for every row; finiteness below only for the rows that step
             # (an autoresetting env ignores its action, as SyncVectorEnv does)
             arr = self._on_device(real_array("actions", actions, finite=False))
-        if tuple(arr.shape) not in ((b, n * d), (b, n, d)):
+        rows = action_rows(self.config.action_basis, n)
+        if tuple(arr.shape) not in ((b, rows * d), (b, rows, d)):
             raise ValueError(
-                f"actions must have shape ({b}, {n * d}) or ({b}, {n}, {d}), got {tuple(arr.shape)}"
+                f"actions must have shape ({b}, {rows * d}) or ({b}, {rows}, {d}), got "
+                f"{tuple(arr.shape)}"
             )
-        arr = xp.reshape(arr, (b, n, d))
+        arr = xp.reshape(arr, (b, rows, d))
         if not bool(xp.all(xp.isfinite(arr[stepping]))):
             raise ValueError("actions must be finite, got NaN or inf entries")
         # rows that do not step get no control at all, so a NaN there never reaches the batch
         arr = xp.where(stepping[:, None, None], arr, 0.0)
-        return self.config.max_control * xp.clip(arr, -1.0, 1.0)
+        return controls_from_actions(arr, self.config.action_basis, self.config.max_control, n)
 
     # ------------------------------------------------------------------ API
     def reset(
