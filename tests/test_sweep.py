@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from agent_envs.training.config import VEC_ENV_CHOICES, TrainConfig
+from agent_envs.training.config import VEC_ENV_CHOICES, TrainConfig, read_hyperparams_file
 from agent_envs.training.experiment import (
     LEARNER,
     REFERENCE,
@@ -107,20 +107,31 @@ def test_paper_preset_definition():
     trials = build_trials(preset, ExperimentOptions(vec_env="dummy"))
     learners = [t for t in trials if t.kind == LEARNER]
     main = {(t.policy, t.seed) for t in learners if t.setting == "main"}
-    names = ("ppo", "ppo-swarm", "sac", "td3", "ppo-shared", "apg")
+    names = ("ppo", "ppo-modes", "sac", "td3", "ppo-shared", "apg")
     assert main == {(a, s) for a in names for s in preset.seeds}
     contrasts = {t.policy for t in learners if t.setting in ("eps1", "em-to-serb")}
-    assert contrasts == {"ppo-swarm", "apg"}
+    assert contrasts == {"ppo", "sac", "apg"}
     # apg: APGConfig's defaults (what benchmarks/bench_apg.py measured) on the setting's env
     apg = next(t for t in learners if t.policy == "apg" and t.setting == "main")
     assert apg.train["iterations"] == 300 and apg.train["eval_freq"] == 25
     assert apg.train["env_kwargs"] == preset.env_kwargs and apg.train["train_paths"] == 4
-    swarm = next(t for t in learners if t.policy == "ppo-swarm")
-    from agent_envs.training.config import default_hyperparams
-
-    config = TrainConfig.from_dict(swarm.train)
-    assert config.hyperparams == {} and config.n_envs is None  # the training layer's own
-    assert default_hyperparams("ppo", swarm.train["env_id"])["policy_kwargs"]["log_std_init"] < 0
+    # each SB3 learner trains with its env options and the hyperparams/paper.yml entry; it is
+    # evaluated on the setting's env (the default interface)
+    options = {
+        "ppo": {"observation": "summary", "action_basis": "common"},
+        "ppo-modes": {"observation": "modes", "action_basis": "modes"},
+        "sac": {"observation": "summary", "action_basis": "common"},
+        "td3": {"observation": "summary", "action_basis": "common"},
+        "ppo-shared": {"observation": "swarm", "agent_reward": "team"},
+    }
+    entries = read_hyperparams_file("paper")
+    for trial in (t for t in learners if t.setting == "main" and t.policy != "apg"):
+        config = TrainConfig.from_dict(trial.train)
+        assert config.env_kwargs == {**preset.env_kwargs, **options[trial.policy]}
+        assert trial.eval_env_kwargs == preset.env_kwargs
+        entry = dict(entries[trial.policy])
+        assert config.n_envs == entry.pop("n_envs")
+        assert entry.items() <= config.hyperparams.items()
     by_setting = {t.setting: t for t in learners if t.policy != "apg"}
     assert by_setting["eps1"].train["env_kwargs"]["epsilon"] == 1.0
     em = by_setting["em-to-serb"]
@@ -144,33 +155,27 @@ def test_paper_preset_definition():
     assert eps1 == sorted(r for r in wanted if r != "mpc")  # MPC: the main setting only
 
 
-@pytest.mark.parametrize(("algo", "learner"), [("ppo", "ppo"), ("sac", "sac"), ("td3", "td3")])
-def test_paper_hyperparameters_are_rl_zoo3_pendulum_entries(algo, learner):
-    """Every key of rl-zoo3's tuned Pendulum-v1 entry is in the preset with the zoo's value,
-    except the budget, the buffer size (the whole budget), TD3's random warm-up (cut to a
-    quarter of the halved budget; the zoo's 1e4 would be all of it) and the zoo-only keys."""
-    yaml = pytest.importorskip("yaml")
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
+def test_zoo_pendulum_file_holds_rl_zoo3_pendulum_entries(algo):
+    """hyperparams/zoo_pendulum.yml (the first paper study's learners) holds every key of
+    rl-zoo3's tuned Pendulum-v1 entry with the zoo's value (budget, buffer and policy apart)."""
+    pytest.importorskip("yaml")
     # find_spec, not import: importing rl_zoo3 patches gymnasium's TimeLimit for the whole test
     # process (rl_zoo3.gym_patches), which breaks the vector env's equivalence tests
     spec = importlib.util.find_spec("rl_zoo3")
     if spec is None or spec.origin is None:
         pytest.skip("rl_zoo3 is the optional 'zoo' extra")
+    import yaml
+
     path = Path(spec.origin).parent / "hyperparams" / f"{algo}.yml"
     zoo = yaml.safe_load(path.read_text())["Pendulum-v1"]
-    preset = {lr.name: lr for lr in PRESETS["paper"].learners}[learner]
+    shipped = read_hyperparams_file("zoo_pendulum")[algo]
     for key, value in zoo.items():
-        if key in ("n_timesteps", "policy", "n_envs", "buffer_size"):
-            continue
-        if key == "learning_starts" and algo == "td3":
-            assert value == 10_000 and preset.hyperparams[key] == preset.timesteps // 4
-            continue
+        if key in ("n_timesteps", "policy", "buffer_size"):
+            continue  # the study sized the replay buffer to its budget (in the preset)
         if key == "policy_kwargs":
             value = eval(value, {"dict": dict})  # the zoo writes "dict(net_arch=[400, 300])"
-        assert preset.hyperparams[key] == value, key
-    if "n_envs" in zoo:
-        assert preset.n_envs == zoo["n_envs"]
-    if "buffer_size" in preset.hyperparams:
-        assert preset.hyperparams["buffer_size"] >= preset.timesteps
+        assert shipped[key] == value, key
 
 
 # ------------------------------------------------------------------------------------ CLI
@@ -484,7 +489,7 @@ def test_compare_runs_one_seed_of_the_sweeps_grid():
     # a contrast setting: its learners, its env, its evaluation env
     em = CompareConfig(preset="paper", setting="em-to-serb", seed=2, out="x").trials()
     learners = [t for t in em if t.kind == LEARNER]
-    assert [(t.policy, t.seed) for t in learners] == [("ppo-swarm", 2), ("apg", 2)]
+    assert [(t.policy, t.seed) for t in learners] == [("ppo", 2), ("sac", 2), ("apg", 2)]
     assert learners[0].train["env_kwargs"]["integrator"] == "em"
     assert {t.eval_env_kwargs["integrator"] for t in em} == {"serb"}
 

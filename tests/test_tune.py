@@ -11,7 +11,7 @@ from agent_envs.training.presets import PRESETS
 from agent_envs.training.tune import TuneConfig, search_space, trial_train_config
 
 
-@pytest.mark.parametrize("learner", ["ppo", "ppo-swarm", "sac", "td3", "ppo-shared"])
+@pytest.mark.parametrize("learner", ["ppo", "ppo-modes", "sac", "td3", "ppo-shared"])
 def test_every_sampled_point_is_a_valid_training_config(learner):
     """20 random points of each learner's space (paper preset) validate as `agent-envs train`
     configs: SB3 accepts every keyword, the ranges hold, a rollout fits (PPO)."""
@@ -36,10 +36,13 @@ def test_every_sampled_point_is_a_valid_training_config(learner):
 
 
 def test_the_base_config_is_the_presets_learner():
-    config = TuneConfig(preset="paper", learner="ppo-swarm", out="x", timesteps_scale=0.5)
+    config = TuneConfig(preset="paper", learner="ppo-modes", out="x", timesteps_scale=0.5)
     base = config.base_config()
-    assert base.timesteps == PRESETS["paper"].learners[1].timesteps // 2
-    assert base.env_kwargs["max_control"] == 25.0 and base.hyperparams == {}
+    learner = PRESETS["paper"].learners[1]
+    assert learner.name == "ppo-modes"
+    assert base.timesteps == learner.timesteps // 2
+    assert base.env_kwargs["max_control"] == 25.0 and base.hyperparams == learner.hyperparams
+    assert base.env_kwargs["observation"] == "modes"  # the learner's env options are tuned on
     assert not base.progress_bar
     assert TuneConfig(preset="smoke", out="x").learner_entry().name == "ppo"
 
@@ -52,7 +55,7 @@ def test_the_base_config_is_the_presets_learner():
         ({"pruner": "hyperband"}, "--pruner"),
         ({"seed": -1}, "--seed"),
         ({"sampler_seed": 2**40}, "--sampler-seed"),
-        ({"setting": "eps1"}, "--setting"),
+        ({"setting": "eps1", "learner": "td3"}, "--setting"),
         ({"preset": "nope"}, "--preset"),
         ({"cpus_per_trial": 0.0}, "--cpus-per-trial"),
     ],

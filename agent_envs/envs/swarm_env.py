@@ -154,7 +154,21 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     | n_paths | 1 | Brownian paths under one control | int in [1, 1e6], n_paths N d <= 1e8 |
     | max_control | 150.0 | u = max_control * clip(action, -1, 1) | (0, 1e6] |
     | divergence_threshold | 1e4 | R: max \|x\| before a step diverges | [1, 1e6] |
+    | observation | "absolute" | layout (Env options) | "absolute", "relative", "modes", "summary" |
+    | action_basis | "agents" | action -> u (Env options) | "agents", "modes", "common" |
+    | agent_reward | "own" | PettingZoo's per-agent reward | "own" here (PettingZoo: also "team") |
     | render_mode | None | see Rendering | None, "rgb_array", "human" |
+
+    ## Env options (the learner's interface)
+
+    `observation` and `action_basis` change what a learner sees and moves, never the dynamics,
+    the cost or the random draws (`agent_envs.envs.interface`; docs page "Env options").
+    Observation: "relative" puts E x_k - xbar in the first block; "modes" puts the
+    centre-and-differences coordinates of E x - xbar and of the drift in the first two blocks
+    (entry 0: the centre's offset from the target); "summary" is `Box((3 d + 1,))`: the centre's
+    offset, the spread sqrt(mean_k (x_k - c)^2), xbar, t / T. Action: "modes" reads the action
+    as those coordinates (entry 0 moves every agent alike, over the whole control range);
+    "common" is `Box(-1, 1, (d,))`, one control max_control * clip(a, -1, 1) for every agent.
 
     The defaults are the paper's stiff setting. A kernel object has `value`, `grad_x`,
     `grad_y` and `symmetric` and answers in the library of its input (numpy or torch; docs page
@@ -180,7 +194,8 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     - v0: the only version. Within v0 the dynamics, spaces and rewards have not changed;
       added since the first release: range checks on every argument and real-dtype actions,
       the reset info with the step's keys, the `reset` option check, the native vector env
-      as `vector_entry_point`, and `linear_operator` (matrix-free large swarms). The
+      as `vector_entry_point`, `linear_operator` (matrix-free large swarms), and the env
+      options `observation` and `action_basis` (defaults unchanged). The
       integrators' round-off changed once (the Array API core with Lanczos phi-actions), which
       moves trained policies' results, not the references' (docs page "Changelog").
     """

@@ -63,7 +63,9 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
 
     r_k^n = -tau/N (|x_k^n - xbar|^2 + gamma |u_k^n|^2), mean over the paths, at the state at
     the start of the step. sum_k r_k^n is the Gymnasium reward -tau c(x^n, u^n) for the same
-    states and controls (up to round-off).
+    states and controls (up to round-off). With ``agent_reward="team"`` every agent receives the
+    swarm's reward -tau c(x^n, u^n) instead (no agent moves the centre, the cost's main term,
+    by more than O(1/N) alone; docs page "Env options").
 
     ## Starting State
 
@@ -81,7 +83,12 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     ## Arguments
 
     The keyword arguments of `SwarmEnv`, with the same defaults and accepted ranges (its
-    table), `render_mode` included. Bad values raise `ValueError`/`TypeError` naming the
+    table), `render_mode` included, except the env options: ``observation`` is "absolute",
+    "relative" (E x_k - xbar in the first slice) or "swarm" (the "relative" row with the
+    swarm's centre offset c - xbar and spread sqrt(mean_l (x_l - c)^2) inserted before t / T:
+    `Box((5 d + 1,))`); ``action_basis`` is "agents" only (each agent acts for itself);
+    ``agent_reward`` is "own" or "team" (Rewards). `state()` keeps the default layout.
+    Bad values raise `ValueError`/`TypeError` naming the
     argument; an unknown keyword raises
     `TypeError("SwarmParallelEnv.__init__() got an unexpected keyword argument 'x'")`.
     `agent_envs.swarm_v0.env()`/`raw_env()` give the AEC env through PettingZoo's
@@ -97,7 +104,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     ## Version History
 
     - v0 (`agent_envs.swarm_v0`): the only version; its changes within v0 are the Gymnasium
-      env's (`SwarmEnv`, Version History), which shares the episode core.
+      env's (`SwarmEnv`, Version History), which shares the episode core, and the env options
+      ``observation`` and ``agent_reward`` (defaults unchanged).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
