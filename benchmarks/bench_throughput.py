@@ -26,7 +26,14 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
 
 `--baseline-python PATH` runs parts 1, 3 and 4 (and 2) again with another interpreter, e.g. a
 virtual environment with an older checkout of the project installed, and prints both (the
-"before" column): the workers only use public APIs that existed before the workspaces.
+"before" column): the workers only use public APIs that existed before the workspaces. For the
+compiled Lanczos, PATH may be a two-line script that runs this interpreter with the compiled
+path switched off (`AGENT_ENVS_NUMBA=0 exec .venv/bin/python "$@"`): the numpy Lanczos.
+
+Part 1's last column is the fresh process's one-time cost before its first step (import the
+package, make the env, reset it): with numba installed it includes importing numba and loading
+the compiled Lanczos from numba's cache (compiling it instead, a few seconds, the first time
+in a cache directory). It is not in the cold steps.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_throughput.py [--baseline-python PY]
 
@@ -93,8 +100,12 @@ def single_env_stepper(kwargs: dict[str, Any], first_seed: int = 0) -> Callable[
 
 
 def worker_cold(setting: str, integrator: str, rounds: int) -> dict[str, float]:
-    """Seconds per step of the first COLD_STEPS steps of this process, then warm (median)."""
+    """Seconds per step of the first COLD_STEPS steps of this process, then warm (median);
+    and the seconds to import the package, make the env and reset it in this fresh process
+    (where the compiled Lanczos is loaded, when numba is installed)."""
+    start = time.perf_counter()
     step = single_env_stepper(env_kwargs(setting, integrator))
+    setup = time.perf_counter() - start
 
     def block() -> float:
         start = time.perf_counter()
@@ -107,7 +118,7 @@ def worker_cold(setting: str, integrator: str, rounds: int) -> dict[str, float]:
     for _ in range(rounds):
         step.restart()  # type: ignore[attr-defined]
         warm.append(block())
-    return {"cold": cold, "warm": float(np.median(warm))}
+    return {"cold": cold, "warm": float(np.median(warm)), "setup": setup}
 
 
 def interleaved(fns: dict[str, Callable[[], None]], calls: int, rounds: int) -> dict[str, float]:
@@ -192,11 +203,14 @@ def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
 
 def krylov_products_per_step(step: Callable[[], None], steps: int = 100) -> float:
     """Mean number of Lanczos matrix products per call of `step` over `steps` calls, counted on
-    the phi-function module's operator wrapper."""
+    the phi-function module's operator wrapper (the numpy Lanczos: the compiled one, which
+    stops at the same dimensions, is switched off while counting)."""
     from agent_envs.integrators import phi_functions
 
     count = [0]
     original = phi_functions._RowOperator.apply
+    switch = getattr(phi_functions, "use_compiled", None)
+    compiled_before = switch(False) if switch else False
 
     def counted(self: Any, rows: Any) -> Any:
         count[0] += 1
@@ -208,6 +222,8 @@ def krylov_products_per_step(step: Callable[[], None], steps: int = 100) -> floa
             step()
     finally:
         phi_functions._RowOperator.apply = original
+        if switch:
+            switch(compiled_before)
     return count[0] / steps
 
 
@@ -357,8 +373,11 @@ def main() -> int:
 
     if "cold" not in args.skip:
         print("## 1. Env steps/s, first 100 steps of a fresh process (cold) and warm\n")
-        print("| setting | integrator | cold steps/s | warm steps/s | cold/warm |")
-        print("|---|---|---|---|---|")
+        print(
+            "| setting | integrator | cold steps/s | warm steps/s | cold/warm |"
+            " import + make + reset (s) |"
+        )
+        print("|---|---|---|---|---|---|")
         for setting in SETTINGS:
             for integrator in ("serb", "em"):
                 # `r` fresh processes per interpreter: medians of their cold and warm figures
@@ -370,7 +389,7 @@ def main() -> int:
                     ]
                     res[k] = {
                         key: float(np.median([run[key] for run in runs]))
-                        for key in ("cold", "warm")
+                        for key in ("cold", "warm", "setup")
                     }
                     res[k]["ratio"] = float(np.median([run["cold"] / run["warm"] for run in runs]))
                 a, b = res["after"], res.get("before")
@@ -378,7 +397,8 @@ def main() -> int:
                     f"| {setting} | {integrator} | "
                     f"{fmt_pair(1 / a['cold'], b and 1 / b['cold'])} | "
                     f"{fmt_pair(1 / a['warm'], b and 1 / b['warm'])} | "
-                    f"{fmt_pair(a['ratio'], b and b['ratio'], '.2f')} |"
+                    f"{fmt_pair(a['ratio'], b and b['ratio'], '.2f')} | "
+                    f"{fmt_pair(a['setup'], b and b['setup'], '.2f')} |"
                 )
         print()
 

@@ -179,6 +179,12 @@ class FrozenLaplacian:
     def dtype(self) -> np.dtype:
         return self.matrix.dtype
 
+    def parts(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P, s): the kernel matrix (read-only) and its row sums, for a compiled phi-action;
+        `RuntimeError` once P was overwritten."""
+        self._check()
+        return self.matrix, self.row_sums
+
     def matvec(self, v: Any) -> np.ndarray:
         """c L V for V (..., N, k)."""
         self._check()

@@ -20,7 +20,7 @@ from typing import Any
 
 from agent_envs import arrays
 from agent_envs.integrators.base import DriftModel, Integrator
-from agent_envs.integrators.phi_functions import PHI_METHODS, phi_action
+from agent_envs.integrators.phi_functions import PHI_METHODS, load_compiled, phi_action
 
 JACOBIAN_CHOICES = ("exact", "frozen")
 
@@ -38,6 +38,8 @@ class RosenbrockEuler(Integrator):
             raise ValueError(f"phi_method must be one of {PHI_METHODS}, got {phi_method!r}")
         self.jacobian = jacobian
         self.phi_method = phi_method
+        if phi_method in ("auto", "krylov"):
+            load_compiled()  # the compiled Lanczos's one-time load falls here, not in a step
 
     @property
     def deterministic_order(self) -> float:  # type: ignore[override]

@@ -36,12 +36,14 @@ the numbers.
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from typing import Any
 
 import numpy as np
 
 from agent_envs import arrays
+from agent_envs.dynamics.laplacian import FrozenLaplacian
 
 PHI_METHODS = ("auto", "expm", "eigh", "krylov")
 # Crossovers of "auto" (measured by benchmarks/bench_integrators.py, one BLAS thread).
@@ -51,6 +53,12 @@ _AUTO_EXPM_SINGLE_NONSYMMETRIC_MAX = 128
 _TAYLOR_TERMS = 16
 #: from this n on, Lanczos sums its basis vector by vector (no stacked copy)
 _ACCUMULATE_BASIS_MIN_N = 2**14
+#: set to "0" to keep the numpy Lanczos even where numba is installed
+COMPILED_ENV_VAR = "AGENT_ENVS_NUMBA"
+#: the compiled Lanczos module once `load_compiled` found it; False: unavailable or switched off;
+#: None: not tried yet
+_compiled: Any = None
+_NO_BOUNDS = np.empty(0)
 
 
 def phi_scalar(z: Any, order: int) -> Any:
@@ -577,11 +585,99 @@ def _auto_method(a: Any, v: Any, symmetric: bool) -> str:
     return auto_phi_method(a.shape[-1], n_matrices, symmetric)
 
 
+def load_compiled() -> bool:
+    """Whether the compiled Lanczos (`agent_envs.integrators.compiled_lanczos`, needs numba)
+    serves the numpy frozen L(x); loads it on the first call.
+
+    The first call imports numba and loads (or, the first time in a cache directory, compiles)
+    the machine code by running it once on a tiny problem, so that this cost falls where the
+    call is made (the exponential integrators' constructors) and not in a step. Without numba,
+    or with the environment variable ``AGENT_ENVS_NUMBA=0``, it answers False and the numpy
+    Lanczos runs.
+    """
+    global _compiled
+    if _compiled is None:
+        _compiled = False
+        if os.environ.get(COMPILED_ENV_VAR, "1") != "0":
+            try:
+                from agent_envs.integrators import compiled_lanczos
+            except ImportError:
+                pass
+            else:
+                _compiled = compiled_lanczos
+                _warm_up()
+    return _compiled is not False
+
+
+def use_compiled(enabled: bool) -> bool:
+    """Switch the compiled Lanczos on (when numba is installed) or off for this process;
+    returns whether it was in use before. For comparisons in one process (benchmarks, tests)."""
+    global _compiled
+    before = load_compiled()
+    _compiled = None if enabled else False
+    if enabled:
+        load_compiled()
+    return before
+
+
+def _warm_up() -> None:
+    """One compiled call with the argument types of the env's calls (a read-only P, as the
+    model's workspace hands out), so that loading the machine code happens here."""
+    p = np.full((1, 3, 3), 0.5)
+    np.fill_diagonal(p[0], 1.0)
+    p.flags.writeable = False
+    s = p.sum(axis=-1)
+    v = np.ones((1, 3, 1))
+    _compiled.frozen_lanczos(
+        p, s, 0.1, v, 1, 1e-10, 3, 2, _NO_BOUNDS, _NO_BOUNDS, 1.0, np.empty((1, 3, 1)),
+        np.empty(1, dtype=bool),
+    )  # fmt: skip
+
+
+def _compiled_frozen_lanczos(
+    a: FrozenLaplacian, v: np.ndarray, order: int, rtol: float, max_dim: int, bounds: Any
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """`_lanczos_numpy` on c L(x) by the compiled kernel: (result, converged per member), or
+    None where it does not apply (V batched beyond P)."""
+    matrix, row_sums = a.parts()
+    n, k = a.n, v.shape[-1]
+    batch = tuple(matrix.shape[:-2])
+    if np.broadcast_shapes(batch, tuple(v.shape[:-2])) != batch:
+        return None
+    members = math.prod(batch)
+    p = matrix.reshape(members, n, n)
+    s = np.ascontiguousarray(row_sums).reshape(members, n)
+    rhs = np.ascontiguousarray(np.broadcast_to(v, (*batch, n, k))).reshape(members, n, k)
+    if bounds is None:
+        norms = widths = _NO_BOUNDS
+    else:
+        norms = np.ascontiguousarray(np.broadcast_to(bounds[0], batch), dtype=float)
+        widths = np.inf if bounds[1] is None else bounds[1]
+        widths = np.ascontiguousarray(np.broadcast_to(widths, batch), dtype=float)
+        norms, widths = norms.reshape(members), widths.reshape(members)
+    peak = a.peak if a.peak is not None and a.symmetric else -1.0
+    out = np.empty((members, n, k))
+    converged = np.empty(members, dtype=bool)
+    _compiled.frozen_lanczos(
+        p, s, a.scale, rhs, order, rtol, max_dim, 2, norms, widths, peak, out, converged
+    )
+    return out.reshape(*batch, n, k), converged.reshape(batch)
+
+
 def _krylov(
     a: Any, v: Any, order: int, symmetric: bool, rtol: float, max_dim: int, bounds: Any = None
 ) -> Any:
     """The Krylov phi-action (Lanczos if symmetric, else Arnoldi) on a matrix or an operator:
     (result, converged per batch member)."""
+    if (
+        symmetric
+        and isinstance(a, FrozenLaplacian)
+        and isinstance(v, np.ndarray)
+        and load_compiled()
+    ):
+        found = _compiled_frozen_lanczos(a, v, order, rtol, max_dim, bounds)
+        if found is not None:
+            return found
     rows = _RowOperator(a)
     if symmetric and not (arrays.is_torch(v) or arrays.is_torch(a)):
         return _lanczos_numpy(rows, v, order, rtol, max_dim, bounds=bounds)

@@ -1,0 +1,324 @@
+"""The Lanczos phi-action of the frozen L(x), compiled with numba (optional).
+
+This module imports numba; `agent_envs.integrators.phi_functions` imports it only through
+`load()` there, so the package works without numba (the numpy path `_lanczos_numpy` and the
+Array-API reference `_lanczos_action` stay, the latter for torch and autograd).
+
+`frozen_lanczos` computes phi_p(c L) V for c L = c (P - diag(s)) / N given as the kernel matrix
+P (B, N, N) and its row sums s (B, N) (`agent_envs.dynamics.laplacian.FrozenLaplacian`), for V
+(B, N, k). It is `_lanczos_action` written as loops, one batch member at a time: the same
+recurrence (b_j q_{j+1} = A q_j - a_j q_j - <., q_{j-1}> q_{j-1}, no reorthogonalization), the
+same per-member bounds (||c L||_inf and the width of spec(c L) apart from 0, from s and P_kk as
+`agent_envs.dynamics.laplacian.krylov_bounds` has them), the same first check, breakdown
+tolerance, check interval, Saad's error estimate and stopping dimension, and phi_p(T_m) e_1
+from the eigendecomposition of T_m. Only the order of the floating-point sums (loops instead
+of BLAS and numpy's pairwise sums) and the eigensolver (the implicit QL iteration for
+tridiagonal matrices, allocation-free, where numpy's `eigh` calls LAPACK's syevd: both backward
+stable) differ, so each phi-action agrees with the reference to round-off
+(tests/test_compiled_lanczos.py: 1e-12).
+
+One member at a time keeps its 80 KB kernel matrix (N = 100) in cache for all its Lanczos
+products, and the product is written as rows of axpys (w += q_l P[l, :], P symmetric), which
+the compiler vectorizes without reassociating a sum. A member's result does not depend on the
+rest of the batch (the native vector env relies on it). No `fastmath`, no threads: the BLAS
+pools of the hot path are one thread too.
+
+`cache=True`: the machine code is written next to this file (or to numba's user-wide cache
+directory when that is read-only) the first time and loaded from there in every later process.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: Taylor terms of phi_p near 0 (as `phi_functions._TAYLOR_TERMS`)
+TAYLOR_TERMS = 16
+
+
+@njit(cache=True)
+def _factorials(count: int) -> np.ndarray:
+    """j! as floats for j < count (exact up to 22!)."""
+    out = np.empty(count)
+    value = 1.0
+    for j in range(count):
+        if j > 0:
+            value *= j
+        out[j] = value
+    return out
+
+
+@njit(cache=True)
+def _phi(z: float, order: int, fact: np.ndarray) -> float:
+    """phi_order(z) for order >= 1, as `phi_functions.phi_scalar` computes it."""
+    if order == 1:
+        if z == 0.0:
+            return 1.0
+        return math.expm1(z) / z
+    if abs(z) < 0.1:
+        acc = 1.0 / fact[TAYLOR_TERMS - 1 + order]
+        for j in range(TAYLOR_TERMS - 2, -1, -1):
+            acc = acc * z + 1.0 / fact[j + order]
+        return acc
+    val = math.expm1(z)
+    power = z
+    for j in range(1, order):
+        val = val - power / fact[j]
+        power = power * z
+    return val / power
+
+
+@njit(cache=True)
+def _dot(a: np.ndarray, b: np.ndarray, n: int) -> float:
+    """sum_i a_i b_i over i < n in four interleaved partial sums (four independent chains of
+    additions instead of one: the loop is bound by the adder's latency otherwise)."""
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    top = n - n % 4
+    for i in range(0, top, 4):
+        s0 += a[i] * b[i]
+        s1 += a[i + 1] * b[i + 1]
+        s2 += a[i + 2] * b[i + 2]
+        s3 += a[i + 3] * b[i + 3]
+    for i in range(top, n):
+        s0 += a[i] * b[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@njit(cache=True)
+def _member_bounds(p: np.ndarray, s: np.ndarray, n: int, scale_abs: float, peak: float):
+    """(||c L||_inf, width of spec(c L) apart from 0) of one member, as `krylov_bounds`
+    (peak < 0: no peak, width inf)."""
+    largest = 0.0
+    for i in range(n):
+        d = abs(s[i] - p[i, i])
+        if d > largest:
+            largest = d
+    norm = scale_abs * ((2.0 / n) * largest)
+    if peak < 0.0:
+        return norm, np.inf
+    spread = -np.inf
+    for i in range(n):
+        d = peak - s[i] / n
+        if d > spread:
+            spread = d
+    return norm, scale_abs * (2.0 * max(spread, 0.0))
+
+
+@njit(cache=True)
+def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray, z: np.ndarray, m: int) -> bool:
+    """Eigenvalues (into d[:m]) and eigenvectors (columns of z[:m, :m]) of the symmetric
+    tridiagonal matrix with diagonal d[:m] and off-diagonal e[:m - 1] (e[m - 1] is scratch): the
+    implicit QL iteration with Wilkinson shifts (EISPACK's tql2, as in Numerical Recipes'
+    `tqli`), backward stable like LAPACK's syevd and without its allocations. False if an
+    eigenvalue needed more than 30 m iterations (then the caller uses `np.linalg.eigh`)."""
+    for i in range(m):
+        for j in range(m):
+            z[i, j] = 0.0
+        z[i, i] = 1.0
+    e[m - 1] = 0.0
+    for low in range(m):
+        iterations = 0
+        while True:
+            high = low
+            while high < m - 1:
+                dd = abs(d[high]) + abs(d[high + 1])
+                if abs(e[high]) + dd == dd:
+                    break
+                high += 1
+            if high == low:
+                break
+            iterations += 1
+            if iterations > 30 * m:
+                return False
+            g = (d[low + 1] - d[low]) / (2.0 * e[low])
+            r = math.hypot(g, 1.0)
+            g = d[high] - d[low] + e[low] / (g + math.copysign(r, g))
+            s = 1.0
+            c = 1.0
+            p = 0.0
+            i = high - 1
+            underflow = False
+            while i >= low:
+                f = s * e[i]
+                b = c * e[i]
+                r = math.hypot(f, g)
+                e[i + 1] = r
+                if r == 0.0:
+                    d[i + 1] -= p
+                    e[high] = 0.0
+                    underflow = True
+                    break
+                s = f / r
+                c = g / r
+                g = d[i + 1] - p
+                r = (d[i] - g) * s + 2.0 * c * b
+                p = s * r
+                d[i + 1] = g + p
+                g = c * r - b
+                for row in range(m):
+                    f = z[row, i + 1]
+                    z[row, i + 1] = s * z[row, i] + c * f
+                    z[row, i] = c * z[row, i] - s * f
+                i -= 1
+            if underflow:
+                continue
+            d[low] -= p
+            e[low] = g
+            e[high] = 0.0
+    return True
+
+
+@njit(cache=True)
+def _coefficients(alphas, betas, m, c, order, fact, out, d, e, z):
+    """phi_order(T_m) e_1 = V phi(Lambda) V^T e_1 of column c into out[:m]; T_m from
+    alphas[:m, c] and betas[:m - 1, c]; d, e (>= m) and z (>= m x m) are scratch."""
+    for i in range(m):
+        d[i] = alphas[i, c]
+    for i in range(m - 1):
+        e[i] = betas[i, c]
+    if not _tridiagonal_eigh(d, e, z, m):
+        t = np.zeros((m, m))
+        for i in range(m):
+            t[i, i] = alphas[i, c]
+        for i in range(m - 1):
+            t[i, i + 1] = betas[i, c]
+            t[i + 1, i] = betas[i, c]
+        lam, vectors = np.linalg.eigh(t)
+        for i in range(m):
+            d[i] = lam[i]
+            for j in range(m):
+                z[i, j] = vectors[i, j]
+    for j in range(m):
+        e[j] = _phi(d[j], order, fact) * z[0, j]
+    for i in range(m):
+        acc = 0.0
+        for j in range(m):
+            acc += z[i, j] * e[j]
+        out[i] = acc
+
+
+@njit(cache=True)
+def frozen_lanczos(
+    p: np.ndarray,
+    s: np.ndarray,
+    scale: float,
+    v: np.ndarray,
+    order: int,
+    rtol: float,
+    max_dim: int,
+    check_every: int,
+    norms: np.ndarray,
+    widths: np.ndarray,
+    peak: float,
+    out: np.ndarray,
+    converged: np.ndarray,
+) -> None:
+    """phi_order(c L) V into `out` (B, N, k) and the members' convergence into `converged` (B,).
+
+    p (B, N, N) symmetric, s (B, N), v (B, N, k); c = `scale`; `norms`, `widths` (B,) the
+    bounds of c L per member, or empty to compute them from s and P_kk (`peak` < 0: none).
+    """
+    n_members, n, _ = p.shape
+    k = v.shape[2]
+    max_dim = min(max_dim, n)
+    fact = _factorials(TAYLOR_TERMS + order + 1)
+    factor = scale / n
+    basis = np.empty((max_dim + 1, k, n))
+    w = np.empty((k, n))
+    alphas = np.empty((max_dim, k))
+    betas = np.empty((max_dim, k))
+    b = np.empty(k)
+    beta0 = np.empty(k)
+    coeffs = np.empty((k, max_dim))
+    eig_d = np.empty(max_dim)
+    eig_e = np.empty(max_dim)
+    eig_z = np.empty((max_dim, max_dim))
+    for member in range(n_members):
+        pm = p[member]
+        sm = s[member]
+        if norms.size == 0:
+            norm, width = _member_bounds(pm, sm, n, abs(scale), peak)
+        else:
+            norm, width = norms[member], widths[member]
+        first = min(math.ceil(3.5 * math.sqrt(norm)), 1 + math.ceil(3.5 * math.sqrt(width)))
+        first_check = int(min(max(first, 2.0), float(max_dim)))
+        tiny = 1e-12 * (norm + 1e-300)
+        for c in range(k):
+            column = v[member, :, c]
+            beta0[c] = math.sqrt(_dot(column, column, n))
+            norm0 = beta0[c] if beta0[c] > 0 else 1.0
+            for i in range(n):
+                basis[0, c, i] = v[member, i, c] / norm0
+        ok_member = False
+        stop_m = max_dim
+        for j in range(max_dim):
+            m = j + 1
+            all_small = True
+            for c in range(k):
+                q = basis[j, c]
+                wc = w[c]
+                # w = (P q - s * q) * c / N, P symmetric: rows of axpys
+                for i in range(n):
+                    wc[i] = 0.0
+                for col in range(n):
+                    q_col = q[col]
+                    row = pm[col]
+                    for i in range(n):
+                        wc[i] += q_col * row[i]
+                for i in range(n):
+                    wc[i] = (wc[i] - sm[i] * q[i]) * factor
+                alpha = _dot(wc, q, n)
+                for i in range(n):
+                    wc[i] -= alpha * q[i]
+                if j > 0:
+                    qp = basis[j - 1, c]
+                    proj = _dot(wc, qp, n)
+                    for i in range(n):
+                        wc[i] -= proj * qp[i]
+                b[c] = math.sqrt(_dot(wc, wc, n))
+                alphas[j, c] = alpha
+                if not b[c] <= tiny:
+                    all_small = False
+            stops = all_small or m == max_dim
+            check = (not stops) and m >= first_check and (m - first_check) % check_every == 0
+            if stops or check:
+                passed = check
+                for c in range(k):
+                    _coefficients(alphas, betas, m, c, order, fact, coeffs[c], eig_d, eig_e, eig_z)
+                    if check:
+                        size = 0.0
+                        for i in range(m):
+                            size += coeffs[c, i] * coeffs[c, i]
+                        estimate = b[c] * abs(coeffs[c, m - 1])
+                        if not estimate <= rtol * math.sqrt(size) + 1e-300:
+                            passed = False
+                if stops or passed:
+                    ok_member = all_small or passed
+                    stop_m = m
+                    break
+            for c in range(k):
+                betas[j, c] = b[c]
+                if b[c] <= tiny:
+                    for i in range(n):
+                        basis[j + 1, c, i] = 0.0
+                else:
+                    for i in range(n):
+                        basis[j + 1, c, i] = w[c, i] / b[c]
+        converged[member] = ok_member
+        # |v| Q_m c, summed vector by vector into w (free now), then written out
+        for c in range(k):
+            acc = w[c]
+            for i in range(n):
+                acc[i] = 0.0
+            for jj in range(stop_m):
+                coef = coeffs[c, jj]
+                q = basis[jj, c]
+                for i in range(n):
+                    acc[i] += coef * q[i]
+            for i in range(n):
+                out[member, i, c] = acc[i] * beta0[c]

@@ -1,0 +1,216 @@
+"""The compiled Lanczos (numba) against the numpy Lanczos and the Array-API reference.
+
+`agent_envs.integrators.compiled_lanczos` serves phi_p(c L(x)) V for the frozen L(x) on numpy
+when numba is installed; these tests require it (skipped without numba: the `dev` extra
+installs it, so CI runs them). Without numba the package must still import and step
+(`test_package_works_without_numba`, which runs everywhere).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import agent_envs  # noqa: F401  (registers the env ids)
+from agent_envs import SwarmModel, SwarmParams, make_integrator
+from agent_envs.integrators import phi_functions as pf
+
+TOL = 1e-12
+
+
+def _needs_numba():
+    pytest.importorskip("numba")
+    assert pf.load_compiled(), "numba is installed but the compiled Lanczos did not load"
+
+
+@pytest.fixture()
+def compiled():
+    """The compiled path on for the test (and restored after)."""
+    _needs_numba()
+    before = pf.use_compiled(True)
+    yield pf._compiled
+    pf.use_compiled(before)
+
+
+def _frozen(n, d, paths, spread, seed, scale, kernel="symmetric"):
+    params = SwarmParams(n_agents=n, dim=d, epsilon=0.05, kernel=kernel)
+    model = SwarmModel(params, linear_operator="dense")
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-spread, spread, (*paths, n, d))
+    f, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+    return model, x, f, scale * lin.matrix
+
+
+CASES = [
+    # (N, d, batch, spread): spread states (many Krylov steps), near consensus (few), d = 2
+    (100, 1, (20,), 1.0),
+    (100, 1, (), 0.01),
+    (100, 1, (1,), 1e-6),
+    (60, 2, (3,), 1.0),
+    (100, 1, (2, 3), 0.3),
+]
+
+
+@pytest.mark.parametrize(("n", "d", "batch", "spread"), CASES)
+@pytest.mark.parametrize("order", [1, 2])
+def test_compiled_equals_numpy_and_reference_lanczos(compiled, n, d, batch, spread, order):
+    _, _, f, op = _frozen(n, d, batch, spread, seed=n + d, scale=0.02)
+    got, got_ok = pf._compiled_frozen_lanczos(op, f, order, 1e-10, 100, None)
+    rows = pf._RowOperator(op)
+    numpy_result, numpy_ok = pf._lanczos_numpy(rows, f, order, 1e-10, 100)
+    reference, reference_ok = pf._lanczos_action(rows, f, order, 1e-10, 100)
+    scale = np.max(np.abs(reference))
+    assert got.shape == reference.shape == (*batch, n, d)
+    np.testing.assert_array_equal(got_ok, reference_ok)
+    np.testing.assert_array_equal(numpy_ok, reference_ok)
+    assert np.max(np.abs(got - numpy_result)) <= TOL * scale
+    assert np.max(np.abs(got - reference)) <= TOL * scale
+
+
+def test_compiled_result_is_phi_of_the_matrix(compiled):
+    """Against an independent value: the dense eigendecomposition of c L (to the Krylov
+    tolerance), including a column of zeros (breakdown at m = 1)."""
+    _, _, f, op = _frozen(100, 2, (4,), 0.5, seed=3, scale=0.02)
+    f = np.array(f)
+    f[1, :, 1] = 0.0
+    got, ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    lam, q = np.linalg.eigh(op.dense())
+    want = q @ (pf.phi_scalar(lam, 1)[..., None] * (np.swapaxes(q, -1, -2) @ f))
+    assert ok.all()
+    assert np.max(np.abs(got - want)) <= 1e-9 * np.max(np.abs(want))
+    np.testing.assert_array_equal(got[1, :, 1], 0.0)
+
+
+def test_bounds_given_or_read_from_the_row_sums_agree(compiled):
+    _, _, f, op = _frozen(100, 1, (5,), 1.0, seed=7, scale=0.02)
+    from_sums, _ = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    given, _ = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, op.krylov_bounds())
+    np.testing.assert_array_equal(from_sums, given)
+
+
+def test_not_converged_members_are_flagged_like_the_reference(compiled):
+    """With a Krylov dimension too small, the members that did not converge are the
+    reference's, and `phi_action` replaces exactly those with the dense method."""
+    _, _, f, op = _frozen(100, 1, (6,), 1.0, seed=11, scale=0.02)
+    _, got_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 6, None)
+    _, want_ok = pf._lanczos_action(pf._RowOperator(op), f, 1, 1e-10, 6)
+    np.testing.assert_array_equal(got_ok, want_ok)
+    assert not got_ok.all()
+    with pytest.warns(RuntimeWarning, match="falling back"):
+        got = pf.phi_action(op, f, 1, method="krylov", symmetric=True, max_krylov_dim=6)
+    dense = pf.phi_action(op.dense(), f, 1, method="eigh", symmetric=True)
+    assert np.max(np.abs(got - dense)) <= 1e-9 * np.max(np.abs(dense))
+
+
+def test_a_member_does_not_depend_on_the_batch(compiled):
+    """Each member is computed on its own: the batch's result equals the members' one by one
+    bit for bit (what the native vector env's equality with SyncVectorEnv needs)."""
+    model, x, f, op = _frozen(100, 1, (5,), 1.0, seed=5, scale=0.02)
+    batched, _ = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    for i in range(5):
+        fi, lin = model.drift_and_linearization(0.0, x[i : i + 1], None, "frozen")
+        one, _ = pf._compiled_frozen_lanczos(0.02 * lin.matrix, fi, 1, 1e-10, 100, None)
+        np.testing.assert_array_equal(one[0], batched[i])
+
+
+def test_stale_operator_raises(compiled):
+    model, x, f, op = _frozen(100, 1, (2,), 1.0, seed=1, scale=0.02)
+    model.drift_and_linearization(0.0, x + 0.1, None, "frozen")  # overwrites P
+    with pytest.raises(RuntimeError, match="overwritten"):
+        pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+
+
+def test_tridiagonal_eigensolver_against_lapack(compiled):
+    rng = np.random.default_rng(0)
+    for m in (1, 2, 5, 17, 40):
+        diag, off = rng.normal(size=m), rng.normal(size=m)
+        off[m // 2] = 0.0  # a split
+        d, e, z = diag.copy(), off.copy(), np.empty((m, m))
+        assert compiled._tridiagonal_eigh(d, e, z, m)
+        t = np.diag(diag) + np.diag(off[: m - 1], 1) + np.diag(off[: m - 1], -1)
+        order = np.argsort(d)
+        np.testing.assert_allclose(d[order], np.linalg.eigvalsh(t), atol=1e-13)
+        np.testing.assert_allclose(z.T @ z, np.eye(m), atol=1e-13)
+        np.testing.assert_allclose(t @ z, z * d, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "setting",
+    [{"n_agents": 100, "n_paths": 20, "max_control": 1.0}, {"n_agents": 60, "max_control": 1.0}],
+)
+def test_env_episode_compiled_equals_numpy(setting):
+    """One SERB episode of the env with and without the compiled Lanczos: the paths' positions
+    (float64; the observation is float32) and the rewards agree to 1e-12.
+
+    With max_control = 1 the swarm stays near consensus. Random actions at max_control = 25
+    spread it, and then a trajectory is only reproducible to the Krylov tolerance (1e-10) per
+    step, amplified by the steps after it: the numpy path itself, started 1e-15 away, ends
+    2e-6 away after 20 such steps (a perturbation moves a Krylov stopping dimension), and so
+    does the compiled one; each phi-action agrees to 1e-12 (the tests above)."""
+    _needs_numba()
+
+    def episode(enabled):
+        before = pf.use_compiled(enabled)
+        try:
+            env = gym.make("agent_envs/Swarm-v0", n_steps=20, epsilon=0.05, **setting)
+            env.reset(seed=3)
+            rng = np.random.default_rng(0)
+            trace = []
+            for _ in range(20):
+                action = rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+                _, reward, *_ = env.step(action)
+                trace += [env.unwrapped.episode.positions, np.array([reward])]
+            return np.concatenate([np.ravel(a).astype(float) for a in trace])
+        finally:
+            pf.use_compiled(before)
+
+    fast, slow = episode(True), episode(False)
+    assert np.max(np.abs(fast - slow)) <= TOL * np.max(np.abs(slow))
+
+
+def test_serb_step_uses_the_compiled_path(compiled, monkeypatch):
+    calls = []
+    original = pf._compiled_frozen_lanczos
+    monkeypatch.setattr(pf, "_compiled_frozen_lanczos", lambda *a: calls.append(1) or original(*a))
+    model = SwarmModel(SwarmParams(n_agents=100, epsilon=0.05), linear_operator="dense")
+    x = np.random.default_rng(0).uniform(-1, 1, (2, 100, 1))
+    make_integrator("serb").step(model, x, None, 0.0, 0.02, np.zeros_like(x))
+    assert calls
+
+
+def test_switched_off_by_environment_variable():
+    code = "from agent_envs.integrators import phi_functions as pf; print(pf.load_compiled())"
+    env = {"AGENT_ENVS_NUMBA": "0", "PATH": "/usr/bin:/bin"}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    assert done.stdout.strip() == "False"
+
+
+def test_package_works_without_numba():
+    """With numba made unimportable, `import agent_envs` works, the compiled path reports
+    unavailable, and a SERB env steps (the numpy Lanczos)."""
+    code = textwrap.dedent(
+        """
+        import sys
+        sys.modules["numba"] = None  # import numba raises ImportError
+        import gymnasium as gym
+        import agent_envs
+        from agent_envs.integrators import phi_functions as pf
+        env = gym.make("agent_envs/Swarm-v0", n_agents=100, n_steps=3, n_paths=2)
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(env.action_space.sample())
+        assert pf.load_compiled() is False
+        assert "torch" not in sys.modules
+        print("ok")
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "ok"
