@@ -1,0 +1,103 @@
+"""What do good controls look like in action units, and what does the common control lose?
+
+The env options of docs/env-options.md were designed from these figures. At the paper's setting
+(training.presets.PAPER_ENV: N = 100, m = 50, eps = 0.05, SERB, 20 paths, max_control = 25) on
+the test seeds, for the optimal control (the sample-average solve of
+`agent_envs.baselines.OptimalController`) and the proportional law u_k = beta (xbar - E x_k):
+
+- the largest |u_k^n| and the largest |mean_k u_k^n| (the common control), in action units
+  (/ max_control);
+- the common mode's share of the control energy, sum_n N |mean_k u_k^n|^2 / sum_n sum_k |u_k^n|^2;
+- how linear the common control is in the centre's offset: R^2 of mean_k u_k^n on
+  (xbar - c^n) with one gain per step n (a time-varying linear feedback on the summary
+  observation), pooled over the seeds;
+- the cost of applying only the common mode of the same controller (the env with
+  ``action_basis="common"``: the controller's mean control broadcast to every agent) against
+  the controller itself on the same seeds: what the "common" action basis can lose.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/env_options.py [--seeds 5] [--out FILE.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import agent_envs  # noqa: F401  (registers the env)
+from agent_envs.baselines import make_baseline
+from agent_envs.training.presets import PAPER_ENV
+
+
+def episode(name: str, seed: int, **options: str) -> dict[str, np.ndarray | float]:
+    """One test episode of controller `name` on the paper env with `options`: cost, the applied
+    controls (m, N) and the centre's offsets xbar - c^n (m,)."""
+    env = gym.make("agent_envs/Swarm-v0", **PAPER_ENV, **options)
+    policy = make_baseline(name, env)
+    obs, info = env.reset(seed=seed)
+    target = env.unwrapped.params.target_vector[0]
+    cost, controls, offsets, done = 0.0, [], [], False
+    while not done:
+        offsets.append(target - env.unwrapped.positions.mean())
+        action, _ = policy.predict(obs)
+        obs, reward, terminated, truncated, info = env.step(action)
+        controls.append(info["control"][:, 0])
+        cost -= reward
+        done = terminated or truncated
+    return {"cost": cost, "controls": np.array(controls), "offsets": np.array(offsets)}
+
+
+def linear_fit_r2(common: np.ndarray, offsets: np.ndarray) -> float:
+    """R^2 of common (S, m) on offsets (S, m) with one gain per step (no intercept)."""
+    gains = (common * offsets).sum(axis=0) / np.maximum((offsets**2).sum(axis=0), 1e-300)
+    residual = ((common - gains * offsets) ** 2).sum()
+    total = ((common - common.mean()) ** 2).sum()
+    return float(1.0 - residual / total)
+
+
+def measure(name: str, seeds: list[int], max_control: float) -> dict[str, float]:
+    runs = [episode(name, s) for s in seeds]
+    common_runs = [episode(name, s, action_basis="common") for s in seeds]
+    controls = np.stack([r["controls"] for r in runs])  # (S, m, N)
+    common = controls.mean(axis=-1)
+    n = controls.shape[-1]
+    costs = np.array([r["cost"] for r in runs])
+    common_costs = np.array([r["cost"] for r in common_runs])
+    return {
+        "cost": float(costs.mean()),
+        "max_abs_u_action_units": float(np.abs(controls).max() / max_control),
+        "max_abs_common_u_action_units": float(np.abs(common).max() / max_control),
+        "common_energy_share": float(n * (common**2).sum() / (controls**2).sum()),
+        "common_linear_r2": linear_fit_r2(common, np.stack([r["offsets"] for r in runs])),
+        "common_only_cost": float(common_costs.mean()),
+        "common_only_ratio": float((common_costs / costs).mean()),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=5, help="test seeds 10000, 10001, ...")
+    parser.add_argument("--out", default=None, help="write the figures as JSON here")
+    args = parser.parse_args()
+    seeds = list(range(10000, 10000 + args.seeds))
+    start = time.perf_counter()
+    results = {
+        name: measure(name, seeds, PAPER_ENV["max_control"]) for name in ("optimal", "proportional")
+    }
+    print(
+        f"paper setting, test seeds {seeds[0]}..{seeds[-1]} ({time.perf_counter() - start:.0f} s)"
+    )
+    keys = list(results["optimal"])
+    print(f"{'':32s}" + "".join(f"{name:>14s}" for name in results))
+    for key in keys:
+        print(f"{key:32s}" + "".join(f"{results[n][key]:14.4g}" for n in results))
+    if args.out:
+        with open(args.out, "w") as fh:
+            json.dump({"seeds": seeds, "results": results}, fh, indent=2)
+
+
+if __name__ == "__main__":
+    main()
