@@ -2,7 +2,7 @@
 
     agent-envs compare --preset quick            # a few minutes on 2 CPU cores
     agent-envs compare --preset paper            # N = 100, stiff, SERB, m = 50; much longer
-    agent-envs compare --preset paper --setting eps1 --learners ppo-swarm
+    agent-envs compare --preset paper --setting eps1 --learners ppo
 
 The presets are the ones of `agent-envs sweep` (`agent_envs.training.presets`): compare runs one
 training seed (``--seed``, default the preset's first) of one env setting (``--setting``,

@@ -1,8 +1,8 @@
 """`agent-envs tune`: a hyperparameter search for one learner of a preset, on Ray Tune + Optuna.
 
     agent-envs tune --preset smoke --learner ppo --num-samples 4 --out tune-smoke   # CI
-    agent-envs tune --preset paper --learner ppo-swarm --num-samples 40 --out tune-paper
-    agent-envs tune --preset paper --learner ppo-swarm --out tune-paper --resume
+    agent-envs tune --preset paper --learner ppo-shared --num-samples 40 --out tune-paper
+    agent-envs tune --preset paper --learner ppo-shared --out tune-paper --resume
 
 The way the SB3 ecosystem tunes (rl-zoo3's ``hyperparams_opt.py``): Optuna's TPE sampler
 proposes the hyperparameters (`SEARCH_SPACES`: rl-zoo3's ranges, with gamma's range widened to
