@@ -515,3 +515,24 @@ def test_no_two_presets_share_a_name_and_unknown_names_say_the_known_ones():
         get_preset("paper-sweep")
     assert len({p.name for p in PRESETS.values()}) == len(PRESETS)
     assert all(name == preset.name for name, preset in PRESETS.items())
+
+
+def test_training_table_counts_validations_above_twice_the_first():
+    from agent_envs.training.sweep_report import _env_options, rising_evaluations
+
+    curve = [{"cost_mean": c} for c in (0.5, 0.9, 1.2, 0.3, 1.01)]
+    assert rising_evaluations(curve) == 2  # 1.2 and 1.01 exceed 2 x 0.5; 0.9 does not
+    assert rising_evaluations([]) == 0
+    assert rising_evaluations(curve, factor=3.0) == 0
+    trial = Trial(
+        trial_id="t",
+        kind=LEARNER,
+        setting="main",
+        policy="ppo",
+        seed=0,
+        eval_env_kwargs={},
+        test_seeds=(1,),
+        settings=("main",),
+        train={"env_kwargs": {"n_agents": 5, "observation": "summary", "action_basis": "common"}},
+    )
+    assert _env_options(trial) == "observation=summary, action_basis=common"

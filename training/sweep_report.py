@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from agent_envs.training.defaults import interface_of
 from agent_envs.training.experiment import LEARNER, Trial
 from agent_envs.training.presets import Preset, get_preset
 
@@ -149,8 +150,26 @@ def plot_learning_curve_bands(
     return pd.DataFrame(points)
 
 
+def _env_options(trial: Trial) -> str:
+    """The learner's interface options (`agent_envs.envs.interface`) that differ from the
+    defaults, as "observation=summary, action_basis=common" ("-" for none)."""
+    kwargs = (trial.train or {}).get("env_kwargs", {})
+    changed = {k: v for k, v in interface_of(kwargs).items() if k in kwargs}
+    return ", ".join(f"{k}={v}" for k, v in changed.items()) or "-"
+
+
+def rising_evaluations(curve: list[dict[str, Any]], factor: float = 2.0) -> int:
+    """How many validations cost more than `factor` times the first one (a learner that gets
+    worse as it trains)."""
+    if not curve:
+        return 0
+    first = curve[0]["cost_mean"]
+    return sum(1 for row in curve[1:] if row["cost_mean"] > factor * first)
+
+
 def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
-    """One row per learner trial: budget, wall time, best validation cost."""
+    """One row per learner trial: env options, budget, wall time, best validation cost, and
+    the validations above twice the first."""
     from agent_envs.training.callbacks import read_learning_curve
     from agent_envs.training.experiment import learner_run_dir
 
@@ -167,10 +186,12 @@ def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
                 "setting": trial.setting,
                 "learner": trial.policy,
                 "seed": trial.seed,
+                "env options": _env_options(trial),
                 "training timesteps": summary["timesteps"],
                 "swarm steps": summary["swarm_steps"],
                 "training wall time [s]": summary["train_wall_time_s"],
                 "best validation cost": None if best is None else round(best["cost_mean"], 4),
+                "validations > 2x the first": rising_evaluations(curve),
                 "run": run_dir.name,
             }
         )
