@@ -270,3 +270,30 @@ def test_table_checker_can_fail():
     assert agrees("0.1041", 0.10413) and not agrees("0.1092", 0.10413)
     assert agrees("+309%", 3.0899, 100.0) and not agrees("+310%", 3.0849, 100.0)
     assert agrees("3.30", 3.2984) and not agrees("3.30", 3.31)
+
+
+def test_env_options_design_table_is_the_benchmarks_output():
+    """docs/env-options.md's design figures are benchmarks/env_options.py's committed output."""
+    import json
+
+    page = (ROOT / "docs" / "env-options.md").read_text()
+    data = json.loads((ROOT / "docs" / "results" / "env-options" / "results.json").read_text())
+    rows = {
+        "mean cost (5 episodes)": ("cost", 1.0),
+        "largest \\|u_k^n\\| / max_control": ("max_abs_u_action_units", 1.0),
+        "largest \\|mean_k u_k^n\\| / max_control": ("max_abs_common_u_action_units", 1.0),
+        "common mode's share of the control energy": ("common_energy_share", 100.0),
+        'cost with the common mode alone (`action_basis="common"`)': ("common_only_cost", 1.0),
+        "... per episode, against the controller itself": ("common_only_ratio", 1.0),
+    }
+    checked = 0
+    for line in page.splitlines():
+        escaped = line.strip().strip("|").replace("\\|", "\0")  # a literal | in a cell
+        cells = [c.strip().replace("\0", "\\|") for c in escaped.split("|")]
+        if len(cells) == 3 and cells[0] in rows:
+            key, scale = rows[cells[0]]
+            for printed, policy in zip(cells[1:], ("optimal", "proportional"), strict=True):
+                value = data["results"][policy][key]
+                assert agrees(printed.replace(" ", ""), value, scale), (cells[0], policy)
+                checked += 1
+    assert checked == 2 * len(rows)
