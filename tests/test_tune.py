@@ -8,7 +8,12 @@ import importlib.util
 import pytest
 
 from agent_envs.training.presets import PRESETS
-from agent_envs.training.tune import TuneConfig, search_space, trial_train_config
+from agent_envs.training.tune import (
+    TuneConfig,
+    agents_per_copy,
+    search_space,
+    trial_train_config,
+)
 
 
 @pytest.mark.parametrize("learner", ["ppo", "ppo-modes", "sac", "td3", "ppo-shared"])
@@ -18,7 +23,9 @@ def test_every_sampled_point_is_a_valid_training_config(learner):
     optuna = pytest.importorskip("optuna")
     config = TuneConfig(preset="paper", learner=learner, out="unused")
     base = config.base_config()
-    sample = search_space(base.algo, base.timesteps)
+    agents = agents_per_copy(base.to_dict())
+    assert agents == (100 if learner == "ppo-shared" else 1)
+    sample = search_space(base.algo, base.timesteps, agents)
     study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=0))
     for _ in range(20):
         trial = study.ask()
@@ -28,8 +35,9 @@ def test_every_sampled_point_is_a_valid_training_config(learner):
         assert tuned.eval_seed == base.eval_seed  # validation seeds only; test seeds unseen
         assert 0.8 <= tuned.hyperparams["gamma"] < 1.0
         if base.algo == "ppo":
-            n_envs = tuned.n_envs
-            assert tuned.hyperparams["batch_size"] <= tuned.hyperparams["n_steps"] * n_envs
+            rollout = tuned.hyperparams["n_steps"] * tuned.n_envs * agents
+            assert tuned.hyperparams["batch_size"] <= rollout
+            assert agents == 1 or 8 * rollout <= tuned.timesteps  # >= 8 rollouts per budget
         else:
             assert tuned.hyperparams["buffer_size"] == base.timesteps
         study.tell(trial, 1.0)

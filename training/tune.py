@@ -33,7 +33,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from agent_envs.params import SwarmParams
 from agent_envs.training.config import TrainConfig, command_line, option_field
+from agent_envs.training.defaults import is_multiagent
 from agent_envs.training.experiment import ExperimentArguments, learner_config
 from agent_envs.training.presets import PRESETS, Learner, get_preset
 from agent_envs.training.sweep import RayArguments
@@ -66,14 +68,22 @@ def _common(trial: Any, hyper: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def sample_ppo(trial: Any) -> dict[str, Any]:
-    """rl-zoo3's PPO space (`sample_ppo_params`) plus log_std_init, ortho_init and n_envs."""
+def sample_ppo(trial: Any, budget: int = 0, agents: int = 1) -> dict[str, Any]:
+    """rl-zoo3's PPO space (`sample_ppo_params`) plus log_std_init, ortho_init and n_envs.
+
+    For the parameter-shared learner (`agents` = N agent-envs per swarm copy, `budget` in
+    agent-steps) n_steps counts steps per agent: its range is 2^3 .. 2^9 and it is cut so that
+    the budget holds at least 8 rollouts of n_steps x n_envs x N samples.
+    """
     n_envs = trial.suggest_categorical("n_envs", [1, 2, 4, 8])
-    n_steps = 2 ** trial.suggest_int("n_steps_pow", 5, 11)
+    low, high = (3, 9) if agents > 1 else (5, 11)
+    n_steps = 2 ** trial.suggest_int("n_steps_pow", low, high)
+    if agents > 1 and budget > 0:
+        n_steps = max(min(n_steps, budget // (8 * agents * n_envs)), 1)
     batch_size = 2 ** trial.suggest_int("batch_size_pow", 5, 10)
     hyper: dict[str, Any] = {
         "n_steps": n_steps,
-        "batch_size": min(batch_size, n_steps * n_envs),
+        "batch_size": min(batch_size, n_steps * n_envs * agents),
         "gae_lambda": 1.0 - trial.suggest_float("one_minus_gae_lambda", 1e-4, 0.1, log=True),
         "ent_coef": trial.suggest_float("ent_coef", 1e-8, 0.1, log=True),
         "clip_range": trial.suggest_categorical("clip_range", [0.1, 0.2, 0.3, 0.4]),
@@ -118,15 +128,23 @@ def sample_td3(trial: Any, budget: int) -> dict[str, Any]:
     return {**_common(trial, hyper), "n_envs": 1}
 
 
-def search_space(algo: str, budget: int) -> Callable[[Any], dict[str, Any]]:
-    """The define-by-run search space of `algo` (an Optuna trial -> sampled settings)."""
+def search_space(algo: str, budget: int, agents: int = 1) -> Callable[[Any], dict[str, Any]]:
+    """The define-by-run search space of `algo` (an Optuna trial -> sampled settings);
+    `agents` > 1 for the parameter-shared learner (N agent-envs per swarm copy)."""
     if algo == "ppo":
-        return sample_ppo
+        return functools.partial(sample_ppo, budget=budget, agents=agents)
     if algo == "sac":
         return functools.partial(sample_sac, budget=budget)
     if algo == "td3":
         return functools.partial(sample_td3, budget=budget)
     raise ValueError(f"--learner: no search space for {algo!r}; tune takes ppo, sac, td3 learners")
+
+
+def agents_per_copy(base: dict[str, Any]) -> int:
+    """N for the parameter-shared learner (SB3 sees one env per agent), 1 otherwise."""
+    if not is_multiagent(base["env_id"]):
+        return 1
+    return int(base.get("env_kwargs", {}).get("n_agents", SwarmParams.n_agents))
 
 
 def trial_train_config(base: TrainConfig, sampled: dict[str, Any], run_name: str) -> TrainConfig:
@@ -248,7 +266,9 @@ class DefineByRun:
     base: dict[str, Any]
 
     def __call__(self, trial: Any) -> dict[str, Any]:
-        sample = search_space(self.base["algo"], int(self.base["timesteps"]))
+        sample = search_space(
+            self.base["algo"], int(self.base["timesteps"]), agents_per_copy(self.base)
+        )
         return {"base": self.base, "sampled": sample(trial)}
 
 
@@ -355,7 +375,7 @@ def parameter_importances(config: TuneConfig, base: TrainConfig, table) -> dict[
     if len(finished) < 2:
         return {}
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    sample = search_space(base.algo, base.timesteps)
+    sample = search_space(base.algo, base.timesteps, agents_per_copy(base.to_dict()))
     study = optuna.create_study(direction="minimize")
     costs = []
     for _, row in finished.iterrows():
@@ -377,7 +397,7 @@ def best_yaml(config: TuneConfig, base: TrainConfig, table) -> str:
     import yaml
 
     best = table.iloc[0]
-    sample = search_space(base.algo, base.timesteps)
+    sample = search_space(base.algo, base.timesteps, agents_per_copy(base.to_dict()))
     import optuna
 
     trial = optuna.trial.FixedTrial(_params(best, table.columns))
@@ -431,7 +451,6 @@ def write_summary(config: TuneConfig, base: TrainConfig, grid: Any) -> dict[str,
 
 def tune_learner(config: TuneConfig) -> dict[str, Any]:
     """Run the search of `config` and write its summary; returns paths and the trials table."""
-    from agent_envs.training.defaults import GYM_ENV_ID
     from agent_envs.training.environments import env_description
     from agent_envs.training.ray_session import clean_up_after_killed_driver, forget_session
     from agent_envs.training.storage import check_output_dir
@@ -440,7 +459,7 @@ def tune_learner(config: TuneConfig) -> dict[str, Any]:
     out = config.out_dir
     check_output_dir(out, "--out")
     base = config.base_config()
-    env_description(GYM_ENV_ID, base.env_kwargs)  # the env kwargs, before Ray starts
+    env_description(base.env_id, base.env_kwargs)  # the env kwargs, before Ray starts
     if config.dry_run:
         print(json.dumps(base.to_dict(), indent=1))
         return {"base": base}
