@@ -16,6 +16,7 @@ the test seeds, for the optimal control (the sample-average solve of
   the controller itself on the same seeds: what the "common" action basis can lose.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/env_options.py [--seeds 5] [--out FILE.json]
+        [--env-kwargs '{"epsilon": 1.0}']    # another setting (over the paper's)
 """
 
 from __future__ import annotations
@@ -31,11 +32,14 @@ import agent_envs  # noqa: F401  (registers the env)
 from agent_envs.baselines import make_baseline
 from agent_envs.training.presets import PAPER_ENV
 
+#: The env of the figures: the paper's, with --env-kwargs over it.
+SETTING = dict(PAPER_ENV)
+
 
 def episode(name: str, seed: int, **options: str) -> dict[str, np.ndarray | float]:
-    """One test episode of controller `name` on the paper env with `options`: cost, the applied
-    controls (m, N) and the centre's offsets xbar - c^n (m,)."""
-    env = gym.make("agent_envs/Swarm-v0", **PAPER_ENV, **options)
+    """One test episode of controller `name` on the setting's env with `options`: cost, the
+    applied controls (m, N) and the centre's offsets xbar - c^n (m,)."""
+    env = gym.make("agent_envs/Swarm-v0", **SETTING, **options)
     policy = make_baseline(name, env)
     obs, info = env.reset(seed=seed)
     target = env.unwrapped.params.target_vector[0]
@@ -81,11 +85,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5, help="test seeds 10000, 10001, ...")
     parser.add_argument("--out", default=None, help="write the figures as JSON here")
+    parser.add_argument("--env-kwargs", default="{}", help="JSON env kwargs over the paper's")
     args = parser.parse_args()
+    SETTING.update(json.loads(args.env_kwargs))
     seeds = list(range(10000, 10000 + args.seeds))
     start = time.perf_counter()
     results = {
-        name: measure(name, seeds, PAPER_ENV["max_control"]) for name in ("optimal", "proportional")
+        name: measure(name, seeds, SETTING["max_control"]) for name in ("optimal", "proportional")
     }
     print(
         f"paper setting, test seeds {seeds[0]}..{seeds[-1]} ({time.perf_counter() - start:.0f} s)"
@@ -96,7 +102,7 @@ def main() -> None:
         print(f"{key:32s}" + "".join(f"{results[n][key]:14.4g}" for n in results))
     if args.out:
         with open(args.out, "w") as fh:
-            json.dump({"seeds": seeds, "results": results}, fh, indent=2)
+            json.dump({"seeds": seeds, "env_kwargs": SETTING, "results": results}, fh, indent=2)
 
 
 if __name__ == "__main__":
