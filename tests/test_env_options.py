@@ -265,3 +265,20 @@ def test_a_controller_that_needs_positions_refuses_the_summary_layout():
     env = gym.make(ENV, **SMALL, observation="summary")
     with pytest.raises(ValueError, match="summary"):
         ProportionalController(env)
+
+
+@pytest.mark.parametrize(("observation", "basis"), [("summary", "common"), ("modes", "modes")])
+def test_torch_vector_env_follows_the_numpy_one_with_options(observation, basis):
+    pytest.importorskip("torch")
+    kwargs = {**SMALL, "observation": observation, "action_basis": basis}
+    make = {"num_envs": 2, "vectorization_mode": "vector_entry_point"}
+    numpy_env = gym.make_vec(ENV, **make, **kwargs)
+    torch_env = gym.make_vec(ENV, **make, backend="torch", **kwargs)
+    o1, _ = numpy_env.reset(seed=1)
+    o2, _ = torch_env.reset(seed=1)
+    np.testing.assert_allclose(o2, o1, rtol=1e-6, atol=1e-9)
+    for _ in range(5):
+        action = np.full(numpy_env.action_space.shape, 0.1, np.float32)
+        s1, s2 = numpy_env.step(action), torch_env.step(action)
+        np.testing.assert_allclose(s2[0], s1[0], rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(s2[1], s1[1], rtol=1e-10)
