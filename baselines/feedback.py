@@ -260,9 +260,7 @@ class FeedbackController:
             on = n * self.dt < tbar - 1e-9
             u = np.where(on.reshape(on.shape + (1,) * (u.ndim - 1)), u, 0.0)
         a = u / self.max_control
-        if basis != "agents":
-            a = actions_from_controls(u, basis, self.max_control)
-        clipped = np.abs(a) > 1.0
+        clipped = np.abs(a) > 1.0  # counted on the controls, in every action basis
         self.n_actions += a.size
         n_clip = int(np.count_nonzero(clipped))
         self.n_clipped += n_clip
@@ -274,6 +272,8 @@ class FeedbackController:
                 RuntimeWarning,
                 stacklevel=4,
             )
+        if basis != "agents":
+            a = actions_from_controls(u, basis, self.max_control)
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
     def _predict_gym(self, batch: np.ndarray, state) -> tuple[np.ndarray, np.ndarray]:

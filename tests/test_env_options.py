@@ -282,3 +282,42 @@ def test_torch_vector_env_follows_the_numpy_one_with_options(observation, basis)
         s1, s2 = numpy_env.step(action), torch_env.step(action)
         np.testing.assert_allclose(s2[0], s1[0], rtol=1e-6, atol=1e-9)
         np.testing.assert_allclose(s2[1], s1[1], rtol=1e-10)
+
+
+def test_controls_are_clipped_agent_by_agent_before_the_change_of_basis():
+    u = np.array([[2.0], [0.0]])  # agent 0 beyond the bound max_control = 1
+    agents = controls_from_actions(actions_from_controls(u, "agents", 1.0), "agents", 1.0)
+    modes = controls_from_actions(actions_from_controls(u, "modes", 1.0), "modes", 1.0)
+    np.testing.assert_allclose(agents, [[1.0], [0.0]])
+    np.testing.assert_allclose(modes, agents, atol=1e-12)  # its coordinates fit the box here
+    common = actions_from_controls(u, "common", 1.0)
+    np.testing.assert_allclose(common, [[0.5]])  # the mean of the clipped controls
+
+
+def test_bad_basis_or_layout_in_the_helpers_names_the_option():
+    from agent_envs.envs.observation import observation_size, split_observation
+
+    with pytest.raises(ValueError, match="action_basis must be one of"):
+        controls_from_actions(np.zeros((3, 1)), "agent", 1.0)
+    with pytest.raises(ValueError, match="action_basis must be one of"):
+        actions_from_controls(np.zeros((3, 1)), "mode", 1.0)
+    with pytest.raises(ValueError, match=r"shape \(\.\.\., 1, d\)"):
+        controls_from_actions(np.zeros((3, 1)), "common", 1.0, 3)  # (N, d): not one control
+    with pytest.raises(ValueError, match="observation must be one of"):
+        observation_size(3, 1, "relativ")
+    with pytest.raises(ValueError, match="observation must be one of"):
+        split_observation(np.zeros(8), 3, 1, "swarm")  # a PettingZoo layout
+    with pytest.raises(ValueError, match="observation must be one of"):
+        agent_observations_from_global(np.zeros(8), 3, 1, "modes")  # a Gymnasium layout
+
+
+def test_baselines_count_clipped_controls_in_every_basis():
+    counts = []
+    for basis in ACTION_BASES:
+        env = gym.make(ENV, **SMALL, max_control=2.0, action_basis=basis)
+        policy = ProportionalController(env)
+        obs, _ = env.reset(seed=1)
+        with pytest.warns(RuntimeWarning, match="exceeds max_control"):
+            policy.predict(obs)
+        counts.append(policy.n_clipped)
+    assert counts[0] > 0 and len(set(counts)) == 1

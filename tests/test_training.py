@@ -536,3 +536,81 @@ def test_rl_zoo3_trains_with_the_shipped_yaml(tmp_path):
     (run,) = (tmp_path / "ppo").iterdir()
     assert (run / "agent_envs-Swarm-v0.zip").is_file()
     assert (run / "agent_envs-Swarm-v0" / "vecnormalize.pkl").is_file()
+
+
+# ------------------------------------------------------------------------ env options (issue 20)
+
+
+def _episode_cost(policy, env, seed: int = 3) -> float:
+    obs, _ = env.reset(seed=seed)
+    total, done = 0.0, False
+    while not done:
+        action, _ = policy.predict(obs)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total -= reward
+        done = terminated or truncated
+    return total
+
+
+def test_a_policy_trained_with_env_options_acts_alike_on_the_default_env(tmp_path):
+    """A run trained with observation="summary", action_basis="common" is evaluated on the
+    default interface through InterfacePolicy with the cost it has on its own env; on an env
+    with another N it is refused (its shapes do not fit its recorded interface)."""
+    import gymnasium as gym
+
+    from agent_envs.training.policies import InterfacePolicy, resolve_policy
+    from agent_envs.training.train import train
+
+    options = {"observation": "summary", "action_basis": "common"}
+    config = tiny_config(tmp_path, env_kwargs={**TINY_ENV, **options}, timesteps=128)
+    run_dir = train(config)
+    model = run_dir / "final_model.zip"
+    default = gym.make(GYM_ENV_ID, **TINY_ENV)
+    own = gym.make(GYM_ENV_ID, **TINY_ENV, **options)
+    wrapped, info = resolve_policy(str(model), default)
+    assert isinstance(getattr(wrapped, "policy", None), object) and info["interface"] == options
+    direct, _ = resolve_policy(str(model), own)
+    assert _episode_cost(wrapped, default) == pytest.approx(_episode_cost(direct, own), rel=1e-5)
+    assert isinstance(wrapped, InterfacePolicy)
+    # the summary observation has 3d + 1 entries at any N, but the action is one control
+    # here too, so the model fits at another N; a "modes" model does not
+    modes = {"observation": "modes", "action_basis": "modes"}
+    config = tiny_config(tmp_path, env_kwargs={**TINY_ENV, **modes}, timesteps=128)
+    modes_model = train(config) / "final_model.zip"
+    other_n = gym.make(GYM_ENV_ID, **{**TINY_ENV, "n_agents": TINY_ENV["n_agents"] + 1})
+    with pytest.raises(ValueError, match="needs"):
+        resolve_policy(str(modes_model), other_n)
+
+
+def test_a_shared_policy_with_the_swarm_layout_is_evaluated_in_its_layout(tmp_path):
+    """The parameter-shared learner with observation="swarm", agent_reward="team": validated
+    and evaluated on the Gymnasium env through PerAgentPolicy in its layout, compare's
+    per-agent table runs it in its layout with own rewards, and a run whose env.json has the
+    Gymnasium twin's id (earlier versions wrote that) still loads as per-agent."""
+    import json
+
+    import gymnasium as gym
+
+    from agent_envs.training.checkpoints import best_model_path
+    from agent_envs.training.compare import per_agent_table
+    from agent_envs.training.policies import PerAgentPolicy, resolve_policy
+    from agent_envs.training.train import train
+
+    options = {"observation": "swarm", "agent_reward": "team"}
+    config = tiny_config(
+        tmp_path, "ppo", PETTINGZOO_ENV_ID, env_kwargs={**TINY_ENV, **options}, timesteps=500
+    )
+    run_dir = train(config)
+    curve = (run_dir / "learning_curve.csv").read_text().splitlines()
+    assert len(curve) >= 2  # validated on the Gymnasium twin
+    env = gym.make(GYM_ENV_ID, **TINY_ENV)
+    policy, info = resolve_policy(str(best_model_path(run_dir)), env)  # compare's model
+    assert isinstance(policy, PerAgentPolicy) and policy.layout == "swarm" and info["per_agent"]
+    cost = _episode_cost(policy, env)
+    row = per_agent_table(run_dir, dict(TINY_ENV), [3])[0].iloc[0]
+    # each agent's own cost adds up to the swarm's cost of the same episode
+    assert row["swarm cost (sum over agents), mean"] == pytest.approx(cost, rel=1e-5)
+    description = json.loads((run_dir / "env.json").read_text())
+    (run_dir / "env.json").write_text(json.dumps({**description, "env_id": GYM_ENV_ID}))
+    again, _ = resolve_policy(str(run_dir / "final_model.zip"), env)
+    assert isinstance(again, PerAgentPolicy) and again.layout == "swarm"

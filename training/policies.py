@@ -32,6 +32,7 @@ from agent_envs.envs.observation import (
     agent_observation_size,
     agent_observations_from_global,
     global_observation,
+    observation_size,
     split_observation,
 )
 from agent_envs.training.defaults import (
@@ -337,15 +338,22 @@ def trained_interface(model_path: Path) -> dict[str, Any]:
     for folder in (model_path.parent, model_path.parent.parent):
         env_json = folder / "env.json"
         if env_json.is_file():
-            try:
-                description = json.loads(env_json.read_text())
-                kwargs = description.get("env_kwargs", {})
-                env_id = description.get("env_id")
-            except (OSError, ValueError, AttributeError):
-                kwargs, env_id = {}, None
+            kwargs, env_id = _read_json_keys(env_json, "env_kwargs", "env_id")
+            # the trained env id from the run's config (runs of earlier versions wrote the
+            # Gymnasium twin's id into env.json for the parameter-shared learner)
+            trained_id = _read_json_keys(folder / "config.json", "env_id")[0]
             kwargs = kwargs if isinstance(kwargs, dict) else {}
-            return {"env_id": env_id, **interface_of(kwargs)}
+            return {"env_id": trained_id or env_id, **interface_of(kwargs)}
     return {"env_id": None, **interface_of({})}
+
+
+def _read_json_keys(path: Path, *keys: str) -> list[Any]:
+    """The values of `keys` in the JSON object at `path` (None where missing or unreadable)."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return [None] * len(keys)
+    return [data.get(k) if isinstance(data, dict) else None for k in keys]
 
 
 def _adapt_to_env(policy: Any, model: Any, env: Any, path: Path, info: dict[str, Any]) -> Any:
@@ -359,10 +367,11 @@ def _adapt_to_env(policy: Any, model: Any, env: Any, path: Path, info: dict[str,
     here = (getattr(config, "observation", "absolute"), getattr(config, "action_basis", "agents"))
     obs_shape = tuple(model.observation_space.shape or ())
     env_shape = tuple(env.observation_space.shape or ())
-    per_agent = (agent_observation_size(d, trained["observation"]),)
-    multiagent = trained["env_id"] == PETTINGZOO_ENV_ID or (
-        trained["env_id"] is None and obs_shape == per_agent and env_shape != per_agent
-    )
+    if trained["env_id"] is None:  # no run folder: the default per-agent row, by its shape
+        per_agent = (agent_observation_size(d),)
+        multiagent = obs_shape == per_agent and env_shape != per_agent
+    else:
+        multiagent = trained["env_id"] == PETTINGZOO_ENV_ID
     if multiagent:
         if here != ("absolute", "agents"):
             raise ValueError(
@@ -377,6 +386,14 @@ def _adapt_to_env(policy: Any, model: Any, env: Any, path: Path, info: dict[str,
             raise ValueError(
                 f"model {path} was trained with observation={wanted[0]!r}, "
                 f"action_basis={wanted[1]!r}; evaluate it on those or on the defaults"
+            )
+        expected = (observation_size(n, d, wanted[0]),), (action_rows(wanted[1], n) * d,)
+        found = obs_shape, tuple(model.action_space.shape or ())
+        if found != expected:
+            raise ValueError(
+                f"model {path} has observation and action shapes {found}; its interface "
+                f"(observation={wanted[0]!r}, action_basis={wanted[1]!r}) on this env needs "
+                f"{expected} (was it trained with other env kwargs, e.g. n_agents?)"
             )
         policy = InterfacePolicy(policy, n, d, *wanted, inner.max_control, model.observation_space)
         info["interface"] = {"observation": wanted[0], "action_basis": wanted[1]}

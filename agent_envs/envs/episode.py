@@ -573,7 +573,8 @@ class SwarmEpisode:
         """u = max_control * clip(action, -1, 1) as an (N, d) float64 array (in the config's
         ``action_basis``: `agent_envs.envs.interface.controls_from_actions`).
 
-        `action` must have N d entries, shaped (N d,) or (N, d) (or (N,) for d = 1), of a real
+        `action` must have rows d entries, shaped (rows d,) or (rows, d) (rows = N, or 1 for
+        ``action_basis="common"``; (N,) for d = 1), of a real
         numeric dtype (`agent_envs.validation.real_array`): strings, bools and complex numbers
         raise `TypeError` (a complex part is never dropped silently); an object array is
         accepted when every entry is an int or a float. A NaN or infinite entry, or an int too

@@ -30,7 +30,8 @@ control every agent shares.
   difference mode. The map is invertible, so every control of |u_k| <= max_control whose
   coordinates fit the box is reachable; in particular any common control plus differences of
   Euclidean norm <= max_control (the box holds the ball of radius max_control, since e_1 ..
-  e_{N-1} are orthonormal).
+  e_{N-1} are orthonormal) as long as each agent's sum stays within the bound (the control is
+  clipped agent by agent after the change of basis).
 - ``"common"``: the action is mode 0 alone, d entries: u_k = max_control * clip(a, -1, 1) for
   every agent (one control broadcast to the swarm). This restricts the controls: no agent can
   be steered apart from the others. docs/env-options.md measures what that costs (the optimal
@@ -99,7 +100,10 @@ ENV_KIND_VALUES: dict[str, dict[str, tuple[str, ...]]] = {
 def check_option(name: str, value: Any) -> str:
     """`value` if it is one of `OPTION_VALUES[name]`; TypeError/ValueError naming `name`."""
     if not isinstance(value, str):
-        raise TypeError(f"{name} must be a str, got {type(value).__name__}")
+        raise TypeError(
+            f"{name} must be a str, one of {', '.join(OPTION_VALUES[name])}; got "
+            f"{type(value).__name__}"
+        )
     if value not in OPTION_VALUES[name]:
         raise ValueError(f"{name} must be one of {', '.join(OPTION_VALUES[name])}; got {value!r}")
     return value
@@ -188,6 +192,7 @@ def controls_from_actions(
     1)), -1, 1); "common": max_control * clip(a, -1, 1) (..., 1, d) repeated for the
     `n_agents` agents. numpy arrays or torch tensors.
     """
+    check_option("action_basis", basis)
     xp = arrays.namespace(actions)
     a = xp.clip(actions, -1.0, 1.0)
     if basis == "modes":
@@ -195,15 +200,25 @@ def controls_from_actions(
     elif basis == "common":
         if n_agents is None:
             raise ValueError("n_agents is needed for action_basis='common'")
+        if a.shape[-2] != 1:
+            raise ValueError(
+                f"actions for action_basis='common' have shape (..., 1, d), got {tuple(a.shape)}"
+            )
         a = xp.broadcast_to(a, (*a.shape[:-2], n_agents, a.shape[-1]))
     return max_control * a
 
 
 def actions_from_controls(controls: Any, basis: str, max_control: float) -> np.ndarray:
-    """The action that applies u (..., N, d) in the action basis, clipped to [-1, 1]:
-    u / max_control ("agents"), to_modes(u) / max_control ("modes"), or the agents' mean
-    control / max_control, (..., 1, d) ("common": the part of u it can apply). numpy, float64."""
-    u = np.asarray(controls, dtype=np.float64) / max_control
+    """The action that applies u (..., N, d) in the action basis, clipped to [-1, 1].
+
+    u is first clipped to the control bound agent by agent (what the "agents" basis applies),
+    then expressed in the basis: u / max_control ("agents"), to_modes(u) / max_control
+    ("modes": the env then applies exactly the clipped u whenever its coordinates fit the box;
+    a difference coordinate can reach about 2, and is clipped), or the agents' mean control /
+    max_control, (..., 1, d) ("common": the part of u it can apply). numpy, float64.
+    """
+    check_option("action_basis", basis)
+    u = np.clip(np.asarray(controls, dtype=np.float64) / max_control, -1.0, 1.0)
     if basis == "modes":
         u = to_modes(u)
     elif basis == "common":

@@ -36,13 +36,30 @@ import numpy as np
 from gymnasium import spaces
 
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
-from agent_envs.envs.interface import from_modes, modes_bound, swarm_summary, to_modes
+from agent_envs.envs.interface import (
+    AGENT_OBSERVATIONS,
+    OBSERVATIONS,
+    from_modes,
+    modes_bound,
+    swarm_summary,
+    to_modes,
+)
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
+def check_layout(layout: str, agent: bool = False) -> str:
+    """`layout` if it is a Gymnasium (`agent`: a PettingZoo agent's) observation layout;
+    ValueError naming ``observation`` and the layouts otherwise."""
+    accepted = AGENT_OBSERVATIONS if agent else OBSERVATIONS
+    if layout not in accepted:
+        raise ValueError(f"observation must be one of {', '.join(accepted)}; got {layout!r}")
+    return layout
+
+
 def observation_size(n_agents: int, dim: int, layout: str = "absolute") -> int:
     """Length of the Gymnasium observation: 2 N d + d + 1 (``"summary"``: 3 d + 1)."""
+    check_layout(layout)
     if layout == "summary":
         return 3 * dim + 1
     return 2 * n_agents * dim + dim + 1
@@ -50,6 +67,7 @@ def observation_size(n_agents: int, dim: int, layout: str = "absolute") -> int:
 
 def agent_observation_size(dim: int, layout: str = "absolute") -> int:
     """Length of one PettingZoo agent's observation: 3 d + 1 (``"swarm"``: 5 d + 1)."""
+    check_layout(layout, agent=True)
     return 5 * dim + 1 if layout == "swarm" else 3 * dim + 1
 
 
@@ -219,6 +237,7 @@ def split_observation(
         dict with ``positions`` (..., N, d), ``interaction_drift`` (..., N, d), ``target``
         (..., d) and ``time_fraction`` (...), as float64 arrays.
     """
+    check_layout(layout)
     if layout == "summary":
         raise ValueError(
             "observation='summary' holds the swarm's centre and spread, not the agents' "
@@ -287,6 +306,7 @@ def agent_observations_from_global(
         means in `layout` (without its clipping, which the Gymnasium observation has already
         had; the swarm's centre and spread are taken from the float32 positions).
     """
+    check_layout(layout, agent=True)
     parts = split_observation(obs, n_agents, dim)
     lead = parts["positions"].shape[:-2]
     shape = (*lead, n_agents, dim)
