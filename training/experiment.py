@@ -282,6 +282,7 @@ def learner_config(
         out=str(runs_dir),
         run_name=name,
         n_envs=learner.n_envs,
+        normalize=learner.normalize,
         hyperparams=dict(learner.hyperparams),
         eval_freq=max(timesteps // preset.evaluations, 1),
         eval_episodes=preset.validation_episodes,

@@ -48,7 +48,8 @@ class Learner:
     own env options over the setting's: its interface (`agent_envs.envs.interface`:
     observation layout, action basis, agent reward), which never changes the dynamics, the cost
     or the draws; the learned policy is evaluated on the setting's env through
-    `agent_envs.training.policies.InterfacePolicy` / `PerAgentPolicy`.
+    `agent_envs.training.policies.InterfacePolicy` / `PerAgentPolicy`. `normalize` is
+    `agent-envs train --normalize` (VecNormalize; None: the hyperparameter file's choice).
     """
 
     name: str
@@ -59,6 +60,7 @@ class Learner:
     n_envs: int | None = None
     description: str = ""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
+    normalize: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -267,10 +269,11 @@ SWARM_TEAM = {"observation": "swarm", "agent_reward": "team"}
 def _paper_learner(
     name: str, algo: str, env_id: str, env_kwargs: dict[str, Any], description: str, **changes: Any
 ) -> Learner:
-    """A learner of the paper preset: its entry of hyperparams/paper.yml (n_envs apart),
-    `changes` over it, its budget and env options."""
+    """A learner of the paper preset: its entry of hyperparams/paper.yml (n_envs and normalize
+    apart, as rl-zoo3 reads them), `changes` over it, its budget and env options."""
     entry = dict(read_hyperparams_file("paper")[name])
     n_envs = int(entry.pop("n_envs"))
+    normalize = entry.pop("normalize", None)
     return Learner(
         name,
         algo,
@@ -280,6 +283,7 @@ def _paper_learner(
         n_envs,
         description,
         env_kwargs,
+        normalize,
     )
 
 
