@@ -233,8 +233,8 @@ def test_readme_headline_table_matches_the_result_files():
         "ppo",
         "td3",
         "proportional",
-        "ppo-shared",
         "ppo-modes",
+        "ppo-shared",
         "zero",
         "turnpike",
     ]
