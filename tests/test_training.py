@@ -562,7 +562,9 @@ def test_a_policy_trained_with_env_options_acts_alike_on_the_default_env(tmp_pat
     from agent_envs.training.train import train
 
     options = {"observation": "summary", "action_basis": "common"}
-    config = tiny_config(tmp_path, env_kwargs={**TINY_ENV, **options}, timesteps=128)
+    config = tiny_config(
+        tmp_path, env_kwargs={**TINY_ENV, **options}, timesteps=128, run_name="summary"
+    )
     run_dir = train(config)
     model = run_dir / "final_model.zip"
     default = gym.make(GYM_ENV_ID, **TINY_ENV)
@@ -575,7 +577,9 @@ def test_a_policy_trained_with_env_options_acts_alike_on_the_default_env(tmp_pat
     # the summary observation has 3d + 1 entries at any N, but the action is one control
     # here too, so the model fits at another N; a "modes" model does not
     modes = {"observation": "modes", "action_basis": "modes"}
-    config = tiny_config(tmp_path, env_kwargs={**TINY_ENV, **modes}, timesteps=128)
+    config = tiny_config(
+        tmp_path, env_kwargs={**TINY_ENV, **modes}, timesteps=128, run_name="modes"
+    )
     modes_model = train(config) / "final_model.zip"
     other_n = gym.make(GYM_ENV_ID, **{**TINY_ENV, "n_agents": TINY_ENV["n_agents"] + 1})
     with pytest.raises(ValueError, match="needs"):
