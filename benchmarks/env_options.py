@@ -93,9 +93,7 @@ def main() -> None:
     results = {
         name: measure(name, seeds, SETTING["max_control"]) for name in ("optimal", "proportional")
     }
-    print(
-        f"paper setting, test seeds {seeds[0]}..{seeds[-1]} ({time.perf_counter() - start:.0f} s)"
-    )
+    print(f"{SETTING}, test seeds {seeds[0]}..{seeds[-1]} ({time.perf_counter() - start:.0f} s)")
     keys = list(results["optimal"])
     print(f"{'':32s}" + "".join(f"{name:>14s}" for name in results))
     for key in keys:

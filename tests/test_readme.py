@@ -262,12 +262,17 @@ def test_table_checker_can_fail():
     assert agrees("3.30", 3.2984) and not agrees("3.30", 3.31)
 
 
-def test_env_options_design_table_is_the_benchmarks_output():
+@pytest.mark.parametrize(
+    ("results", "first_cell"),
+    [("results.json", "figure"), ("results_eps1.json", "figure, eps = 1")],
+)
+def test_env_options_design_table_is_the_benchmarks_output(results, first_cell):
     """docs/env-options.md's design figures are benchmarks/env_options.py's committed output."""
     import json
 
     page = (ROOT / "docs" / "env-options.md").read_text()
-    data = json.loads((ROOT / "docs" / "results" / "env-options" / "results.json").read_text())
+    page = page[page.index(f"| {first_cell} | optimal control |") :].split("\n\n")[0]
+    data = json.loads((ROOT / "docs" / "results" / "env-options" / results).read_text())
     rows = {
         "mean cost (5 episodes)": ("cost", 1.0),
         "largest \\|u_k^n\\| / max_control": ("max_abs_u_action_units", 1.0),
@@ -287,3 +292,21 @@ def test_env_options_design_table_is_the_benchmarks_output():
                 assert agrees(printed.replace(" ", ""), value, scale), (cells[0], policy)
                 checked += 1
     assert checked == 2 * len(rows)
+
+
+def test_shared_policy_across_n_table_is_the_benchmarks_output():
+    """The Results page's across-N table is benchmarks/shared_across_n.py's committed CSV."""
+    path = ROOT / "docs" / "results" / "shared-across-n" / "across_n.csv"
+    with open(path, newline="") as f:
+        data = {(r["policy"], int(r["n_agents"])): r for r in csv.DictReader(f)}
+    shared = sorted({p for p, _ in data if p.startswith("shared")})
+    rows = readme_table("### The parameter-shared policy at other N", "N")
+    assert [int(cells[0]) for cells in rows] == [20, 100, 1000, 10000]
+    for cells in rows:
+        n = int(cells[0])
+        for cell, policy in zip(cells[1:4], shared, strict=True):
+            cost, ratio = _numbers(cell)[:2]
+            assert agrees(cost, float(data[(policy, n)]["mean_cost"])), (n, policy, cell)
+            assert agrees(ratio, float(data[(policy, n)]["ratio_to_proportional"])), cell
+        for cell, policy in zip(cells[4:6], ("proportional", "zero"), strict=True):
+            assert agrees(cell, float(data[(policy, n)]["mean_cost"])), (n, policy, cell)
