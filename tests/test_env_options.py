@@ -13,6 +13,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from episodes import episode_cost
 from gymnasium.utils.env_checker import check_env
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -205,16 +206,6 @@ def test_interface_policy_acts_on_the_default_env_as_in_its_own():
             obs = np.asarray(obs)
             return np.clip(-0.2 * obs[..., :1], -1, 1).astype(np.float32), state
 
-    def cost(env, policy):
-        obs, _ = env.reset(seed=11)
-        total, done = 0.0, False
-        while not done:
-            action, _ = policy.predict(obs)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total -= reward
-            done = terminated or truncated
-        return total
-
     wrapped = InterfacePolicy(
         CentreFeedback(),
         6,
@@ -224,8 +215,8 @@ def test_interface_policy_acts_on_the_default_env_as_in_its_own():
         own.unwrapped.max_control,
         own.observation_space,
     )
-    assert cost(gym.make(ENV, **kwargs), wrapped) == pytest.approx(
-        cost(own, CentreFeedback()), rel=1e-6
+    assert episode_cost(wrapped, gym.make(ENV, **kwargs), 11) == pytest.approx(
+        episode_cost(CentreFeedback(), own, 11), rel=1e-6
     )
 
 
@@ -233,15 +224,7 @@ def test_references_act_alike_under_every_action_basis():
     costs = []
     for basis in ("agents", "modes"):
         env = gym.make(ENV, **SMALL, observation="modes", action_basis=basis)
-        policy = ProportionalController(env)
-        obs, _ = env.reset(seed=1)
-        total, done = 0.0, False
-        while not done:
-            action, _ = policy.predict(obs)
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total -= reward
-            done = terminated or truncated
-        costs.append(total)
+        costs.append(episode_cost(ProportionalController(env), env, 1))
     assert costs[1] == pytest.approx(costs[0], rel=1e-7)  # float32 actions, other basis
 
 

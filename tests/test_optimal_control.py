@@ -9,6 +9,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
+from episodes import episode_cost
 
 import agent_envs  # noqa: F401  (registers the env id)
 from agent_envs.baselines import (
@@ -358,14 +359,7 @@ def test_baselines_import_without_torch_and_solve_names_the_extra():
 
 
 def run_episode(env, policy, seed):
-    obs, _ = env.reset(seed=seed)
-    total, done = 0.0, False
-    while not done:
-        action, _ = policy.predict(obs)
-        obs, reward, terminated, truncated, _ = env.step(action)
-        total -= reward
-        done = terminated or truncated
-    return total
+    return episode_cost(policy, env, seed)
 
 
 def test_registered_as_baselines():

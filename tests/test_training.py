@@ -542,14 +542,9 @@ def test_rl_zoo3_trains_with_the_shipped_yaml(tmp_path):
 
 
 def _episode_cost(policy, env, seed: int = 3) -> float:
-    obs, _ = env.reset(seed=seed)
-    total, done = 0.0, False
-    while not done:
-        action, _ = policy.predict(obs)
-        obs, reward, terminated, truncated, _ = env.step(action)
-        total -= reward
-        done = terminated or truncated
-    return total
+    from episodes import episode_cost
+
+    return episode_cost(policy, env, seed)
 
 
 def test_a_policy_trained_with_env_options_acts_alike_on_the_default_env(tmp_path):
