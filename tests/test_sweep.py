@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -340,6 +341,10 @@ def test_smoke_sweep_on_a_two_node_cluster_with_token_auth(tmp_path):
         subprocess.run([ray_cli, *args], env=env, check=True, capture_output=True, timeout=120)
 
     ray("get-auth-token", "--generate")
+    # a temp dir of its own (short: Ray's unix sockets live there), so that the cluster's
+    # processes, and only they, are ended at the end (`ray stop` would end every Ray instance
+    # on the machine, a sweep of the user's included)
+    temp_dir = Path(tempfile.mkdtemp(prefix="rt", dir="/tmp"))
     try:
         ray(
             "start",
@@ -349,6 +354,7 @@ def test_smoke_sweep_on_a_two_node_cluster_with_token_auth(tmp_path):
             "--num-cpus=1",
             "--include-dashboard=false",
             "--disable-usage-stats",
+            f"--temp-dir={temp_dir}",
         )
         ray("start", f"--address=127.0.0.1:{port}", "--node-ip-address=127.0.0.1", "--num-cpus=1")
         out = tmp_path / "sweep"
@@ -362,12 +368,28 @@ def test_smoke_sweep_on_a_two_node_cluster_with_token_auth(tmp_path):
             timeout=600,
         )
     finally:
-        subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=120)
+        _end_cluster(temp_dir)
     assert driver.returncode == 0, driver.stderr[-2000:]
     report = (out / "report" / "report.md").read_text()
     assert "ppo (seed 0)" in report and "ppo (seed 1)" in report
     nodes = pd.read_csv(out / "report" / "trial_wall_times.csv")["node"]
     assert len(nodes) == 5 and nodes.nunique() == 2  # both nodes ran trials
+
+
+def _end_cluster(temp_dir: Path) -> None:
+    """End the processes of the test's Ray cluster: those holding a file of its session, under
+    its temp dir (the head node) or under Ray's default /tmp/ray with the same session name
+    (a worker node started with --address), then remove the temp dir."""
+    import shutil
+
+    from agent_envs.training.ray_session import end_processes, session_processes
+
+    sessions = sorted(temp_dir.glob("session_2*"))
+    folders = [str(s) for s in sessions]
+    folders += [str(Path("/tmp/ray") / s.name) for s in sessions]
+    processes = {p.pid: p for folder in folders for p in session_processes(folder)}
+    end_processes(list(processes.values()))
+    shutil.rmtree(temp_dir, ignore_errors=True)
 
 
 def _free_port() -> int:

@@ -77,17 +77,26 @@ def clean_up_after_killed_driver(out: Path) -> int:
         except psutil.NoSuchProcess:
             pass
     left = session_processes(session_dir)
-    for process in left:
+    end_processes(left)
+    path.unlink(missing_ok=True)
+    return len(left)
+
+
+def end_processes(processes: list[Any]) -> None:
+    """SIGTERM each process (psutil), then SIGKILL those still alive after
+    `TERMINATE_GRACE_S`. Ending exactly these (and not every Ray process of the machine, as
+    ``ray stop`` does) leaves other Ray instances alone."""
+    import psutil
+
+    for process in processes:
         try:
             process.terminate()
         except psutil.NoSuchProcess:
             pass
-    _, alive = psutil.wait_procs(left, timeout=TERMINATE_GRACE_S)
+    _, alive = psutil.wait_procs(processes, timeout=TERMINATE_GRACE_S)
     for process in alive:
         try:
             process.kill()
         except psutil.NoSuchProcess:
             pass
     psutil.wait_procs(alive, timeout=TERMINATE_GRACE_S)
-    path.unlink(missing_ok=True)
-    return len(left)
