@@ -207,18 +207,17 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
     import agent_envs  # noqa: F401
     from agent_envs.training.checkpoints import best_model_path
     from agent_envs.training.multiagent import evaluate_per_agent
-    from agent_envs.training.policies import load_sb3_policy, trained_interface
+    from agent_envs.training.policies import load_sb3_policy
 
     env = gym.make(GYM_ENV_ID, **env_kwargs)
-    model_path = best_model_path(run_dir)
     try:
-        policy, _ = load_sb3_policy(model_path, env)
+        policy, _ = load_sb3_policy(best_model_path(run_dir), env)
     finally:
         env.close()
     inner = getattr(policy, "policy", policy)  # PerAgentPolicy -> the per-agent policy
-    # the per-agent layout the policy was trained on; each agent's own reward (its own cost)
-    layout = trained_interface(model_path)["observation"]
-    agent_kwargs = {**env_kwargs, "observation": layout, "agent_reward": "own"}
+    # the per-agent layout the policy was trained on (read by the loader from the run's
+    # env.json); each agent's own reward (its own cost)
+    agent_kwargs = {**env_kwargs, "observation": policy.layout, "agent_reward": "own"}
     costs = evaluate_per_agent(inner, agent_kwargs, seeds)  # (S, N)
     swarm = costs.sum(axis=1)
     per_agent_mean = costs.mean(axis=0)

@@ -428,11 +428,12 @@ def check_envs(trials: Sequence[Trial], option: str = "--env-kwargs") -> None:
 
     seen: set[str] = set()
     for trial in trials:
-        for kwargs in (trial.eval_env_kwargs, (trial.train or {}).get("env_kwargs")):
-            key = json.dumps(kwargs, sort_keys=True)
+        train = trial.train or {}
+        envs = [(GYM_ENV_ID, trial.eval_env_kwargs), (train.get("env_id"), train.get("env_kwargs"))]
+        for env_id, kwargs in envs:
+            key = json.dumps([env_id, kwargs], sort_keys=True)
             if kwargs is not None and key not in seen:
                 seen.add(key)
-                env_id = GYM_ENV_ID if kwargs is trial.eval_env_kwargs else trial.train["env_id"]
                 env_description(env_id, kwargs, option)
 
 

@@ -304,10 +304,15 @@ def _callbacks(config, run_dir: Path, sb3_envs: int, description: dict[str, Any]
     if config.eval_freq <= 0:
         return callbacks, None
     shape = (description["n_agents"], description["dim"]) if is_multiagent(config.env_id) else None
-    eval_vec = make_eval_vec_env(eval_env_id(config), eval_env_kwargs(config), config.eval_episodes)
-    # the references act on the default interface: same dynamics, cost and draws (env options)
-    reference_vec = make_eval_vec_env(
-        GYM_ENV_ID, default_interface(config.env_kwargs), config.eval_episodes
+    eval_kwargs = eval_env_kwargs(config)
+    eval_vec = make_eval_vec_env(eval_env_id(config), eval_kwargs, config.eval_episodes)
+    # the references act on the default interface: same dynamics, cost and draws (env options);
+    # the validation env itself when it has the default interface
+    reference_kwargs = default_interface(config.env_kwargs)
+    reference_vec = (
+        eval_vec
+        if reference_kwargs == eval_kwargs
+        else make_eval_vec_env(GYM_ENV_ID, reference_kwargs, config.eval_episodes)
     )
     reference_env = reference_vec.envs[0]
     references = {
