@@ -86,6 +86,18 @@ def test_compiled_result_is_phi_of_the_matrix(compiled):
     np.testing.assert_array_equal(got[1, :, 1], 0.0)
 
 
+@pytest.mark.parametrize("order", [1, 2])
+def test_a_constant_vector_is_deflated_exactly(compiled, order):
+    """phi_p(c L) (a 1) = a / p! (L 1 = 0): the compiled Lanczos deflates the constant vector
+    like the numpy one (tests/test_phi_functions.py), so it returns the mean's part alone."""
+    _, _, f, op = _frozen(100, 2, (3,), 0.5, seed=4, scale=0.02)
+    v = np.empty_like(f)
+    v[..., 0], v[..., 1] = 2.5, -0.75
+    got, ok = pf._compiled_frozen_lanczos(op, v, order, 1e-10, 100, None)
+    assert ok.all()
+    np.testing.assert_allclose(got, v / order, rtol=1e-15, atol=0)  # 1/1!, 1/2!
+
+
 def test_bounds_given_or_read_from_the_row_sums_agree(compiled):
     _, _, f, op = _frozen(100, 1, (5,), 1.0, seed=7, scale=0.02)
     from_sums, _ = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)

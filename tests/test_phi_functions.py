@@ -184,10 +184,42 @@ def test_numpy_lanczos_equals_the_reference_lanczos_bit_for_bit(order, columns):
             assert np.all(got_ok)
 
 
-def test_lanczos_with_row_sum_bounds_matches_dense_to_the_tolerance():
+@pytest.mark.parametrize("order", [1, 2])
+@pytest.mark.parametrize("mean", [0.0, 3.0])
+def test_lanczos_with_row_sum_bounds_matches_dense_to_the_tolerance(order, mean):
+    """With the row-sum bounds the constant vector is deflated (phi_p(0) = 1/p! on the mean):
+    against the dense eigh, for vectors with and without a mean, phi_1 and phi_2."""
     for _, dense, operator in _swarm_laplacians():
-        v = np.random.default_rng(0).standard_normal((dense.shape[0], 100, 1))
-        ref = phi_action(dense, v, 1, method="eigh", symmetric=True)
-        got = phi_action(operator, v, 1, method="krylov", symmetric=True)
+        v = np.random.default_rng(0).standard_normal((dense.shape[0], 100, 1)) + mean
+        ref = phi_action(dense, v, order, method="eigh", symmetric=True)
+        got = phi_action(operator, v, order, method="krylov", symmetric=True)
         scale = np.linalg.norm(ref, axis=-2, keepdims=True)
         assert np.max(np.abs(got - ref) / scale) < 1e-8
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_a_constant_vector_is_deflated_exactly(order):
+    """phi_p(c L) (a 1) = a / p! (L 1 = 0): with the width known, the Lanczos iteration sees
+    v - mean(v) 1 = 0, breaks down at m = 1 and returns the mean's part alone, in the numpy and
+    the reference Lanczos; without the width (no deflation) the same value to the tolerance."""
+    import math
+
+    from agent_envs.integrators.phi_functions import (
+        _lanczos_action,
+        _lanczos_numpy,
+        _RowOperator,
+    )
+
+    for _, dense, operator in _swarm_laplacians():
+        v = np.full((dense.shape[0], 100, 2), 2.5)
+        v[:, :, 1] = -0.75
+        want = v / math.factorial(order)
+        bounds = operator.krylov_bounds()
+        assert bounds[1] is not None and np.all(np.isfinite(bounds[1]))
+        for lanczos in (_lanczos_numpy, _lanczos_action):
+            got, ok = lanczos(_RowOperator(operator), v, order, 1e-10, 100, bounds=bounds)
+            assert np.all(ok)
+            np.testing.assert_allclose(got, want, rtol=1e-15, atol=0)
+            plain, ok = lanczos(_RowOperator(dense), v, order, 1e-10, 100)
+            assert np.all(ok)
+            np.testing.assert_allclose(plain, want, rtol=1e-9, atol=0)

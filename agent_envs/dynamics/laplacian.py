@@ -20,9 +20,9 @@ batch member, both from quantities the drift already has (s, and p_max = w / alp
 - ``cluster_width = 2 c max_k (p_max - s_k / N)`` for the symmetric kernel: L 1 = 0, and on
   1^perp (L is symmetric) L = -p_max I + (graph Laplacian of E)/N with E = p_max 1 1^T - P >= 0
   entrywise, whose eigenvalues lie in [0, 2 max_k (E 1)_k]; so spec(c L) is {0} together with an
-  interval of that width around -c p_max. Near consensus the width is tiny and Lanczos converges
-  in a few steps; `phi_functions` uses it to decide from which Krylov dimension its a posteriori
-  error estimate may be trusted.
+  interval of that width above -c p_max. Near consensus the width is tiny and Lanczos converges
+  in a few steps; `phi_functions` deflates the constant vector (L 1 = 0) and uses the width to
+  decide from which Krylov dimension its a posteriori error estimate may be trusted.
 
 A `FrozenLaplacian` refers to the workspace it was built in: the model's next evaluation
 overwrites P, and using an operator built before that raises `RuntimeError` (never a silent stale

@@ -182,8 +182,9 @@ class _RowOperator:
     def member_bounds(self, batch: tuple, bounds: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """(||A||_inf, width) per batch member, float64 arrays of shape `batch`.
 
-        width bounds the spread of spec(A) apart from an isolated eigenvalue 0 (then one
-        Krylov dimension more is needed); without that knowledge it is inf. The bounds come
+        A finite width says that A 1 = 0 and A is symmetric (the frozen L(x)), and bounds the
+        spread of spec(A) on 1^perp; the Lanczos iteration then deflates the constant vector
+        (`_deflate_constant`). Without that knowledge it is inf. The bounds come
         from `bounds` (the caller's, e.g. `Linearization.scaled_bounds`), else from the
         operator's `krylov_bounds()`, else ||A||_inf of the matrix (one pass over A) or the
         operator's shared `norm_inf`.
@@ -306,6 +307,37 @@ def _krylov_action(
     return _gather_members(xp, stopped, stacked, beta, batch), converged
 
 
+def _first_check(norm_inf: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """The Krylov dimension m_0 of the first convergence check, per member (before clipping):
+    min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)), w the width of an interval holding spec(A) on the
+    complement of the deflated constant vector (inf where unknown)."""
+    return np.minimum(np.ceil(3.5 * np.sqrt(norm_inf)), np.ceil(3.5 * np.sqrt(width)))
+
+
+def _deflate_constant(xp: Any, q: Any, width: np.ndarray) -> tuple[Any, Any]:
+    """Rows q (..., k, n) without their means where a member's width is finite, and the means
+    (..., k); (q, None) where no member has a width.
+
+    A finite width says A 1 = 0 (the frozen L(x): its rows sum to 0) and A symmetric, so
+    phi_p(A) v = phi_p(0) mean(v) 1 + phi_p(A) (v - mean(v) 1) with the second term in 1^perp,
+    where the spectrum is one interval of that width: the Lanczos iteration runs on
+    v - mean(v) 1 and needs no dimension for the eigenvalue 0 (`_add_constant` adds the first
+    term back)."""
+    finite = np.isfinite(width)
+    if not finite.any():
+        return q, None
+    mean = xp.mean(q, axis=-1)  # (..., k)
+    if not finite.all():
+        mean = mean * arrays.asarray(finite.astype(np.float64), like=mean)[..., None]
+    return q - mean[..., None], mean
+
+
+def _add_constant(result: Any, mean: Any, order: int) -> Any:
+    """result (..., n, k) + phi_p(0) mean 1^T (phi_p(0) = 1 / p!) for the deflated constant
+    vector."""
+    return result if mean is None else result + mean[..., None, :] / math.factorial(order)
+
+
 def _lanczos_action(
     a: _RowOperator,
     v: Any,
@@ -324,11 +356,14 @@ def _lanczos_action(
     (Druskin, Greenbaum & Knizhnerman, 1998); tests/test_phi_functions.py checks it against the
     dense eigh on the swarm's L(x) and exact Jacobian. Stopped when Saad's error estimate
     b_m |e_m^T phi_p(T_m) e_1| is below rtol |phi_p(T_m) e_1|, checked every `check_every`
-    steps from m_0 = min(3.5 sqrt(|A|_inf), 1 + 3.5 sqrt(w)) (about the dimension below which the
+    steps from m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)) (about the dimension below which the
     Krylov approximation of the exponential has not converged yet: 3.5 sqrt of the width of an
-    interval holding the spectrum, by Hochbruck & Lubich 1997; w is the width of the spectrum
-    apart from an isolated eigenvalue 0, which takes one dimension more; see
-    `_RowOperator.member_bounds`), or at a happy breakdown; a member that reaches `max_dim`
+    interval holding the spectrum, by Hochbruck & Lubich 1997), or at a happy breakdown. w is
+    known for the frozen L(x) (A 1 = 0, A symmetric; `_RowOperator.member_bounds`): it bounds
+    the spectrum on 1^perp, and the iteration runs on v - mean(v) 1, the mean's part
+    phi_p(0) mean(v) 1 added at the end (`_deflate_constant`): the eigenvalue 0 then costs no
+    Krylov dimension (one per step near consensus, where L is about -p_max on 1^perp and 5
+    dimensions reach rtol = 1e-10 instead of 6). A member that reaches `max_dim`
     first (also when m reaches n: the basis is then not exact) counts as not converged.
     Returns (result, converged per batch member). Differentiable on torch
     (list-built basis, no in-place writes to the basis).
@@ -345,6 +380,9 @@ def _lanczos_action(
     max_dim = min(max_dim, n)
     batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
     q = xp.matrix_transpose(xp.broadcast_to(v, (*batch, *v.shape[-2:])))  # (..., k, n)
+    # per member: |A|_inf, the first check and the breakdown tolerance
+    norm_inf, width = a.member_bounds(batch, bounds)
+    q, mean = _deflate_constant(xp, q, width)
     beta0 = xp.linalg.vector_norm(q, axis=-1)  # (..., k)
     if bool(xp.any(beta0 == 0)):
         q = q / xp.where(beta0 > 0, beta0, 1.0)[..., None]
@@ -353,9 +391,7 @@ def _lanczos_action(
     basis = [q]
     alphas: list[Any] = []
     betas: list[Any] = []
-    # per member: |A|_inf, the first check and the breakdown tolerance
-    norm_inf, width = a.member_bounds(batch, bounds)
-    first_check = np.minimum(np.ceil(3.5 * np.sqrt(norm_inf)), 1 + np.ceil(3.5 * np.sqrt(width)))
+    first_check = _first_check(norm_inf, width)
     first_check = np.clip(first_check, 2, max_dim).astype(np.int64)
     tiny = 1e-12 * (norm_inf + 1e-300)
     done = np.zeros(batch, dtype=bool)
@@ -416,9 +452,10 @@ def _lanczos_action(
         out = coeffs[..., 0:1] * basis[0]
         for j in range(1, m):
             out = out + coeffs[..., j : j + 1] * basis[j]
-        return xp.matrix_transpose(out * beta0[..., None]), converged
+        return _add_constant(xp.matrix_transpose(out * beta0[..., None]), mean, order), converged
     stacked = xp.stack(basis[: max(stopped)], axis=-2)
-    return _gather_members(xp, stopped, stacked, beta0, batch), converged
+    result = _gather_members(xp, stopped, stacked, beta0, batch)
+    return _add_constant(result, mean, order), converged
 
 
 def _norms(w: np.ndarray) -> np.ndarray:
@@ -449,6 +486,8 @@ def _lanczos_numpy(
     max_dim = min(max_dim, n)
     batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
     q = np.swapaxes(np.broadcast_to(v, (*batch, *v.shape[-2:])), -1, -2)  # (..., k, n)
+    norm_inf, width = a.member_bounds(batch, bounds)
+    q, mean = _deflate_constant(xp, q, width)
     beta0 = _norms(q)  # (..., k)
     if (beta0 == 0).any():
         q = q / np.where(beta0 > 0, beta0, 1.0)[..., None]
@@ -457,8 +496,7 @@ def _lanczos_numpy(
     basis = [q]
     alphas: list[np.ndarray] = []
     betas: list[np.ndarray] = []
-    norm_inf, width = a.member_bounds(batch, bounds)
-    first_check = np.minimum(np.ceil(3.5 * np.sqrt(norm_inf)), 1 + np.ceil(3.5 * np.sqrt(width)))
+    first_check = _first_check(norm_inf, width)
     first_check = np.clip(first_check, 2, max_dim).astype(np.int64)
     tiny = (1e-12 * (norm_inf + 1e-300))[..., None]
     earliest = int(first_check.min())
@@ -518,9 +556,10 @@ def _lanczos_numpy(
         out = coeffs[..., 0:1] * basis[0]
         for j in range(1, m):
             out = out + coeffs[..., j : j + 1] * basis[j]
-        return np.swapaxes(out * beta0[..., None], -1, -2), converged
+        return _add_constant(np.swapaxes(out * beta0[..., None], -1, -2), mean, order), converged
     stacked = np.stack(basis[: max(stopped)], axis=-2)
-    return _gather_members(np, stopped, stacked, beta0, batch), converged
+    result = _gather_members(np, stopped, stacked, beta0, batch)
+    return _add_constant(result, mean, order), converged
 
 
 def _gather_members(
@@ -770,9 +809,11 @@ def phi_action(
         symmetric: whether A is symmetric (enables "eigh").
         rtol: relative tolerance of the Krylov approximation.
         max_krylov_dim: largest Krylov dimension tried.
-        bounds: (||A||_inf, width of spec(A) apart from an eigenvalue 0, or None) per batch
-            member, numpy arrays, when the caller knows them (`Linearization.scaled_bounds`);
-            the Lanczos iteration reads them instead of a pass over A (see `_lanczos_action`).
+        bounds: (||A||_inf, width or None) per batch member, numpy arrays, when the caller
+            knows them (`Linearization.scaled_bounds`); the Lanczos iteration reads them
+            instead of a pass over A (see `_lanczos_action`). A width may only be given for a
+            symmetric A with A 1 = 0 (the frozen L(x)): it bounds spec(A) on 1^perp, and
+            Lanczos deflates the constant vector.
     """
     if order < 1:
         raise ValueError(f"order must be >= 1, got {order}")
