@@ -28,6 +28,7 @@ and answers in the same library; on torch it is differentiable.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -183,7 +184,7 @@ class SwarmModel:
         over budget) but does not exist: torch states, the exact Jacobian for d > 1 or
         another kernel.
         """
-        n_paths = int(np.prod(x.shape[:-2], dtype=int))
+        n_paths = math.prod(x.shape[:-2])  # (np.prod of a tuple: 2 us, 4 calls per env step)
         needed = dense_bytes(self.n_agents, self.dim, n_paths, kind)
         if self.linear_operator == "dense":
             return False
