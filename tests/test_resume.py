@@ -173,3 +173,19 @@ def test_a_sweep_resumed_with_another_preset_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--resume" in err[0] and "smoke preset, not paper" in err[0]
     assert (out / "sweep.json").read_text() == saved
+
+
+def test_training_without_tensorboard_leaves_no_folder_in_the_temp_dir(tmp_path, monkeypatch):
+    """SB3 gives `learn` a logger whose folder is a fresh $TMPDIR/SB3-<date> when TensorBoard is
+    off; the training layer logs without a folder instead (training and its resume)."""
+    import tempfile
+
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    from agent_envs.training.train import train
+
+    run_dir = tiny_run(tmp_path, "ppo", timesteps=128)
+    train(resume_config(run_dir, 256))
+    assert (run_dir / "manifest.json").is_file()
+    assert [p.name for p in temp.iterdir() if p.name.startswith("SB3-")] == []

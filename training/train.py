@@ -343,6 +343,8 @@ def _learn(model, config: TrainConfig, callbacks: list[Any], fresh: bool, run_di
     remaining = config.timesteps - (0 if fresh else int(model.num_timesteps))
     if remaining <= 0:
         return
+    if model.tensorboard_log is None:
+        _log_without_folder(model)
     try:
         model.learn(
             total_timesteps=remaining,
@@ -359,6 +361,16 @@ def _learn(model, config: TrainConfig, callbacks: list[Any], fresh: bool, run_di
             file=sys.stderr,
         )
         raise
+
+
+def _log_without_folder(model: Any) -> None:
+    """SB3's logger without a folder (standard output only, with verbose >= 1): without
+    TensorBoard, `model.learn` configures one whose folder is a fresh, empty
+    ``$TMPDIR/SB3-<date>`` directory per call, which nothing reads and nothing removes."""
+    from stable_baselines3.common.logger import Logger, make_output_format
+
+    formats = [make_output_format("stdout", "")] if model.verbose >= 1 else []
+    model.set_logger(Logger(folder=None, output_formats=formats))
 
 
 def save_checkpoint_of(model: Any, run_dir: Path, off_policy: bool) -> Path:
