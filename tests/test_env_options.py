@@ -231,7 +231,17 @@ def test_references_act_alike_under_every_action_basis():
 @pytest.mark.parametrize(
     ("make", "kwargs", "match"),
     [
-        (lambda **k: gym.make(ENV, **k), {"observation": "velocity"}, "observation must be one"),
+        # the env's own values, not both envs' ("swarm" is the PettingZoo env's)
+        (
+            lambda **k: gym.make(ENV, **k),
+            {"observation": "velocity"},
+            r"observation='velocity' .* 'absolute', 'relative', 'modes', 'summary'$",
+        ),
+        (
+            swarm_v0.parallel_env,
+            {"observation": "velocity"},
+            r"observation='velocity' .* 'absolute', 'relative', 'swarm'$",
+        ),
         (lambda **k: gym.make(ENV, **k), {"action_basis": 3}, "action_basis must be a str"),
         (lambda **k: gym.make(ENV, **k), {"observation": "swarm"}, "observation='swarm'"),
         (lambda **k: gym.make(ENV, **k), {"agent_reward": "team"}, "agent_reward='team'"),

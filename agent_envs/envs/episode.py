@@ -39,6 +39,7 @@ from agent_envs.costs import agent_running_cost, running_cost
 from agent_envs.dynamics.operators import LinearizationOperator, check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.interface import (
+    ENV_KIND_VALUES,
     action_rows,
     check_env_options,
     check_option,
@@ -194,18 +195,29 @@ class EpisodeConfig:
 
     @classmethod
     def from_kwargs(
-        cls, owner: str = "EpisodeConfig.from_kwargs", /, **kwargs: Any
+        cls, owner: str = "EpisodeConfig.from_kwargs", /, env_kind: str | None = None, **kwargs: Any
     ) -> EpisodeConfig:
         """Split env keyword arguments into `SwarmParams` fields and env options.
 
         `owner` names the callable in the `TypeError` for an unknown keyword (the env's
-        ``__init__``), as Python would.
+        ``__init__``), as Python would. `env_kind` ("gymnasium" | "pettingzoo"): a string
+        option value that env does not take is refused with that env's values
+        (`check_env_kind`), not the values of both envs.
         """
         param_names = SwarmParams.field_names()
         accepted = (*param_names, *ENV_OPTION_NAMES, "render_mode")
         for name in kwargs:
             if name not in param_names and name not in ENV_OPTION_NAMES:
                 raise unexpected_keyword(owner, name, accepted)
+        if env_kind is not None:
+            check_env_options(
+                env_kind,
+                **{
+                    k: v
+                    for k, v in kwargs.items()
+                    if k in ENV_KIND_VALUES[env_kind] and isinstance(v, str)
+                },
+            )
         params = SwarmParams(**{k: v for k, v in kwargs.items() if k in param_names})
         return cls(params=params, **{k: v for k, v in kwargs.items() if k not in param_names})
 

@@ -203,7 +203,9 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
+        self.config = EpisodeConfig.from_kwargs(
+            f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
+        )
         self.config.check_env_kind("gymnasium")
         self.episode = SwarmEpisode(self.config)
         self.render_mode = check_render_mode(render_mode)

@@ -204,7 +204,9 @@ class SwarmVectorEnv(VectorEnv):
         if mode not in AUTORESET_MODES:
             allowed = [m.value for m in AUTORESET_MODES]
             raise ValueError(f"autoreset_mode must be one of {allowed}, got {autoreset_mode!r}")
-        self.config = EpisodeConfig.from_kwargs(f"{type(self).__name__}.__init__", **kwargs)
+        self.config = EpisodeConfig.from_kwargs(
+            f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
+        )
         self.config.check_env_kind("gymnasium")
         self.num_envs = int(num_envs)
         self.device = "cpu" if self._device is None else str(self._device)
