@@ -219,6 +219,8 @@ def test_package_works_without_numba():
         for _ in range(3):
             env.step(env.action_space.sample())
         assert pf.load_compiled() is False
+        from agent_envs.dynamics import laplacian
+        assert laplacian.load_compiled_kernel() is False
         assert "torch" not in sys.modules
         print("ok")
         """

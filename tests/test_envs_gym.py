@@ -403,10 +403,12 @@ def test_kernel_matrix_is_built_once_per_step(monkeypatch, integrator):
     env = SwarmEnv(n_paths=2, integrator=integrator, **SMALL)
     env.reset(seed=0)
     calls = []
-    original = swarm_module.fill_cucker_smale
-    monkeypatch.setattr(
-        swarm_module, "fill_cucker_smale", lambda *a, **k: calls.append(1) or original(*a, **k)
-    )
+    # the numpy passes or, with numba, the compiled pass that replaces them
+    for name in ("fill_cucker_smale", "compiled_cucker_smale_drift"):
+        original = getattr(swarm_module, name)
+        monkeypatch.setattr(
+            swarm_module, name, lambda *a, _f=original, **k: calls.append(1) or _f(*a, **k)
+        )
     for _ in range(3):
         env.step(env.action_space.sample())
     assert len(calls) == 3  # one per new state; without the cache it would be 6

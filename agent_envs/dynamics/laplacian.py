@@ -31,12 +31,71 @@ product). The public `SwarmModel.frozen_linearization` still returns a fresh arr
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
 
 #: batch shapes a `KernelWorkspace` keeps buffers for (the oldest is dropped beyond this)
 _MAX_SHAPES = 2
+#: set to "0" to keep the numpy kernel and Lanczos even where numba is installed
+COMPILED_ENV_VAR = "AGENT_ENVS_NUMBA"
+#: `agent_envs.dynamics.compiled_kernel` once `load_compiled_kernel` found it; False:
+#: unavailable or switched off; None: not tried yet
+_compiled_kernel: Any = None
+
+
+def load_compiled_kernel() -> bool:
+    """Whether the compiled kernel pass (`agent_envs.dynamics.compiled_kernel`, needs numba)
+    builds P, its row sums and the drift for the symmetric Cucker-Smale kernel; loads it on
+    the first call (importing numba and loading, or the first time in a cache directory
+    compiling, its machine code: `SwarmModel` calls this when it is made, not in a step).
+    Without numba, or with ``AGENT_ENVS_NUMBA=0``, False: `fill_cucker_smale` and one product
+    P [x | 1] run."""
+    global _compiled_kernel
+    if _compiled_kernel is None:
+        _compiled_kernel = False
+        if os.environ.get(COMPILED_ENV_VAR, "1") != "0":
+            try:
+                from agent_envs.dynamics import compiled_kernel
+            except ImportError:
+                pass
+            else:
+                _compiled_kernel = compiled_kernel
+                x = np.zeros((1, 2, 1))  # one call with the env's argument types
+                compiled_kernel.cucker_smale_drift(
+                    x, 1.0, 1.0, np.empty((1, 2, 2)), np.empty((1, 2)), np.empty((1, 2, 1))
+                )
+    return _compiled_kernel is not False
+
+
+def use_compiled_kernel(enabled: bool) -> bool:
+    """Switch the compiled kernel pass on (when numba is installed) or off for this process;
+    returns whether it was in use before (`phi_functions.use_compiled` switches it with the
+    compiled Lanczos)."""
+    global _compiled_kernel
+    before = load_compiled_kernel()
+    _compiled_kernel = None if enabled else False
+    if enabled:
+        load_compiled_kernel()
+    return before
+
+
+def compiled_cucker_smale_drift(
+    x: np.ndarray, weight: float, alpha2: float, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(s, L(x) x) with P written into `p` (..., N, N) by the compiled pass, for x (..., N, d)
+    and the symmetric kernel with scalar weight w (`load_compiled_kernel` must have answered
+    True)."""
+    *batch, n, d = x.shape
+    members = int(np.prod(batch, dtype=np.int64)) if batch else 1
+    flat = np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d)
+    row_sums = np.empty((members, n))
+    drift = np.empty((members, n, d))
+    _compiled_kernel.cucker_smale_drift(
+        flat, float(weight), float(alpha2), p.reshape(members, n, n), row_sums, drift
+    )
+    return row_sums.reshape(*batch, n), drift.reshape(*batch, n, d)
 
 
 class KernelWorkspace:

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from agent_envs import arrays
-from agent_envs.dynamics.laplacian import FrozenLaplacian
+from agent_envs.dynamics.laplacian import COMPILED_ENV_VAR, FrozenLaplacian, use_compiled_kernel
 
 PHI_METHODS = ("auto", "expm", "eigh", "krylov")
 # Crossovers of "auto" (measured by benchmarks/bench_integrators.py, one BLAS thread).
@@ -53,8 +53,6 @@ _AUTO_EXPM_SINGLE_NONSYMMETRIC_MAX = 128
 _TAYLOR_TERMS = 16
 #: from this n on, Lanczos sums its basis vector by vector (no stacked copy)
 _ACCUMULATE_BASIS_MIN_N = 2**14
-#: set to "0" to keep the numpy Lanczos even where numba is installed
-COMPILED_ENV_VAR = "AGENT_ENVS_NUMBA"
 #: the compiled Lanczos module once `load_compiled` found it; False: unavailable or switched off;
 #: None: not tried yet
 _compiled: Any = None
@@ -649,9 +647,12 @@ def load_compiled() -> bool:
 
 
 def use_compiled(enabled: bool) -> bool:
-    """Switch the compiled Lanczos on (when numba is installed) or off for this process;
-    returns whether it was in use before. For comparisons in one process (benchmarks, tests)."""
+    """Switch the compiled Lanczos and the compiled kernel pass
+    (`agent_envs.dynamics.laplacian.use_compiled_kernel`) on (when numba is installed) or off
+    for this process; returns whether the Lanczos was in use before. For comparisons in one
+    process (benchmarks, tests)."""
     global _compiled
+    use_compiled_kernel(enabled)
     before = load_compiled()
     _compiled = None if enabled else False
     if enabled:

@@ -1,0 +1,94 @@
+"""The compiled kernel pass (numba) against the numpy passes of the dense workspace path.
+
+`agent_envs.dynamics.compiled_kernel` builds P, s = P 1 and L(x) x for the symmetric
+Cucker-Smale kernel when numba is installed; these tests require it (skipped without numba:
+the `dev` extra installs it, so CI runs them).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from agent_envs import SwarmModel, SwarmParams
+from agent_envs.dynamics import laplacian
+
+
+@pytest.fixture()
+def compiled():
+    pytest.importorskip("numba")
+    before = laplacian.use_compiled_kernel(True)
+    assert laplacian.load_compiled_kernel(), "numba is installed but the kernel did not load"
+    yield
+    laplacian.use_compiled_kernel(before)
+
+
+def _numpy_pass(x, alpha, weight):
+    """P, s and L(x) x as the numpy path computes them (fill_cucker_smale, P [x | 1])."""
+    n = x.shape[-2]
+    p = np.empty((*x.shape[:-1], n))
+    laplacian.fill_cucker_smale(x, alpha, weight, out=p)
+    s = p.sum(axis=-1)
+    return p, s, (p @ x - s[..., None] * x) / n
+
+
+@pytest.mark.parametrize("d", [1, 2, 3])
+@pytest.mark.parametrize("batch", [(), (3,), (2, 3)])
+def test_kernel_pass_equals_the_numpy_passes(compiled, d, batch):
+    n, alpha, weight = 37, 0.3, 1.0 / 0.05
+    x = np.random.default_rng(d).uniform(-1, 1, (*batch, n, d))
+    p = np.empty((*batch, n, n))
+    s, drift = laplacian.compiled_cucker_smale_drift(x, weight, alpha**2, p)
+    want_p, want_s, want_drift = _numpy_pass(x, alpha, weight)
+    assert s.shape == want_s.shape and drift.shape == want_drift.shape
+    np.testing.assert_array_equal(p, np.swapaxes(p, -1, -2))  # exactly symmetric
+    assert np.max(np.abs(p - want_p)) <= 1e-15 * np.max(want_p)
+    assert np.max(np.abs(s - want_s)) <= 1e-14 * np.max(want_s)
+    assert np.max(np.abs(drift - want_drift)) <= 1e-13 * np.max(np.abs(want_drift))
+
+
+def test_a_member_does_not_depend_on_the_batch(compiled):
+    x = np.random.default_rng(0).uniform(-1, 1, (5, 40, 2))
+    p = np.empty((5, 40, 40))
+    s, drift = laplacian.compiled_cucker_smale_drift(x, 3.0, 0.01, p)
+    for i in range(5):
+        pi = np.empty((1, 40, 40))
+        si, di = laplacian.compiled_cucker_smale_drift(x[i : i + 1], 3.0, 0.01, pi)
+        np.testing.assert_array_equal(pi[0], p[i])
+        np.testing.assert_array_equal(si[0], s[i])
+        np.testing.assert_array_equal(di[0], drift[i])
+
+
+@pytest.mark.parametrize("kernel", ["symmetric", "nonsymmetric"])
+def test_the_model_drift_and_operator_agree_with_the_numpy_path(compiled, kernel):
+    """The model's drift and its frozen operator (P, s) with and without the compiled pass; the
+    non-symmetric kernel (per-agent weights) keeps the numpy passes."""
+    params = SwarmParams(n_agents=60, dim=2, epsilon=0.05, kernel=kernel)
+    x = np.random.default_rng(1).uniform(-1, 1, (4, 60, 2))
+
+    def evaluate(enabled):
+        before = laplacian.use_compiled_kernel(enabled)
+        try:
+            model = SwarmModel(params, linear_operator="dense")
+            f, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+            return f, np.array(lin.matrix.dense())
+        finally:
+            laplacian.use_compiled_kernel(before)
+
+    (f_fast, l_fast), (f_slow, l_slow) = evaluate(True), evaluate(False)
+    assert np.max(np.abs(f_fast - f_slow)) <= 1e-13 * np.max(np.abs(f_slow))
+    assert np.max(np.abs(l_fast - l_slow)) <= 1e-14 * np.max(np.abs(l_slow))
+    if kernel == "nonsymmetric":
+        np.testing.assert_array_equal(f_fast, f_slow)
+
+
+def test_switched_off_by_environment_variable():
+    code = "from agent_envs.dynamics import laplacian; print(laplacian.load_compiled_kernel())"
+    env = {"AGENT_ENVS_NUMBA": "0", "PATH": "/usr/bin:/bin"}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    assert done.stdout.strip() == "False"
