@@ -10,14 +10,16 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
    ~10 ms, so one preemption moves a single process's ratio by 10-40 %).
 2. Ratios in one process (interleaved rounds, medians): the warm SERB env step over the EM env
    step (paper); the EM env step over a plain numpy kernel + drift of the same size
-   (``p = w / (alpha^2 + (x_l - x_k)^2); (p @ x - p.sum(-1) * x) / N``, its floor); one bare
+   (``p = w / (alpha^2 + (x_l - x_k)^2); (p @ x - p.sum(-1) * x) / N``, its floor), over the
+   same in place, and over the env's own kernel pass (compiled with numba); one bare
    SERB step over one bare EM step (`integrator.step` with a `SwarmModel`, N = 100, 1 path,
    zero control, the same states: episodes from uniform starts).
 3. Native vector env (`gym.make_vec(..., vectorization_mode="vector_entry_point")`) at
    B = 1, 16, 64 for 1 and 20 paths against B single envs stepped in a loop, and against
    Gymnasium's SyncVectorEnv at B = 64, 1 path (env-steps/s, interleaved rounds, medians). The
-   last column is the time of the unavoidable compute (one in-place numpy kernel matrix and drift
-   per system, B x P systems) as a share of the native step: near 100 % the env is
+   last column is the time of the unavoidable compute (one kernel matrix and drift per system,
+   B x P systems, by the env's own pass: the compiled one with numba, else in-place numpy) as a
+   share of the native step: near 100 % the env is
    compute-bound.
 4. PPO (SB3) on `agent_envs.training.native_vec_env.NativeVecEnv` at the paper setting with the
    training layer's hyperparameters (`HYPERPARAMS["ppo"]`, VecNormalize, horizon as
@@ -194,6 +196,27 @@ def inplace_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     return step
 
 
+def compiled_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None] | None:
+    """The same by the compiled kernel pass (`agent_envs.dynamics.compiled_kernel`, what the env
+    runs with numba installed), or None where the tree has none (an older checkout) or numba is
+    off."""
+    try:
+        from agent_envs.dynamics import laplacian
+
+        if not laplacian.load_compiled_kernel():
+            return None
+    except (ImportError, AttributeError):
+        return None
+    x = np.random.default_rng(0).uniform(-1.0, 1.0, (n_paths, n, 1))
+    p = np.empty((n_paths, n, n))
+    return lambda: laplacian.compiled_cucker_smale_drift(x, 1.0 / 0.05, 0.1**2, p)
+
+
+def kernel_drift_floor(n_paths: int) -> Callable[[], None]:
+    """The compiled kernel pass where there is one, else the in-place numpy passes."""
+    return compiled_kernel_drift(n_paths) or inplace_kernel_drift(n_paths)
+
+
 def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     """One Lanczos product's worth of memory traffic: rows (n_paths, 1, n) @ P (n_paths, n, n)."""
     p = np.random.default_rng(0).uniform(size=(n_paths, n, n))
@@ -233,6 +256,7 @@ def worker_ratios(rounds: int) -> dict[str, float]:
         "em_env": single_env_stepper(env_kwargs("paper", "em")),
         "plain": plain_kernel_drift(),
         "inplace": inplace_kernel_drift(),
+        "floor": kernel_drift_floor(20),
         "matrix_pass": matrix_pass(),
         "serb_bare_1": bare_stepper("serb", 1),
         "em_bare_1": bare_stepper("em", 1),
@@ -271,7 +295,7 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
             # in chunks of at most 100 systems = 8 MB, as the native env's blocks)
             systems = b * n_paths
             chunk = min(systems, 100)
-            floor = inplace_kernel_drift(n_paths=chunk)
+            floor = kernel_drift_floor(chunk)
             fns["floor"] = lambda floor=floor, reps=systems / chunk: [
                 floor() for _ in range(max(1, round(reps)))
             ]
@@ -411,6 +435,7 @@ def main() -> int:
             ("SERB env step / EM env step", "serb_env", "em_env"),
             ("EM env step / plain numpy kernel + drift", "em_env", "plain"),
             ("EM env step / in-place numpy kernel + drift", "em_env", "inplace"),
+            ("EM env step / the env's kernel + drift (compiled with numba)", "em_env", "floor"),
             ("one SERB step / one EM step (N = 100, 1 path)", "serb_bare_1", "em_bare_1"),
         ):
             a, b = res["after"], res.get("before")
@@ -454,7 +479,7 @@ def main() -> int:
         }
         print(
             "| paths | B | native env-steps/s | loop env-steps/s | native / loop |"
-            " kernel + drift share of the native step |"
+            " kernel + drift share of the native step (the env's pass) |"
         )
         print("|---|---|---|---|---|---|")
         for p in paths:
