@@ -228,3 +228,19 @@ def test_package_works_without_numba():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "ok"
+
+
+@pytest.mark.parametrize(("n", "d", "batch", "spread"), CASES)
+def test_compiled_product_pass_equals_the_product_taken_first(compiled, n, d, batch, spread):
+    """SERB's V + e (c L) W with the product taken inside the compiled pass, against the numpy
+    product taken first and then the compiled and the reference Lanczos (1e-12)."""
+    _, _, f, op = _frozen(n, d, batch, spread, seed=n + d, scale=0.02)
+    w = 0.01 * np.random.default_rng(2).standard_normal(f.shape)
+    got, ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None, (w, 50.0))
+    rhs = f + 50.0 * (op @ w)
+    first, first_ok = pf._compiled_frozen_lanczos(op, rhs, 1, 1e-10, 100, None)
+    reference, _ = pf._lanczos_action(pf._RowOperator(op), rhs, 1, 1e-10, 100)
+    scale = np.max(np.abs(reference))
+    np.testing.assert_array_equal(ok, first_ok)
+    assert np.max(np.abs(got - first)) <= TOL * scale
+    assert np.max(np.abs(got - reference)) <= TOL * scale

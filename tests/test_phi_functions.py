@@ -223,3 +223,25 @@ def test_a_constant_vector_is_deflated_exactly(order):
             plain, ok = lanczos(_RowOperator(dense), v, order, 1e-10, 100)
             assert np.all(ok)
             np.testing.assert_allclose(plain, want, rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("method", ["krylov", "eigh", "expm", "auto"])
+def test_add_product_acts_on_v_plus_e_a_w(method):
+    """phi_action(A, V, add_product=(W, e)) = phi_action(A, V + e A W) on the workspace
+    operator (the compiled pass when numba is installed), a dense matrix and a torch tensor."""
+    e = 1 / 0.02
+    for _, dense, operator in _swarm_laplacians(n_paths=3):
+        rng = np.random.default_rng(1)
+        v = rng.standard_normal((3, 100, 1))
+        w = 0.1 * rng.standard_normal((3, 100, 1))
+        want = phi_action(dense, v + e * (dense @ w), 1, method="eigh", symmetric=True)
+        scale = np.max(np.abs(want))
+        for a in (operator, dense):
+            got = phi_action(a, v, 1, method=method, symmetric=True, add_product=(w, e))
+            assert np.max(np.abs(got - want)) <= 1e-9 * scale
+        torch = pytest.importorskip("torch")
+        got = phi_action(
+            torch.tensor(dense), torch.tensor(v), 1, method=method, symmetric=True,
+            add_product=(torch.tensor(w), e),
+        )  # fmt: skip
+        assert np.max(np.abs(got.numpy() - want)) <= 1e-9 * scale

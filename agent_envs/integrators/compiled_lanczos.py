@@ -310,15 +310,21 @@ def frozen_lanczos(
     peak: float,
     out: np.ndarray,
     converged: np.ndarray,
+    extra: np.ndarray,
+    extra_scale: float,
 ) -> None:
-    """phi_order(c L) V into `out` (B, N, k) and the members' convergence into `converged` (B,).
+    """phi_order(c L) (V + e c L W) into `out` (B, N, k) and the members' convergence into
+    `converged` (B,).
 
     p (B, N, N) symmetric, s (B, N), v (B, N, k); c = `scale`; `norms`, `widths` (B,) the
-    bounds of c L per member, or empty to compute them from s and P_kk (`peak` < 0: none).
+    bounds of c L per member, or empty to compute them from s and P_kk (`peak` < 0: none);
+    `extra` W (B, N, k) and e = `extra_scale`, or an empty W for phi_order(c L) V: the product
+    c L W is taken with the member's P in cache, before its Lanczos iteration (SERB's sigma L dW).
     """
     n_members, n, _ = p.shape
     k = v.shape[2]
     max_dim = min(max_dim, n)
+    with_extra = extra.shape[0] > 0
     fact = _factorials(TAYLOR_TERMS + order + 1)
     factor = scale / n
     basis = np.empty((max_dim + 1, k, n))
@@ -348,13 +354,24 @@ def frozen_lanczos(
         first_check = int(min(max(first, 2.0), float(max_dim)))
         tiny = 1e-12 * (norm + 1e-300)
         for c in range(k):
+            q0 = basis[0, c]
+            if with_extra:
+                # V + e c L W = V + e c (P W - s * W) / N, into q0 (basis[1] is free here)
+                wc_in = basis[1, c]
+                for i in range(n):
+                    wc_in[i] = extra[member, i, c]
+                _product(pm, wc_in, w[c], n)
+                for i in range(n):
+                    q0[i] = v[member, i, c] + extra_scale * ((w[c, i] - sm[i] * wc_in[i]) * factor)
+            else:
+                for i in range(n):
+                    q0[i] = v[member, i, c]
             mean = 0.0
             if deflate:
-                mean = _mean(v[member, :, c], n)
+                mean = _mean(q0, n)
             means[c] = mean
-            q0 = basis[0, c]
             for i in range(n):
-                q0[i] = v[member, i, c] - mean
+                q0[i] = q0[i] - mean
             beta0[c] = math.sqrt(_dot(q0, q0, n))
             norm0 = beta0[c] if beta0[c] > 0 else 1.0
             for i in range(n):

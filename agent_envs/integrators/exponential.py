@@ -19,6 +19,7 @@ from __future__ import annotations
 from typing import Any
 
 from agent_envs import arrays
+from agent_envs.dynamics.laplacian import FrozenLaplacian
 from agent_envs.integrators.base import DriftModel, Integrator
 from agent_envs.integrators.phi_functions import PHI_METHODS, load_compiled, phi_action
 
@@ -48,13 +49,19 @@ class RosenbrockEuler(Integrator):
     def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> Any:
         rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
         noise = model.sigma * dW
-        if self.stochastic_correction and model.sigma != 0.0:
-            rhs = rhs + lin.apply(noise)
         scaled = dt * lin.matrix
         kw = {"method": self.phi_method, "symmetric": lin.symmetric}
         if lin.bounds is not None:
             kw["bounds"] = lin.scaled_bounds(dt)
-        incr = dt * phi_action(scaled, lin.as_columns(rhs), 1, **kw)
+        correction = None
+        if self.stochastic_correction and model.sigma != 0.0:
+            if isinstance(lin.matrix, FrozenLaplacian) and dt != 0.0:
+                # F + sigma A dW with the product A dW = (tau A) dW / tau taken in the
+                # phi-action's pass over A (the compiled frozen L(x))
+                correction = (lin.as_columns(noise), 1.0 / dt)
+            else:
+                rhs = rhs + lin.apply(noise)
+        incr = dt * phi_action(scaled, lin.as_columns(rhs), 1, add_product=correction, **kw)
         if du_dt is not None:
             v = arrays.namespace(rhs).broadcast_to(du_dt, tuple(rhs.shape))
             incr = incr + dt**2 * phi_action(scaled, lin.as_columns(v), 2, **kw)

@@ -57,6 +57,7 @@ _ACCUMULATE_BASIS_MIN_N = 2**14
 #: None: not tried yet
 _compiled: Any = None
 _NO_BOUNDS = np.empty(0)
+_NO_EXTRA = np.empty((0, 0, 0))
 
 
 def phi_scalar(z: Any, order: int) -> Any:
@@ -668,26 +669,44 @@ def _warm_up() -> None:
     p.flags.writeable = False
     s = p.sum(axis=-1)
     v = np.ones((1, 3, 1))
-    _compiled.frozen_lanczos(
-        p, s, 0.1, v, 1, 1e-10, 3, 2, _NO_BOUNDS, _NO_BOUNDS, 1.0, np.empty((1, 3, 1)),
-        np.empty(1, dtype=bool),
-    )  # fmt: skip
+    for extra in (_NO_EXTRA, v):
+        _compiled.frozen_lanczos(
+            p, s, 0.1, v, 1, 1e-10, 3, 2, _NO_BOUNDS, _NO_BOUNDS, 1.0, np.empty((1, 3, 1)),
+            np.empty(1, dtype=bool), extra, 1.0,
+        )  # fmt: skip
 
 
 def _compiled_frozen_lanczos(
-    a: FrozenLaplacian, v: np.ndarray, order: int, rtol: float, max_dim: int, bounds: Any
+    a: FrozenLaplacian,
+    v: np.ndarray,
+    order: int,
+    rtol: float,
+    max_dim: int,
+    bounds: Any,
+    add_product: tuple[np.ndarray, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """`_lanczos_numpy` on c L(x) by the compiled kernel: (result, converged per member), or
-    None where it does not apply (V batched beyond P)."""
+    None where it does not apply (V, or W of `add_product`, batched beyond P). With
+    `add_product` = (W, e) it acts on V + e (c L) W, the product taken in the compiled pass."""
     matrix, row_sums = a.parts()
     n, k = a.n, v.shape[-1]
     batch = tuple(matrix.shape[:-2])
-    if np.broadcast_shapes(batch, tuple(v.shape[:-2])) != batch:
+    shapes = [tuple(v.shape[:-2])]
+    if add_product is not None:
+        if tuple(add_product[0].shape[-2:]) != (n, k):
+            return None
+        shapes.append(tuple(add_product[0].shape[:-2]))
+    if np.broadcast_shapes(batch, *shapes) != batch:
         return None
     members = math.prod(batch)
     p = matrix.reshape(members, n, n)
     s = np.ascontiguousarray(row_sums).reshape(members, n)
     rhs = np.ascontiguousarray(np.broadcast_to(v, (*batch, n, k))).reshape(members, n, k)
+    extra, extra_scale = _NO_EXTRA, 0.0
+    if add_product is not None:
+        extra = np.broadcast_to(np.asarray(add_product[0], dtype=np.float64), (*batch, n, k))
+        extra = np.ascontiguousarray(extra).reshape(members, n, k)
+        extra_scale = float(add_product[1])
     if bounds is None:
         norms = widths = _NO_BOUNDS
     else:
@@ -699,31 +718,47 @@ def _compiled_frozen_lanczos(
     out = np.empty((members, n, k))
     converged = np.empty(members, dtype=bool)
     _compiled.frozen_lanczos(
-        p, s, a.scale, rhs, order, rtol, max_dim, 2, norms, widths, peak, out, converged
-    )
+        p, s, a.scale, rhs, order, rtol, max_dim, 2, norms, widths, peak, out, converged,
+        extra, extra_scale,
+    )  # fmt: skip
     return out.reshape(*batch, n, k), converged.reshape(batch)
 
 
 def _krylov(
-    a: Any, v: Any, order: int, symmetric: bool, rtol: float, max_dim: int, bounds: Any = None
+    a: Any,
+    v: Any,
+    order: int,
+    symmetric: bool,
+    rtol: float,
+    max_dim: int,
+    bounds: Any = None,
+    add_product: Any = None,
 ) -> Any:
     """The Krylov phi-action (Lanczos if symmetric, else Arnoldi) on a matrix or an operator:
-    (result, converged per batch member)."""
+    (result, converged per batch member), of V + e A W for `add_product` = (W, e)."""
     if (
         symmetric
         and isinstance(a, FrozenLaplacian)
         and isinstance(v, np.ndarray)
         and load_compiled()
     ):
-        found = _compiled_frozen_lanczos(a, v, order, rtol, max_dim, bounds)
+        found = _compiled_frozen_lanczos(a, v, order, rtol, max_dim, bounds, add_product)
         if found is not None:
             return found
+    if add_product is not None:
+        v = _with_product(a, v, add_product)
     rows = _RowOperator(a)
     if symmetric and not (arrays.is_torch(v) or arrays.is_torch(a)):
         return _lanczos_numpy(rows, v, order, rtol, max_dim, bounds=bounds)
     if symmetric:
         return _lanczos_action(rows, v, order, rtol, max_dim, bounds=bounds)
     return _krylov_action(rows, v, order, rtol, max_dim, symmetric)
+
+
+def _with_product(a: Any, v: Any, add_product: tuple[Any, float]) -> Any:
+    """V + e A W for `add_product` = (W, e)."""
+    w, e = add_product
+    return v + e * (a @ w)
 
 
 def _krylov_or_none(
@@ -790,6 +825,7 @@ def phi_action(
     rtol: float = 1e-10,
     max_krylov_dim: int = 100,
     bounds: Any = None,
+    add_product: tuple[Any, float] | None = None,
 ) -> Any:
     """phi_order(A) V for A (..., n, n) and V (..., n, k); returns (..., n, k).
 
@@ -815,6 +851,10 @@ def phi_action(
             instead of a pass over A (see `_lanczos_action`). A width may only be given for a
             symmetric A with A 1 = 0 (the frozen L(x)): it bounds spec(A) on 1^perp, and
             Lanczos deflates the constant vector.
+        add_product: (W, e) with W shaped like V: phi_order(A) (V + e A W) instead, e.g.
+            SERB's F + sigma J dW with A = tau J and e = 1 / tau. On the compiled frozen L(x)
+            the product A W is taken in the same pass over each member's matrix as its
+            Lanczos iteration; elsewhere it is taken first.
     """
     if order < 1:
         raise ValueError(f"order must be >= 1, got {order}")
@@ -822,6 +862,8 @@ def phi_action(
         raise ValueError(f"method must be one of {PHI_METHODS}, got {method!r}")
     dense_backed = is_operator(a) and hasattr(a, "dense") and hasattr(a, "apply_rows")
     if is_operator(a) and not dense_backed:
+        if add_product is not None:
+            v = _with_product(a, v, add_product)
         return _operator_action(a, v, order, method, symmetric, rtol, max_krylov_dim)
     if dense_backed:
         if arrays.is_torch(v):
@@ -834,6 +876,8 @@ def phi_action(
         raise ValueError(f"shapes do not fit: A {tuple(a.shape)}, V {tuple(v.shape)}")
     if method == "auto":
         method = _auto_method(a, v, symmetric)
+    if add_product is not None and method != "krylov":
+        v, add_product = _with_product(a, v, add_product), None
     if dense_backed and method != "krylov":
         a = a.dense()
     if method == "eigh":
@@ -842,9 +886,11 @@ def phi_action(
         return _eigh_action(a, v, order)
     if method == "expm":
         return _augmented_expm(a, v, order)
-    result, converged = _krylov(a, v, order, symmetric, rtol, max_krylov_dim, bounds)
+    result, converged = _krylov(a, v, order, symmetric, rtol, max_krylov_dim, bounds, add_product)
     if np.all(converged):
         return result
+    if add_product is not None:
+        v = _with_product(a, v, add_product)
     if dense_backed:
         a = a.dense()
     # Only the members that did not converge get the dense method: the others keep their
