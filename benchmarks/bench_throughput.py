@@ -14,6 +14,10 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
    same in place, and over the env's own kernel pass (compiled with numba); one bare
    SERB step over one bare EM step (`integrator.step` with a `SwarmModel`, N = 100, 1 path,
    zero control, the same states: episodes from uniform starts).
+2b. Krylov dimensions per member and step of the paper SERB env, this tree only
+   (`_oracle_dimension`: the smallest dimension within rtol of the dense eigh value, which no
+   stopping rule can beat), one compiled product in cache and a near-consensus step's compiled
+   phi-action per member, and the products-only floors of SERB / EM they give.
 3. Native vector env (`gym.make_vec(..., vectorization_mode="vector_entry_point")`) at
    B = 1, 16, 64 for 1 and 20 paths against B single envs stepped in a loop, and against
    Gymnasium's SyncVectorEnv at B = 64, 1 path (env-steps/s, interleaved rounds, medians). The
@@ -355,7 +359,153 @@ def worker_ppo(timesteps: int) -> dict[str, float]:
     }
 
 
-WORKERS = {"cold": worker_cold, "ratios": worker_ratios, "vector": worker_vector, "ppo": worker_ppo}
+def _oracle_dimension(a: np.ndarray, v: np.ndarray, order: int, rtol: float, deflate: bool) -> int:
+    """The smallest Krylov dimension m whose Lanczos approximation of phi_order(A) v is within
+    rtol of the dense eigh value (relative, 2-norm); A (n, n) symmetric, v (n,). With `deflate`
+    the constant vector is taken out first, as the library does when it knows A 1 = 0."""
+    from math import factorial
+
+    from agent_envs.integrators.phi_functions import phi_scalar
+
+    lam, z = np.linalg.eigh(a)
+    exact = z @ (phi_scalar(lam, order) * (z.T @ v))
+    mean = float(v.mean()) if deflate else 0.0
+    rest = v - mean
+    beta0 = np.linalg.norm(rest)
+    if beta0 == 0.0:
+        return 1
+    basis, alphas, betas = [rest / beta0], [], []
+    for m in range(1, a.shape[0] + 1):
+        w = a @ basis[-1]
+        alphas.append(w @ basis[-1])
+        w = w - alphas[-1] * basis[-1]
+        if m > 1:
+            w = w - (w @ basis[-2]) * basis[-2]
+        t = np.diag(alphas) + np.diag(betas, 1) + np.diag(betas, -1)
+        tl, tz = np.linalg.eigh(t)
+        approx = beta0 * np.array(basis).T @ (tz @ (phi_scalar(tl, order) * tz[0]))
+        approx = approx + mean / factorial(order)
+        if np.linalg.norm(approx - exact) <= rtol * np.linalg.norm(exact):
+            return m
+        betas.append(np.linalg.norm(w))
+        basis.append(w / betas[-1])
+    return a.shape[0]
+
+
+def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
+    """Krylov dimensions per member and step of the paper SERB env: reached by the library's
+    Lanczos (its numpy reference: the compiled one stops at the same dimensions) and the oracle
+    (`_oracle_dimension`), for `members` of the 20 members of every phi-action over `episodes`
+    episodes (the steps of part 1); and, with numba, one compiled product over a member's
+    100 x 100 matrix in cache and the compiled phi-action of a near-consensus step, per member
+    (microseconds)."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401
+    from agent_envs.dynamics.laplacian import FrozenLaplacian
+    from agent_envs.envs import ENV_ID
+    from agent_envs.integrators import phi_functions as pf
+
+    captured: list[tuple[Any, ...]] = []
+    original = pf._krylov
+
+    def capture(a: Any, v: Any, order: int, symmetric: bool, rtol: float, max_dim: int,
+                bounds: Any = None) -> Any:  # fmt: skip
+        if isinstance(a, FrozenLaplacian):
+            norms, widths = a.krylov_bounds() if bounds is None else bounds
+            widths = np.full(a.shape[:-2], np.inf) if widths is None else widths
+            pick = slice(None, None, max(1, a.shape[0] // members))
+            captured.append((a.dense()[pick], np.array(v[pick]), order, rtol,
+                             np.broadcast_to(norms, a.shape[:-2])[pick],
+                             np.broadcast_to(widths, a.shape[:-2])[pick],
+                             a.parts(), np.array(v), a.scale, a.peak))  # fmt: skip
+        return original(a, v, order, symmetric, rtol, max_dim, bounds)
+
+    env = gym.make(ENV_ID, **env_kwargs("paper", "serb")).unwrapped
+    action = np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape)
+    pf._krylov = capture
+    try:
+        for episode in range(episodes):
+            env.reset(seed=episode)
+            for _ in range(env.config.n_steps):
+                env.step(action.astype(np.float32))
+                # keep only the last step's whole batch (for the timing below)
+                if len(captured) > 1:
+                    captured[-2] = captured[-2][:6]
+    finally:
+        pf._krylov = original
+    count = [0]
+    apply = pf._RowOperator.apply
+
+    def counted(self: Any, rows: Any) -> Any:
+        count[0] += 1
+        return apply(self, rows)
+
+    reached, oracle, step_of = [], [], []
+    pf._RowOperator.apply = counted
+    try:
+        for index, (dense, v, order, rtol, norms, widths, *_) in enumerate(captured):
+            for j in range(dense.shape[0]):
+                count[0] = 0
+                bounds = (norms[j : j + 1], widths[j : j + 1])
+                pf._lanczos_numpy(pf._RowOperator(dense[j : j + 1]), v[j : j + 1], order, rtol,
+                                  100, bounds=bounds)  # fmt: skip
+                reached.append(count[0])
+                deflate = bool(np.isfinite(widths[j]))
+                oracle.append(_oracle_dimension(dense[j], v[j, :, 0], order, rtol, deflate))
+                step_of.append(index % env.config.n_steps)
+    finally:
+        pf._RowOperator.apply = apply
+    reached_a, oracle_a, steps = np.array(reached), np.array(oracle), np.array(step_of)
+    late, early = steps >= 10, steps < 3
+    out = {
+        "reached": float(reached_a.mean()),
+        "reached_late": float(reached_a[late].mean()),
+        "reached_early": float(reached_a[early].mean()),
+        "oracle": float(oracle_a.mean()),
+        "oracle_late": float(oracle_a[late].mean()),
+        "oracle_early": float(oracle_a[early].mean()),
+    }
+    if pf.load_compiled():
+        from numba import njit
+
+        from agent_envs.integrators import compiled_lanczos as cl
+
+        product = cl._product
+
+        @njit
+        def products(p: Any, q: Any, w: Any, n: int, reps: int) -> None:
+            for _ in range(reps):
+                product(p, q, w, n)
+
+        (p, s), v_all, scale, peak = captured[-1][6:10]
+        p0, q, w = np.ascontiguousarray(p[0]), np.ones(p.shape[-1]), np.empty(p.shape[-1])
+        products(p0, q, w, p.shape[-1], 10)
+        start = time.perf_counter()
+        products(p0, q, w, p.shape[-1], 20000)
+        out["product_us"] = 1e6 * (time.perf_counter() - start) / 20000
+        members_all = p.shape[0]
+        p_all = np.ascontiguousarray(p).reshape(members_all, *p.shape[-2:])
+        p_all.flags.writeable = False
+        s_all = np.ascontiguousarray(s).reshape(members_all, -1)
+        rhs = np.ascontiguousarray(v_all).reshape(members_all, *v_all.shape[-2:])
+        result, ok = np.empty(rhs.shape), np.empty(members_all, dtype=bool)
+
+        def call() -> None:
+            cl.frozen_lanczos(p_all, s_all, scale, rhs, 1, 1e-10, 100, 2, pf._NO_BOUNDS,
+                              pf._NO_BOUNDS, peak, result, ok)  # fmt: skip
+
+        out["member_us"] = 1e6 * interleaved({"call": call}, 200, 5)["call"] / members_all
+    return out
+
+
+WORKERS = {
+    "cold": worker_cold,
+    "ratios": worker_ratios,
+    "krylov": worker_krylov,
+    "vector": worker_vector,
+    "ppo": worker_ppo,
+}
 
 
 # ----------------------------------------------------------------------------- driver
@@ -468,6 +618,29 @@ def main() -> int:
             " beyond the EM step per product (the interpreter's share: numpy calls on 100-vectors)"
             f" {cost} ms"
         )
+        print()
+
+    if "krylov" not in args.skip:
+        k = run_worker(sys.executable, "krylov")
+        print("## 2b. Krylov dimensions per member and step (paper SERB env, this tree)\n")
+        print("| | mean | steps >= 10 (near consensus) | steps 0-2 |")
+        print("|---|---|---|---|")
+        for label, key in (("reached (rtol 1e-10)", "reached"), ("oracle", "oracle")):
+            print(f"| {label} | {k[key]:.2f} | {k[key + '_late']:.2f} | {k[key + '_early']:.1f} |")
+        if "product_us" in k:
+            print(
+                f"\nOne compiled product over a member's 100 x 100 matrix in cache: "
+                f"{k['product_us']:.2f} us; the compiled phi-action of a near-consensus step: "
+                f"{k['member_us']:.2f} us per member"
+            )
+            if "ratios" not in args.skip:
+                em = res["after"]["em_env"]
+                for label, dims in (("the oracle", k["oracle"]), ("the reached", k["reached"])):
+                    extra = 20 * (dims + 1) * k["product_us"] * 1e-6  # + the noise product
+                    print(
+                        f"Products alone at {label} dimension (+ the noise product): "
+                        f"SERB / EM >= {(em + extra) / em:.2f}"
+                    )
         print()
 
     if "vector" not in args.skip:
