@@ -410,8 +410,10 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
     original = pf._krylov
 
     def capture(a: Any, v: Any, order: int, symmetric: bool, rtol: float, max_dim: int,
-                bounds: Any = None) -> Any:  # fmt: skip
+                bounds: Any = None, add_product: Any = None) -> Any:  # fmt: skip
         if isinstance(a, FrozenLaplacian):
+            if add_product is not None:  # SERB's F + sigma L dW, as the phi-action sees it
+                v = v + add_product[1] * (a @ add_product[0])
             norms, widths = a.krylov_bounds() if bounds is None else bounds
             widths = np.full(a.shape[:-2], np.inf) if widths is None else widths
             pick = slice(None, None, max(1, a.shape[0] // members))
@@ -419,7 +421,8 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
                              np.broadcast_to(norms, a.shape[:-2])[pick],
                              np.broadcast_to(widths, a.shape[:-2])[pick],
                              a.parts(), np.array(v), a.scale, a.peak))  # fmt: skip
-        return original(a, v, order, symmetric, rtol, max_dim, bounds)
+            return original(a, v, order, symmetric, rtol, max_dim, bounds)
+        return original(a, v, order, symmetric, rtol, max_dim, bounds, add_product)
 
     env = gym.make(ENV_ID, **env_kwargs("paper", "serb")).unwrapped
     action = np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape)
@@ -493,7 +496,7 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
 
         def call() -> None:
             cl.frozen_lanczos(p_all, s_all, scale, rhs, 1, 1e-10, 100, 2, pf._NO_BOUNDS,
-                              pf._NO_BOUNDS, peak, result, ok)  # fmt: skip
+                              pf._NO_BOUNDS, peak, result, ok, pf._NO_EXTRA, 0.0)  # fmt: skip
 
         out["member_us"] = 1e6 * interleaved({"call": call}, 200, 5)["call"] / members_all
     return out
