@@ -7,9 +7,6 @@ the `dev` extra installs it, so CI runs them).
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -83,12 +80,3 @@ def test_the_model_drift_and_operator_agree_with_the_numpy_path(compiled, kernel
     assert np.max(np.abs(l_fast - l_slow)) <= 1e-14 * np.max(np.abs(l_slow))
     if kernel == "nonsymmetric":
         np.testing.assert_array_equal(f_fast, f_slow)
-
-
-def test_switched_off_by_environment_variable():
-    code = "from agent_envs.dynamics import laplacian; print(laplacian.load_compiled_kernel())"
-    env = {"AGENT_ENVS_NUMBA": "0", "PATH": "/usr/bin:/bin"}
-    done = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
-    )
-    assert done.stdout.strip() == "False"

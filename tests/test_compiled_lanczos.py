@@ -196,12 +196,17 @@ def test_serb_step_uses_the_compiled_path(compiled, monkeypatch):
 
 
 def test_switched_off_by_environment_variable():
-    code = "from agent_envs.integrators import phi_functions as pf; print(pf.load_compiled())"
+    """AGENT_ENVS_NUMBA=0 switches off both compiled parts: the Lanczos and the kernel pass."""
+    code = (
+        "from agent_envs.integrators import phi_functions as pf; "
+        "from agent_envs.dynamics import laplacian; "
+        "print(pf.load_compiled(), laplacian.load_compiled_kernel())"
+    )
     env = {"AGENT_ENVS_NUMBA": "0", "PATH": "/usr/bin:/bin"}
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
     )
-    assert done.stdout.strip() == "False"
+    assert done.stdout.strip() == "False False"
 
 
 def test_package_works_without_numba():

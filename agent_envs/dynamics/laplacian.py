@@ -31,6 +31,7 @@ product). The public `SwarmModel.frozen_linearization` still returns a fresh arr
 
 from __future__ import annotations
 
+import importlib
 import os
 from typing import Any
 
@@ -45,6 +46,17 @@ COMPILED_ENV_VAR = "AGENT_ENVS_NUMBA"
 _compiled_kernel: Any = None
 
 
+def import_compiled(module: str) -> Any:
+    """The numba-compiled module `module` (e.g. ``"agent_envs.dynamics.compiled_kernel"``), or
+    False: numba not importable, or ``AGENT_ENVS_NUMBA=0`` in the environment."""
+    if os.environ.get(COMPILED_ENV_VAR, "1") == "0":
+        return False
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        return False
+
+
 def load_compiled_kernel() -> bool:
     """Whether the compiled kernel pass (`agent_envs.dynamics.compiled_kernel`, needs numba)
     builds P, its row sums and the drift for the symmetric Cucker-Smale kernel; loads it on
@@ -54,18 +66,12 @@ def load_compiled_kernel() -> bool:
     P [x | 1] run."""
     global _compiled_kernel
     if _compiled_kernel is None:
-        _compiled_kernel = False
-        if os.environ.get(COMPILED_ENV_VAR, "1") != "0":
-            try:
-                from agent_envs.dynamics import compiled_kernel
-            except ImportError:
-                pass
-            else:
-                _compiled_kernel = compiled_kernel
-                x = np.zeros((1, 2, 1))  # one call with the env's argument types
-                compiled_kernel.cucker_smale_drift(
-                    x, 1.0, 1.0, np.empty((1, 2, 2)), np.empty((1, 2)), np.empty((1, 2, 1))
-                )
+        _compiled_kernel = import_compiled("agent_envs.dynamics.compiled_kernel")
+        if _compiled_kernel is not False:
+            x = np.zeros((1, 2, 1))  # one call with the env's argument types
+            _compiled_kernel.cucker_smale_drift(
+                x, 1.0, 1.0, np.empty((1, 2, 2)), np.empty((1, 2)), np.empty((1, 2, 1))
+            )
     return _compiled_kernel is not False
 
 

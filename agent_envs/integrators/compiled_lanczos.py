@@ -94,24 +94,6 @@ def _dot(a: np.ndarray, b: np.ndarray, n: int) -> float:
 
 
 @njit(cache=True)
-def _mean(a: np.ndarray, n: int) -> float:
-    """sum_i a_i / n (in `_dot`'s four partial sums)."""
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    top = n - n % 4
-    for i in range(0, top, 4):
-        s0 += a[i]
-        s1 += a[i + 1]
-        s2 += a[i + 2]
-        s3 += a[i + 3]
-    for i in range(top, n):
-        s0 += a[i]
-    return ((s0 + s1) + (s2 + s3)) / n
-
-
-@njit(cache=True)
 def _axpy_dot(w: np.ndarray, coef: float, x: np.ndarray, y: np.ndarray, n: int) -> float:
     """w += coef x, then <w, y> over i < n, in one pass (`_dot`'s four partial sums; y may be
     w itself: then |w|^2 of the updated w)."""
@@ -338,6 +320,7 @@ def frozen_lanczos(
     eig_e = np.empty(max_dim)
     eig_z = np.empty((max_dim, max_dim))
     means = np.empty(k)
+    ones = np.ones(n)
     for member in range(n_members):
         pm = p[member]
         sm = s[member]
@@ -368,7 +351,7 @@ def frozen_lanczos(
                     q0[i] = v[member, i, c]
             mean = 0.0
             if deflate:
-                mean = _mean(q0, n)
+                mean = _dot(q0, ones, n) / n
             means[c] = mean
             for i in range(n):
                 q0[i] = q0[i] - mean

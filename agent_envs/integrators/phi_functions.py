@@ -36,14 +36,13 @@ the numbers.
 from __future__ import annotations
 
 import math
-import os
 import warnings
 from typing import Any
 
 import numpy as np
 
 from agent_envs import arrays
-from agent_envs.dynamics.laplacian import COMPILED_ENV_VAR, FrozenLaplacian, use_compiled_kernel
+from agent_envs.dynamics.laplacian import FrozenLaplacian, import_compiled, use_compiled_kernel
 
 PHI_METHODS = ("auto", "expm", "eigh", "krylov")
 # Crossovers of "auto" (measured by benchmarks/bench_integrators.py, one BLAS thread).
@@ -635,15 +634,9 @@ def load_compiled() -> bool:
     """
     global _compiled
     if _compiled is None:
-        _compiled = False
-        if os.environ.get(COMPILED_ENV_VAR, "1") != "0":
-            try:
-                from agent_envs.integrators import compiled_lanczos
-            except ImportError:
-                pass
-            else:
-                _compiled = compiled_lanczos
-                _warm_up()
+        _compiled = import_compiled("agent_envs.integrators.compiled_lanczos")
+        if _compiled is not False:
+            _warm_up()
     return _compiled is not False
 
 
