@@ -617,9 +617,10 @@ def auto_phi_method(size: int, n_matrices: int, symmetric: bool) -> str:
 
 
 def _auto_method(a: Any, v: Any, symmetric: bool) -> str:
-    batch = np.broadcast_shapes(tuple(a.shape[:-2]), tuple(v.shape[:-2]))
-    n_matrices = int(np.prod(batch, dtype=int))
-    return auto_phi_method(a.shape[-1], n_matrices, symmetric)
+    a_batch, v_batch = tuple(a.shape[:-2]), tuple(v.shape[:-2])
+    # (np.broadcast_shapes and np.prod of a tuple: 10 us per SERB env step)
+    batch = a_batch if a_batch == v_batch else np.broadcast_shapes(a_batch, v_batch)
+    return auto_phi_method(a.shape[-1], math.prod(batch), symmetric)
 
 
 def load_compiled() -> bool:
