@@ -249,3 +249,32 @@ def test_compiled_product_pass_equals_the_product_taken_first(compiled, n, d, ba
     np.testing.assert_array_equal(ok, first_ok)
     assert np.max(np.abs(got - first)) <= TOL * scale
     assert np.max(np.abs(got - reference)) <= TOL * scale
+
+
+def test_steps_use_the_machine_code_loaded_at_make():
+    """numba keeps one machine code per argument type (read-only is part of it) and loads a new
+    one at its first call: the env's first step paid 15 ms for that before its inputs were
+    made read-only like the warm-up's. After make, steps of the env and of `simulate` (writable
+    states) add no type."""
+    _needs_numba()
+    code = textwrap.dedent(
+        """
+        import gymnasium as gym
+        import agent_envs
+        from agent_envs import SwarmParams, simulate
+        from agent_envs.dynamics import compiled_kernel
+        from agent_envs.integrators import compiled_lanczos
+        env = gym.make("agent_envs/Swarm-v0", n_agents=100, n_paths=3, integrator="serb")
+        counts = lambda: (len(compiled_kernel.cucker_smale_drift.signatures),
+                          len(compiled_lanczos.frozen_lanczos.signatures))
+        made = counts()
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(env.action_space.sample())
+        simulate(SwarmParams(n_agents=100), n_steps=3, n_paths=2, integrator="serb", seed=0)
+        print(made, counts())
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "(1, 1) (1, 1)"

@@ -68,7 +68,8 @@ def load_compiled_kernel() -> bool:
     if _compiled_kernel is None:
         _compiled_kernel = import_compiled("agent_envs.dynamics.compiled_kernel")
         if _compiled_kernel is not False:
-            x = np.zeros((1, 2, 1))  # one call with the env's argument types
+            x = np.zeros((1, 2, 1))  # one call with the argument types of every call
+            x.flags.writeable = False
             _compiled_kernel.cucker_smale_drift(
                 x, 1.0, 1.0, np.empty((1, 2, 2)), np.empty((1, 2)), np.empty((1, 2, 1))
             )
@@ -95,7 +96,10 @@ def compiled_cucker_smale_drift(
     True)."""
     *batch, n, d = x.shape
     members = int(np.prod(batch, dtype=np.int64)) if batch else 1
-    flat = np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d)
+    # read-only, as the env's states: numba keeps one machine code per argument type, and a
+    # second (writable) type would be loaded at its first call, in a step
+    flat = np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d).view()
+    flat.flags.writeable = False
     row_sums = np.empty((members, n))
     drift = np.empty((members, n, d))
     _compiled_kernel.cucker_smale_drift(

@@ -55,8 +55,20 @@ _ACCUMULATE_BASIS_MIN_N = 2**14
 #: the compiled Lanczos module once `load_compiled` found it; False: unavailable or switched off;
 #: None: not tried yet
 _compiled: Any = None
-_NO_BOUNDS = np.empty(0)
-_NO_EXTRA = np.empty((0, 0, 0))
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    """A read-only view of a: numba compiles (or loads) one machine code per argument type,
+    and read-only is part of the type, so the compiled calls always get read-only inputs (the
+    env's states and the workspace's P are read-only; a second type would cost its load at the
+    first step instead of at make)."""
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
+_NO_BOUNDS = _readonly(np.empty(0))
+_NO_EXTRA = _readonly(np.empty((0, 0, 0)))
 
 
 def phi_scalar(z: Any, order: int) -> Any:
@@ -661,8 +673,8 @@ def _warm_up() -> None:
     p = np.full((1, 3, 3), 0.5)
     np.fill_diagonal(p[0], 1.0)
     p.flags.writeable = False
-    s = p.sum(axis=-1)
-    v = np.ones((1, 3, 1))
+    s = _readonly(p.sum(axis=-1))
+    v = _readonly(np.ones((1, 3, 1)))
     for extra in (_NO_EXTRA, v):
         _compiled.frozen_lanczos(
             p, s, 0.1, v, 1, 1e-10, 3, 2, _NO_BOUNDS, _NO_BOUNDS, 1.0, np.empty((1, 3, 1)),
@@ -693,13 +705,14 @@ def _compiled_frozen_lanczos(
     if np.broadcast_shapes(batch, *shapes) != batch:
         return None
     members = math.prod(batch)
-    p = matrix.reshape(members, n, n)
-    s = np.ascontiguousarray(row_sums).reshape(members, n)
+    p = _readonly(matrix.reshape(members, n, n))
+    s = _readonly(np.ascontiguousarray(row_sums).reshape(members, n))
     rhs = np.ascontiguousarray(np.broadcast_to(v, (*batch, n, k))).reshape(members, n, k)
+    rhs = _readonly(rhs)
     extra, extra_scale = _NO_EXTRA, 0.0
     if add_product is not None:
         extra = np.broadcast_to(np.asarray(add_product[0], dtype=np.float64), (*batch, n, k))
-        extra = np.ascontiguousarray(extra).reshape(members, n, k)
+        extra = _readonly(np.ascontiguousarray(extra).reshape(members, n, k))
         extra_scale = float(add_product[1])
     if bounds is None:
         norms = widths = _NO_BOUNDS
@@ -707,7 +720,7 @@ def _compiled_frozen_lanczos(
         norms = np.ascontiguousarray(np.broadcast_to(bounds[0], batch), dtype=float)
         widths = np.inf if bounds[1] is None else bounds[1]
         widths = np.ascontiguousarray(np.broadcast_to(widths, batch), dtype=float)
-        norms, widths = norms.reshape(members), widths.reshape(members)
+        norms, widths = _readonly(norms.reshape(members)), _readonly(widths.reshape(members))
     peak = a.peak if a.peak is not None and a.symmetric else -1.0
     out = np.empty((members, n, k))
     converged = np.empty(members, dtype=bool)
