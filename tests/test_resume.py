@@ -29,7 +29,7 @@ TINY_HYPERPARAMS = {
 }
 
 
-def tiny_run(tmp_path: Path, algo: str, timesteps: int = 200) -> Path:
+def tiny_run(tmp_path: Path, algo: str, timesteps: int = 200, verbose: int = 0) -> Path:
     from agent_envs.training.train import train
 
     config = TrainConfig(
@@ -45,6 +45,7 @@ def tiny_run(tmp_path: Path, algo: str, timesteps: int = 200) -> Path:
         checkpoint_freq=100,
         progress_bar=False,
         tensorboard=False,
+        verbose=verbose,
     )
     return train(config)
 
@@ -175,9 +176,14 @@ def test_a_sweep_resumed_with_another_preset_is_refused(tmp_path, capsys):
     assert (out / "sweep.json").read_text() == saved
 
 
-def test_training_without_tensorboard_leaves_no_folder_in_the_temp_dir(tmp_path, monkeypatch):
+@pytest.mark.parametrize("verbose", [0, 1])
+def test_training_without_tensorboard_leaves_no_folder_in_the_temp_dir(
+    tmp_path, monkeypatch, capsys, verbose
+):
     """SB3 gives `learn` a logger whose folder is a fresh $TMPDIR/SB3-<date> when TensorBoard is
-    off; the training layer logs without a folder instead (training and its resume)."""
+    off; the training layer logs without a folder instead (training and its resume), to the
+    standard output with verbose >= 1."""
+    import dataclasses
     import tempfile
 
     temp = tmp_path / "tmp"
@@ -185,7 +191,8 @@ def test_training_without_tensorboard_leaves_no_folder_in_the_temp_dir(tmp_path,
     monkeypatch.setattr(tempfile, "tempdir", str(temp))
     from agent_envs.training.train import train
 
-    run_dir = tiny_run(tmp_path, "ppo", timesteps=128)
-    train(resume_config(run_dir, 256))
+    run_dir = tiny_run(tmp_path, "ppo", timesteps=128, verbose=verbose)
+    train(dataclasses.replace(resume_config(run_dir, 256), verbose=verbose))
     assert (run_dir / "manifest.json").is_file()
+    assert ("total_timesteps" in capsys.readouterr().out) == (verbose >= 1)
     assert [p.name for p in temp.iterdir() if p.name.startswith("SB3-")] == []

@@ -367,9 +367,9 @@ def _log_without_folder(model: Any) -> None:
     """SB3's logger without a folder (standard output only, with verbose >= 1): without
     TensorBoard, `model.learn` configures one whose folder is a fresh, empty
     ``$TMPDIR/SB3-<date>`` directory per call, which nothing reads and nothing removes."""
-    from stable_baselines3.common.logger import Logger, make_output_format
+    from stable_baselines3.common.logger import HumanOutputFormat, Logger
 
-    formats = [make_output_format("stdout", "")] if model.verbose >= 1 else []
+    formats = [HumanOutputFormat(sys.stdout)] if model.verbose >= 1 else []
     model.set_logger(Logger(folder=None, output_formats=formats))
 
 

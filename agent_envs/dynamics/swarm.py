@@ -155,6 +155,8 @@ class SwarmModel:
 
         One kernel pass into the workspace's P, one product P [x | 1] = [P x | s], then
         F = (P x - s * x) / N; nothing of size (..., N, N) is allocated after the first call.
+        With numba, for the symmetric kernel with a scalar weight, the compiled pass
+        (`agent_envs.dynamics.compiled_kernel`) writes P and returns s and F instead.
         """
         kernel = self.kernel
         ws = self._workspace

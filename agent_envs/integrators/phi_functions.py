@@ -865,6 +865,10 @@ def phi_action(
     """
     if order < 1:
         raise ValueError(f"order must be >= 1, got {order}")
+    if isinstance(max_krylov_dim, bool) or not isinstance(max_krylov_dim, (int, np.integer)):
+        raise TypeError(f"max_krylov_dim must be an int >= 1, got {max_krylov_dim!r}")
+    if max_krylov_dim < 1:
+        raise ValueError(f"max_krylov_dim must be >= 1, got {max_krylov_dim}")
     if method not in PHI_METHODS:
         raise ValueError(f"method must be one of {PHI_METHODS}, got {method!r}")
     dense_backed = is_operator(a) and hasattr(a, "dense") and hasattr(a, "apply_rows")
