@@ -20,8 +20,9 @@ than numpy's product, so the results agree with the numpy path to round-off
 does not depend on the rest of the batch (the native vector env relies on it). No `fastmath`,
 no threads.
 
-Measured (`OPENBLAS_NUM_THREADS=1`, N = 100, 20 paths, d = 1): 8.5 us per member against 11.3
-us for numpy's four passes and the product; the N (N + 1) / 2 divisions are most of it.
+Measured by `benchmarks/bench_throughput.py` (part 2, N = 100, 20 paths, d = 1): 8.9 us per
+member against 12.6 us for numpy's four in-place passes and the product; the N (N + 1) / 2
+divisions are most of it.
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
