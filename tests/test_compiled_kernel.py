@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agent_envs import SwarmModel, SwarmParams
 from agent_envs.dynamics import laplacian
@@ -80,3 +82,27 @@ def test_the_model_drift_and_operator_agree_with_the_numpy_path(compiled, kernel
     assert np.max(np.abs(l_fast - l_slow)) <= 1e-14 * np.max(np.abs(l_slow))
     if kernel == "nonsymmetric":
         np.testing.assert_array_equal(f_fast, f_slow)
+
+
+@given(
+    n=st.integers(1, 40),
+    d=st.integers(1, 3),
+    paths=st.integers(1, 3),
+    spread=st.sampled_from([0.0, 1e-6, 0.3, 5.0]),
+    alpha=st.floats(0.05, 2.0),
+    seed=st.integers(0, 2**16),
+)
+@settings(max_examples=60, deadline=None)
+def test_kernel_pass_equals_the_numpy_passes_on_any_swarm(n, d, paths, spread, alpha, seed):
+    """Any N (one agent included), d, batch and spread (coincident agents included)."""
+    pytest.importorskip("numba")
+    assert laplacian.load_compiled_kernel()
+    weight = 1.0 / 0.05
+    x = np.random.default_rng(seed).uniform(-spread, spread, (paths, n, d))
+    p = np.empty((paths, n, n))
+    s, drift = laplacian.compiled_cucker_smale_drift(x, weight, alpha**2, p)
+    want_p, want_s, want_drift = _numpy_pass(x, alpha, weight)
+    assert np.max(np.abs(p - want_p)) <= 1e-15 * np.max(want_p)
+    assert np.max(np.abs(s - want_s)) <= 1e-14 * np.max(want_s)
+    scale = max(np.max(np.abs(want_drift)), np.max(want_s) * max(spread, 1e-300) / n)
+    assert np.max(np.abs(drift - want_drift)) <= 1e-13 * scale
