@@ -32,6 +32,7 @@ product). The public `SwarmModel.frozen_linearization` still returns a fresh arr
 from __future__ import annotations
 
 import importlib
+import math
 import os
 from typing import Any
 
@@ -44,6 +45,15 @@ COMPILED_ENV_VAR = "AGENT_ENVS_NUMBA"
 #: `agent_envs.dynamics.compiled_kernel` once `load_compiled_kernel` found it; False:
 #: unavailable or switched off; None: not tried yet
 _compiled_kernel: Any = None
+
+
+def readonly_view(a: np.ndarray) -> np.ndarray:
+    """A read-only view of `a` (the workspace hands out its P so; the compiled calls take
+    read-only inputs only: numba keeps one machine code per argument type, and read-only is part
+    of the type, so a second, writable type would be loaded at its first call, in a step)."""
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def import_compiled(module: str) -> Any:
@@ -68,8 +78,7 @@ def load_compiled_kernel() -> bool:
     if _compiled_kernel is None:
         _compiled_kernel = import_compiled("agent_envs.dynamics.compiled_kernel")
         if _compiled_kernel is not False:
-            x = np.zeros((1, 2, 1))  # one call with the argument types of every call
-            x.flags.writeable = False
+            x = readonly_view(np.zeros((1, 2, 1)))  # one call with every call's types
             _compiled_kernel.cucker_smale_drift(
                 x, 1.0, 1.0, np.empty((1, 2, 2)), np.empty((1, 2)), np.empty((1, 2, 1))
             )
@@ -95,11 +104,8 @@ def compiled_cucker_smale_drift(
     and the symmetric kernel with scalar weight w (`load_compiled_kernel` must have answered
     True)."""
     *batch, n, d = x.shape
-    members = int(np.prod(batch, dtype=np.int64)) if batch else 1
-    # read-only, as the env's states: numba keeps one machine code per argument type, and a
-    # second (writable) type would be loaded at its first call, in a step
-    flat = np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d).view()
-    flat.flags.writeable = False
+    members = math.prod(batch)
+    flat = readonly_view(np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d))
     row_sums = np.empty((members, n))
     drift = np.empty((members, n, d))
     _compiled_kernel.cucker_smale_drift(

@@ -43,6 +43,7 @@ from agent_envs.dynamics.laplacian import (
     fill_cucker_smale,
     krylov_bounds,
     load_compiled_kernel,
+    readonly_view,
 )
 from agent_envs.dynamics.operators import (
     AUTO_MATRIX_FREE_MIN_AGENTS,
@@ -174,10 +175,8 @@ class SwarmModel:
             row_sums = product[..., d].copy()
             drift = product[..., :d] - row_sums[..., None] * x
             drift /= self.n_agents
-        view = p.view()
-        view.flags.writeable = False
         operator = FrozenLaplacian(
-            view,
+            readonly_view(p),
             row_sums,
             symmetric=bool(kernel.symmetric),
             peak=self._peak,

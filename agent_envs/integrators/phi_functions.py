@@ -42,7 +42,12 @@ from typing import Any
 import numpy as np
 
 from agent_envs import arrays
-from agent_envs.dynamics.laplacian import FrozenLaplacian, import_compiled, use_compiled_kernel
+from agent_envs.dynamics.laplacian import (
+    FrozenLaplacian,
+    import_compiled,
+    readonly_view,
+    use_compiled_kernel,
+)
 
 PHI_METHODS = ("auto", "expm", "eigh", "krylov")
 # Crossovers of "auto" (measured by benchmarks/bench_integrators.py, one BLAS thread).
@@ -57,18 +62,8 @@ _ACCUMULATE_BASIS_MIN_N = 2**14
 _compiled: Any = None
 
 
-def _readonly(a: np.ndarray) -> np.ndarray:
-    """A read-only view of a: numba compiles (or loads) one machine code per argument type,
-    and read-only is part of the type, so the compiled calls always get read-only inputs (the
-    env's states and the workspace's P are read-only; a second type would cost its load at the
-    first step instead of at make)."""
-    view = a.view()
-    view.flags.writeable = False
-    return view
-
-
-_NO_BOUNDS = _readonly(np.empty(0))
-_NO_EXTRA = _readonly(np.empty((0, 0, 0)))
+_NO_BOUNDS = readonly_view(np.empty(0))
+_NO_EXTRA = readonly_view(np.empty((0, 0, 0)))
 
 
 def phi_scalar(z: Any, order: int) -> Any:
@@ -672,9 +667,9 @@ def _warm_up() -> None:
     model's workspace hands out), so that loading the machine code happens here."""
     p = np.full((1, 3, 3), 0.5)
     np.fill_diagonal(p[0], 1.0)
-    p.flags.writeable = False
-    s = _readonly(p.sum(axis=-1))
-    v = _readonly(np.ones((1, 3, 1)))
+    p = readonly_view(p)
+    s = readonly_view(p.sum(axis=-1))
+    v = readonly_view(np.ones((1, 3, 1)))
     for extra in (_NO_EXTRA, v):
         _compiled.frozen_lanczos(
             p, s, 0.1, v, 1, 1e-10, 3, 2, _NO_BOUNDS, _NO_BOUNDS, 1.0, np.empty((1, 3, 1)),
@@ -705,14 +700,14 @@ def _compiled_frozen_lanczos(
     if np.broadcast_shapes(batch, *shapes) != batch:
         return None
     members = math.prod(batch)
-    p = _readonly(matrix.reshape(members, n, n))
-    s = _readonly(np.ascontiguousarray(row_sums).reshape(members, n))
+    p = readonly_view(matrix.reshape(members, n, n))
+    s = readonly_view(np.ascontiguousarray(row_sums).reshape(members, n))
     rhs = np.ascontiguousarray(np.broadcast_to(v, (*batch, n, k))).reshape(members, n, k)
-    rhs = _readonly(rhs)
+    rhs = readonly_view(rhs)
     extra, extra_scale = _NO_EXTRA, 0.0
     if add_product is not None:
         extra = np.broadcast_to(np.asarray(add_product[0], dtype=np.float64), (*batch, n, k))
-        extra = _readonly(np.ascontiguousarray(extra).reshape(members, n, k))
+        extra = readonly_view(np.ascontiguousarray(extra).reshape(members, n, k))
         extra_scale = float(add_product[1])
     if bounds is None:
         norms = widths = _NO_BOUNDS
@@ -720,7 +715,10 @@ def _compiled_frozen_lanczos(
         norms = np.ascontiguousarray(np.broadcast_to(bounds[0], batch), dtype=float)
         widths = np.inf if bounds[1] is None else bounds[1]
         widths = np.ascontiguousarray(np.broadcast_to(widths, batch), dtype=float)
-        norms, widths = _readonly(norms.reshape(members)), _readonly(widths.reshape(members))
+        norms, widths = (
+            readonly_view(norms.reshape(members)),
+            readonly_view(widths.reshape(members)),
+        )
     peak = a.peak if a.peak is not None and a.symmetric else -1.0
     out = np.empty((members, n, k))
     converged = np.empty(members, dtype=bool)
