@@ -183,16 +183,6 @@ class EpisodeConfig:
         for name in ("observation", "action_basis", "agent_reward"):
             check_option(name, getattr(self, name))
 
-    def check_env_kind(self, kind: str) -> None:
-        """ValueError when the env `kind` ("gymnasium" | "pettingzoo") does not take one of
-        the interface options' values (`interface.check_env_options`)."""
-        check_env_options(
-            kind,
-            observation=self.observation,
-            action_basis=self.action_basis,
-            agent_reward=self.agent_reward,
-        )
-
     @classmethod
     def from_kwargs(
         cls, owner: str = "EpisodeConfig.from_kwargs", /, env_kind: str | None = None, **kwargs: Any
@@ -200,9 +190,10 @@ class EpisodeConfig:
         """Split env keyword arguments into `SwarmParams` fields and env options.
 
         `owner` names the callable in the `TypeError` for an unknown keyword (the env's
-        ``__init__``), as Python would. `env_kind` ("gymnasium" | "pettingzoo"): a string
-        option value that env does not take is refused with that env's values
-        (`check_env_kind`), not the values of both envs.
+        ``__init__``), as Python would. `env_kind` ("gymnasium" | "pettingzoo"): an option
+        value that env does not take is refused with that env's values
+        (`interface.check_env_options`), before the generic check that names both envs' values
+        (a value of the wrong type still gets its TypeError there; the defaults fit both envs).
         """
         param_names = SwarmParams.field_names()
         accepted = (*param_names, *ENV_OPTION_NAMES, "render_mode")

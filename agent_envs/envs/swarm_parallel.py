@@ -119,7 +119,6 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         self.config = EpisodeConfig.from_kwargs(
             f"{type(self).__name__}.__init__", env_kind="pettingzoo", **kwargs
         )
-        self.config.check_env_kind("pettingzoo")
         self.episode = SwarmEpisode(self.config)
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params

@@ -207,7 +207,6 @@ class SwarmVectorEnv(VectorEnv):
         self.config = EpisodeConfig.from_kwargs(
             f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
         )
-        self.config.check_env_kind("gymnasium")
         self.num_envs = int(num_envs)
         self.device = "cpu" if self._device is None else str(self._device)
         self.render_mode = None
