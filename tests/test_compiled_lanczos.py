@@ -138,17 +138,62 @@ def test_stale_operator_raises(compiled):
 
 
 def test_tridiagonal_eigensolver_against_lapack(compiled):
+    """The QL iteration's eigenvalues equal LAPACK's; its recorded rotations form an orthogonal
+    Z with T Z = Z diag(d) (`_apply_z` on the unit vectors), whose first and last rows are the
+    two it carried along."""
     rng = np.random.default_rng(0)
     for m in (1, 2, 5, 17, 40):
         diag, off = rng.normal(size=m), rng.normal(size=m)
         off[m // 2] = 0.0  # a split
-        d, e, z = diag.copy(), off.copy(), np.empty((m, m))
-        assert compiled._tridiagonal_eigh(d, e, z, m)
+        d, e, rows = diag.copy(), off.copy(), np.empty((2, m))
+        size = 2 * m * m + 8
+        rot_c, rot_s, rot_at = np.empty(size), np.empty(size), np.empty(size, int)
+        count = compiled._tridiagonal_ql(d, e, rows, m, rot_c, rot_s, rot_at)
+        assert count >= 0
+        z = np.eye(m)
+        for j in range(m):
+            compiled._apply_z(z[:, j], count, rot_c, rot_s, rot_at)
         t = np.diag(diag) + np.diag(off[: m - 1], 1) + np.diag(off[: m - 1], -1)
         order = np.argsort(d)
         np.testing.assert_allclose(d[order], np.linalg.eigvalsh(t), atol=1e-13)
         np.testing.assert_allclose(z.T @ z, np.eye(m), atol=1e-13)
         np.testing.assert_allclose(t @ z, z * d, atol=1e-12)
+        np.testing.assert_allclose(rows, z[[0, m - 1]], atol=1e-14)
+
+
+def test_tridiagonal_eigensolver_reports_a_full_rotation_buffer(compiled):
+    """More rotations than the buffers hold: -1 (the caller then takes LAPACK's eigh)."""
+    m = 12
+    rng = np.random.default_rng(1)
+    d, e, rows = rng.normal(size=m), rng.normal(size=m), np.empty((2, m))
+    tiny = np.empty(3)
+    assert compiled._tridiagonal_ql(d, e, rows, m, tiny, tiny.copy(), np.empty(3, int)) == -1
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_phi_of_tridiagonal_from_rotations_equals_lapack(compiled, order):
+    """phi_p(T_m) e_1 and Saad's estimate's parts from the QL rotations equal those from
+    LAPACK's eigh, which the compiled Lanczos takes when the rotation buffer is full."""
+    m = 9
+    rng = np.random.default_rng(2)
+    alphas, betas = -np.abs(rng.normal(size=(m, 1))) * 5, np.abs(rng.normal(size=(m, 1)))
+    fact = compiled._factorials(compiled.TAYLOR_TERMS + order + 1)
+    t = np.diag(alphas[:, 0]) + np.diag(betas[: m - 1, 0], 1) + np.diag(betas[: m - 1, 0], -1)
+    lam, vec = np.linalg.eigh(t)
+    phi = (np.expm1(lam) / lam) if order == 1 else (np.expm1(lam) - lam) / lam**2
+    expected = vec @ (phi * vec[0])
+    for capacity in (2 * m * m + 8, 2):
+        out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
+        rot_c, rot_s, rot_at = np.empty(capacity), np.empty(capacity), np.empty(capacity, int)
+        last, size, count = compiled._phi_of_tridiagonal(
+            alphas, betas, m, 0, order, fact, out, d, e, rows, rot_c, rot_s, rot_at
+        )
+        assert (count >= 0) == (capacity > 2)
+        if count > 0:
+            compiled._apply_z(out, count, rot_c, rot_s, rot_at)
+        np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-15)
+        assert last == pytest.approx(abs(expected[-1]), rel=1e-10)
+        assert size == pytest.approx(np.linalg.norm(expected), rel=1e-12)
 
 
 @pytest.mark.parametrize(

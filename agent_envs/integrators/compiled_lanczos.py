@@ -13,18 +13,24 @@ same per-member bounds (||c L||_inf and the width of spec(c L) on 1^perp, from s
 vector (with a finite width: Lanczos on v - mean(v) 1, phi_p(0) mean(v) 1 added at the end),
 the same first check, breakdown tolerance, check interval, Saad's error estimate and stopping
 dimension, and phi_p(T_m) e_1 from the eigendecomposition of T_m. Only the order of the
-floating-point sums (loops instead
-of BLAS and numpy's pairwise sums) and the eigensolver (the implicit QL iteration for
-tridiagonal matrices, allocation-free, where numpy's `eigh` calls LAPACK's syevd: both backward
-stable) differ, so each phi-action agrees with the reference to round-off
-(tests/test_compiled_lanczos.py: 1e-12).
+floating-point sums (loops instead of BLAS and numpy's pairwise sums, fused multiply-adds in
+the product) and the eigensolver differ, so each phi-action agrees with the reference to
+round-off (tests/test_compiled_lanczos.py: 1e-12). The eigensolver is the implicit QL
+iteration for tridiagonal matrices (EISPACK's tql2; numpy's `eigh` calls LAPACK's syevd: both
+backward stable), allocation-free, and it does not form the eigenvector matrix Z: it records
+its plane rotations and carries only Z's first and last rows, all that Saad's estimate reads
+(O(m^2) per check instead of O(m^3): a check at m = 25, as the first steps of an episode from a
+spread start need, cost 40 us with the full Z and 20 us without; `math.sqrt` of the sum of
+squares replaces `math.hypot` in the rotations, whose entries are bounded by ||c L||);
+Z phi(Lambda) Z^T e_1 is formed from the rotations once, at the accepted dimension.
 
 One member at a time keeps its 80 KB kernel matrix (N = 100) in cache for all its Lanczos
-products, and the product is written as rows of axpys (w += q_l P[l, :], P symmetric, four
+products, and the product is written as rows of axpys (w += q_l P[l, :], P symmetric, eight
 rows per pass over w), which the compiler vectorizes without reassociating a sum; the
 recurrence's scalings, projections and norms are fused into two passes over w
 (`_scale_dot`, `_axpy_dot`). A member's result does not depend on the
-rest of the batch (the native vector env relies on it). No `fastmath`, no threads: the BLAS
+rest of the batch (the native vector env relies on it). No reassociation (`fastmath` allows
+only the contraction of a multiply and an add into one fused operation), no threads: the BLAS
 pools of the hot path are one thread too.
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
@@ -117,28 +123,43 @@ def _axpy_dot(w: np.ndarray, coef: float, x: np.ndarray, y: np.ndarray, n: int) 
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"contract"})
 def _product(p: np.ndarray, q: np.ndarray, w: np.ndarray, n: int) -> None:
-    """w = P q for a symmetric P (n, n), as rows of axpys (w += q_l P[l, :]) four rows at a
-    time: each pass over w reads four rows of P, which the compiler vectorizes along the row
-    without reassociating a sum (a separate function: inlined into the Lanczos loop, the
-    compiler vectorized it worse, 0.9 us against 0.65 us at n = 100)."""
+    """w = P q for a symmetric P (n, n), as rows of axpys (w += q_l P[l, :]) eight rows at a
+    time, in the order of the rows (w_i = (...((q_0 P_0i + q_1 P_1i) + q_2 P_2i) ...): each
+    pass over w reads eight rows of P, which the compiler vectorizes along the row without
+    reassociating a sum; `contract` lets it fuse each multiply-add (one rounding instead of
+    two). A separate function: inlined into the Lanczos loop, the compiler vectorized it worse.
+    At n = 100 the matrix (80 KB) is read from L2 and the pass is bound by that: 1.2-1.3 us,
+    against 1.5 us for four rows per pass without fused multiply-adds."""
     for i in range(n):
         w[i] = 0.0
-    top = n - n % 4
-    for col in range(0, top, 4):
+    top = n - n % 8
+    for col in range(0, top, 8):
         q0 = q[col]
         q1 = q[col + 1]
         q2 = q[col + 2]
         q3 = q[col + 3]
+        q4 = q[col + 4]
+        q5 = q[col + 5]
+        q6 = q[col + 6]
+        q7 = q[col + 7]
         for i in range(n):
-            w[i] += (q0 * p[col, i] + q1 * p[col + 1, i]) + (
-                q2 * p[col + 2, i] + q3 * p[col + 3, i]
+            w[i] = (
+                w[i]
+                + q0 * p[col, i]
+                + q1 * p[col + 1, i]
+                + q2 * p[col + 2, i]
+                + q3 * p[col + 3, i]
+                + q4 * p[col + 4, i]
+                + q5 * p[col + 5, i]
+                + q6 * p[col + 6, i]
+                + q7 * p[col + 7, i]
             )
     for col in range(top, n):
         q_col = q[col]
         for i in range(n):
-            w[i] += q_col * p[col, i]
+            w[i] = w[i] + q_col * p[col, i]
 
 
 @njit(cache=True)
@@ -185,16 +206,27 @@ def _member_bounds(p: np.ndarray, s: np.ndarray, n: int, scale_abs: float, peak:
 
 
 @njit(cache=True)
-def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray, z: np.ndarray, m: int) -> bool:
-    """Eigenvalues (into d[:m]) and eigenvectors (columns of z[:m, :m]) of the symmetric
-    tridiagonal matrix with diagonal d[:m] and off-diagonal e[:m - 1] (e[m - 1] is scratch): the
-    implicit QL iteration with Wilkinson shifts (EISPACK's tql2, as in Numerical Recipes'
-    `tqli`), backward stable like LAPACK's syevd and without its allocations. False if an
-    eigenvalue needed more than 30 m iterations (then the caller uses `np.linalg.eigh`)."""
-    for i in range(m):
-        for j in range(m):
-            z[i, j] = 0.0
-        z[i, i] = 1.0
+def _tridiagonal_ql(d, e, rows, m, rot_c, rot_s, rot_at) -> int:
+    """Eigenvalues of the symmetric tridiagonal T (diagonal d[:m], off-diagonal e[:m - 1]; e[m - 1]
+    is scratch) into d[:m], by the implicit QL iteration with Wilkinson shifts (EISPACK's tql2,
+    as in Numerical Recipes' `tqli`; backward stable like LAPACK's syevd). Returns the number K
+    of plane rotations G_1, ..., G_K it applied, or -1 (an eigenvalue needed more than 30 m
+    iterations, or more rotations than the buffers hold: the caller then uses
+    `np.linalg.eigh`).
+
+    The eigenvectors are Z = G_1 G_2 ... G_K (columns), where G_r rotates the coordinates
+    (i, i + 1), i = rot_at[r], by (c, s) = (rot_c[r], rot_s[r]):
+    (G y)_i = c y_i + s y_{i+1}, (G y)_{i+1} = c y_{i+1} - s y_i. tql2 multiplies them into a
+    full Z, O(m^3); here the rotations are recorded and applied to the two rows of Z that
+    Saad's error estimate reads, rows[0] = e_1^T Z and rows[1] = e_m^T Z, O(m^2); `_apply_z`
+    forms Z y for the one vector the phi-action needs."""
+    for j in range(m):
+        rows[0, j] = 0.0
+        rows[1, j] = 0.0
+    rows[0, 0] = 1.0
+    rows[1, m - 1] = 1.0
+    capacity = rot_c.shape[0]
+    count = 0
     e[m - 1] = 0.0
     for low in range(m):
         iterations = 0
@@ -208,10 +240,10 @@ def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray, z: np.ndarray, m: int) -> bo
             if high == low:
                 break
             iterations += 1
-            if iterations > 30 * m:
-                return False
+            if iterations > 30 * m or count + (high - low) > capacity:
+                return -1
             g = (d[low + 1] - d[low]) / (2.0 * e[low])
-            r = math.hypot(g, 1.0)
+            r = math.sqrt(g * g + 1.0)  # |g| > 1e154: r = inf, the shift term below -> 0, its limit
             g = d[high] - d[low] + e[low] / (g + math.copysign(r, g))
             s = 1.0
             c = 1.0
@@ -221,7 +253,7 @@ def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray, z: np.ndarray, m: int) -> bo
             while i >= low:
                 f = s * e[i]
                 b = c * e[i]
-                r = math.hypot(f, g)
+                r = math.sqrt(f * f + g * g)  # entries of c L(x) are bounded by its norm
                 e[i + 1] = r
                 if r == 0.0:
                     d[i + 1] -= p
@@ -235,46 +267,79 @@ def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray, z: np.ndarray, m: int) -> bo
                 p = s * r
                 d[i + 1] = g + p
                 g = c * r - b
-                for row in range(m):
-                    f = z[row, i + 1]
-                    z[row, i + 1] = s * z[row, i] + c * f
-                    z[row, i] = c * z[row, i] - s * f
+                for row in range(2):
+                    f = rows[row, i + 1]
+                    rows[row, i + 1] = s * rows[row, i] + c * f
+                    rows[row, i] = c * rows[row, i] - s * f
+                rot_c[count] = c
+                rot_s[count] = s
+                rot_at[count] = i
+                count += 1
                 i -= 1
             if underflow:
                 continue
             d[low] -= p
             e[low] = g
             e[high] = 0.0
-    return True
+    return count
 
 
 @njit(cache=True)
-def _coefficients(alphas, betas, m, c, order, fact, out, d, e, z):
-    """phi_order(T_m) e_1 = V phi(Lambda) V^T e_1 of column c into out[:m]; T_m from
-    alphas[:m, c] and betas[:m - 1, c]; d, e (>= m) and z (>= m x m) are scratch."""
+def _apply_z(y, count, rot_c, rot_s, rot_at) -> None:
+    """y <- Z y = G_1 (G_2 (... (G_K y))) in place, for the K rotations `_tridiagonal_ql`
+    recorded: O(K) = O(m^2) instead of the O(m^3) of forming Z."""
+    for r in range(count - 1, -1, -1):
+        i = rot_at[r]
+        c = rot_c[r]
+        s = rot_s[r]
+        a = y[i]
+        b = y[i + 1]
+        y[i] = c * a + s * b
+        y[i + 1] = c * b - s * a
+
+
+@njit(cache=True)
+def _phi_of_tridiagonal(alphas, betas, m, col, order, fact, out, d, e, rows, rot_c, rot_s,
+                        rot_at):  # fmt: skip
+    """What Saad's error estimate of column `col` at dimension m reads,
+    (|e_m^T phi(T_m) e_1|, |phi(T_m) e_1|) (the estimate is b_m times the first), and what
+    `_apply_z` needs to form phi_order(T_m) e_1 = Z phi(Lambda) Z^T e_1 (T_m from
+    alphas[:m, col] and betas[:m - 1, col]): returns (last, size, K).
+
+    Both come from the eigenvalues and rows 1 and m of Z alone (|Z y| = |y| for the
+    orthogonal Z), so a check that fails forms no coefficients. out[:m] receives
+    y = phi(Lambda) Z^T e_1 and K >= 0 the rotations of Z (`_tridiagonal_ql`), or, where the
+    QL iteration gave up (not seen in practice), the coefficients themselves from LAPACK's
+    eigh and K = -1. d, e (>= m), rows (2, >= m) and the rotation buffers are scratch."""
     for i in range(m):
-        d[i] = alphas[i, c]
+        d[i] = alphas[i, col]
     for i in range(m - 1):
-        e[i] = betas[i, c]
-    if not _tridiagonal_eigh(d, e, z, m):
+        e[i] = betas[i, col]
+    count = _tridiagonal_ql(d, e, rows, m, rot_c, rot_s, rot_at)
+    last = 0.0
+    size = 0.0
+    if count < 0:
         t = np.zeros((m, m))
         for i in range(m):
-            t[i, i] = alphas[i, c]
+            t[i, i] = alphas[i, col]
         for i in range(m - 1):
-            t[i, i + 1] = betas[i, c]
-            t[i + 1, i] = betas[i, c]
+            t[i, i + 1] = betas[i, col]
+            t[i + 1, i] = betas[i, col]
         lam, vectors = np.linalg.eigh(t)
         for i in range(m):
-            d[i] = lam[i]
+            acc = 0.0
             for j in range(m):
-                z[i, j] = vectors[i, j]
-    for j in range(m):
-        e[j] = _phi(d[j], order, fact) * z[0, j]
-    for i in range(m):
-        acc = 0.0
+                acc += vectors[i, j] * (_phi(lam[j], order, fact) * vectors[0, j])
+            out[i] = acc
+            size += acc * acc
+        last = out[m - 1]
+    else:
         for j in range(m):
-            acc += z[i, j] * e[j]
-        out[i] = acc
+            y = _phi(d[j], order, fact) * rows[0, j]
+            out[j] = y
+            last += rows[1, j] * y
+            size += y * y
+    return abs(last), math.sqrt(size), count
 
 
 @njit(cache=True)
@@ -318,7 +383,13 @@ def frozen_lanczos(
     coeffs = np.empty((k, max_dim))
     eig_d = np.empty(max_dim)
     eig_e = np.empty(max_dim)
-    eig_z = np.empty((max_dim, max_dim))
+    rows = np.empty((2, max_dim))
+    # rotations of one QL run: m^2 / 2 to 1.3 m^2 for T_m in practice; beyond the buffers (m
+    # above 40; 26 at most at the paper setting) the check falls back to LAPACK's eigh
+    capacity = 2 * min(max_dim, 40) ** 2 + 8
+    rot_c = np.empty(capacity)
+    rot_s = np.empty(capacity)
+    rot_at = np.empty(capacity, dtype=np.int64)
     means = np.empty(k)
     ones = np.ones(n)
     for member in range(n_members):
@@ -382,18 +453,19 @@ def frozen_lanczos(
             stops = all_small or m == max_dim
             check = (not stops) and m >= first_check and (m - first_check) % check_every == 0
             if stops or check:
-                passed = check
+                passed = True
                 for c in range(k):
-                    _coefficients(alphas, betas, m, c, order, fact, coeffs[c], eig_d, eig_e, eig_z)
-                    if check:
-                        size = 0.0
-                        for i in range(m):
-                            size += coeffs[c, i] * coeffs[c, i]
-                        estimate = b[c] * abs(coeffs[c, m - 1])
-                        if not estimate <= rtol * math.sqrt(size) + 1e-300:
-                            passed = False
+                    last, size, count = _phi_of_tridiagonal(
+                        alphas, betas, m, c, order, fact, coeffs[c], eig_d, eig_e, rows,
+                        rot_c, rot_s, rot_at,
+                    )  # fmt: skip
+                    if check and not b[c] * last <= rtol * size + 1e-300:
+                        passed = False
+                        break  # this dimension is not accepted: no coefficients needed
+                    if count > 0:
+                        _apply_z(coeffs[c], count, rot_c, rot_s, rot_at)
                 if stops or passed:
-                    ok_member = all_small or passed
+                    ok_member = all_small or (check and passed)
                     stop_m = m
                     break
             for c in range(k):

@@ -691,7 +691,34 @@ def _compiled_frozen_lanczos(
     `add_product` = (W, e) it acts on V + e (c L) W, the product taken in the compiled pass."""
     matrix, row_sums = a.parts()
     n, k = a.n, v.shape[-1]
-    batch = tuple(matrix.shape[:-2])
+    batch = matrix.shape[:-2]
+    if (
+        v.shape[:-1] == matrix.shape[:-1]
+        and v.dtype == np.float64
+        and bounds is None
+        and (
+            add_product is None
+            or (add_product[0].shape == v.shape and add_product[0].dtype == np.float64)
+        )
+    ):
+        # the integrators' call: V (and W) batched exactly like P, float64, no bounds given (the
+        # compiled pass reads them off s and P_kk): no broadcasting, no copies
+        members = math.prod(batch)
+        extra, extra_scale = _NO_EXTRA, 0.0
+        if add_product is not None:
+            extra = readonly_view(_contiguous(add_product[0]).reshape(members, n, k))
+            extra_scale = float(add_product[1])
+        out = np.empty((members, n, k))
+        converged = np.empty(members, dtype=bool)
+        _compiled.frozen_lanczos(
+            readonly_view(matrix.reshape(members, n, n)),
+            readonly_view(_contiguous(row_sums).reshape(members, n)),
+            a.scale, readonly_view(_contiguous(v).reshape(members, n, k)), order, rtol, max_dim,
+            2, _NO_BOUNDS, _NO_BOUNDS, a.peak if a.peak is not None and a.symmetric else -1.0,
+            out, converged, extra, extra_scale,
+        )  # fmt: skip
+        return out.reshape(v.shape), converged.reshape(batch)
+    batch = tuple(batch)
     shapes = [tuple(v.shape[:-2])]
     if add_product is not None:
         if tuple(add_product[0].shape[-2:]) != (n, k):
@@ -727,6 +754,11 @@ def _compiled_frozen_lanczos(
         extra, extra_scale,
     )  # fmt: skip
     return out.reshape(*batch, n, k), converged.reshape(batch)
+
+
+def _contiguous(a: np.ndarray) -> np.ndarray:
+    """a itself when C-contiguous (np.ascontiguousarray's call costs more than this check)."""
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
 
 
 def _krylov(
@@ -896,7 +928,7 @@ def phi_action(
     if method == "expm":
         return _augmented_expm(a, v, order)
     result, converged = _krylov(a, v, order, symmetric, rtol, max_krylov_dim, bounds, add_product)
-    if np.all(converged):
+    if converged.all():
         return result
     if add_product is not None:
         v = _with_product(a, v, add_product)
