@@ -88,7 +88,25 @@ def cucker_smale_drift(
         for c in range(d):
             for i in range(n):
                 acc[c, i] = 0.0
-        for j in range(n):
+        # four rows per pass over s and each acc[c]: the same sums in the same order as row by
+        # row (s_i = ((P_0i + P_1i) + P_2i) + ...), with a quarter of the passes
+        top = n - n % 4
+        for j in range(0, top, 4):
+            r0 = pb[j]
+            r1 = pb[j + 1]
+            r2 = pb[j + 2]
+            r3 = pb[j + 3]
+            for i in range(n):
+                sb[i] = sb[i] + r0[i] + r1[i] + r2[i] + r3[i]
+            for c in range(d):
+                x0 = xt[c, j]
+                x1 = xt[c, j + 1]
+                x2 = xt[c, j + 2]
+                x3 = xt[c, j + 3]
+                ac = acc[c]
+                for i in range(n):
+                    ac[i] = ac[i] + x0 * r0[i] + x1 * r1[i] + x2 * r2[i] + x3 * r3[i]
+        for j in range(top, n):
             row = pb[j]
             for i in range(n):
                 sb[i] += row[i]

@@ -427,9 +427,9 @@ def frozen_lanczos(
             for i in range(n):
                 q0[i] = q0[i] - mean
             beta0[c] = math.sqrt(_dot(q0, q0, n))
-            norm0 = beta0[c] if beta0[c] > 0 else 1.0
+            inv0 = 1.0 / beta0[c] if beta0[c] > 0 else 1.0
             for i in range(n):
-                q0[i] = q0[i] / norm0
+                q0[i] = q0[i] * inv0
         ok_member = False
         stop_m = max_dim
         for j in range(max_dim):
@@ -475,8 +475,9 @@ def frozen_lanczos(
                     for i in range(n):
                         nxt[i] = 0.0
                 else:
+                    inv = 1.0 / b[c]  # one division, n products (within an ulp of w / b)
                     for i in range(n):
-                        nxt[i] = w[c, i] / b[c]
+                        nxt[i] = w[c, i] * inv
         converged[member] = ok_member
         # |v| Q_m c, summed vector by vector into w (free now), then written out
         for c in range(k):
