@@ -20,10 +20,10 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
    phi-action per member, and the products-only floors of SERB / EM they give.
 3. Native vector env (`gym.make_vec(..., vectorization_mode="vector_entry_point")`) at
    B = 1, 16, 64 for 1 and 20 paths against B single envs stepped in a loop, and against
-   Gymnasium's SyncVectorEnv at B = 64, 1 path (env-steps/s, interleaved rounds, medians). The
-   last column is the time of the unavoidable compute (one kernel matrix and drift per system,
-   B x P systems, by the env's own pass: the compiled one with numba, else in-place numpy) as a
-   share of the native step: near 100 % the env is
+   Gymnasium's SyncVectorEnv at B = 64, 1 path (env-steps/s, interleaved rounds of about 0.3 s
+   of the slower side each, medians). The last column is the time of the unavoidable compute
+   (one kernel matrix and drift per system, B x P systems, by the env's own pass: the compiled
+   one with numba, else in-place numpy) as a share of the native step: near 100 % the env is
    compute-bound.
 4. PPO (SB3) on `agent_envs.training.native_vec_env.NativeVecEnv` at the paper setting with the
    training layer's hyperparameters (`HYPERPARAMS["ppo"]`, VecNormalize, horizon as
@@ -307,8 +307,15 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
                 sync = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="sync", **kwargs)
                 sync.reset(seed=0)
                 fns["sync"] = lambda sync=sync, actions=actions: sync.step(actions)
-            # blocks of about 0.3 s of the slower side at today's speeds
-            calls = max(2, int(60 / (b * (1 if n_paths == 1 else 5))))
+            # blocks of about 0.3 s of the slower side, from one timed call of each after a
+            # warm-up (two calls per block at 20 paths, as before, moved the ratio by 0.1)
+            probe = {}
+            for name in ("native", "loop"):
+                fns[name]()
+                start = time.perf_counter()
+                fns[name]()
+                probe[name] = time.perf_counter() - start
+            calls = max(2, int(0.3 / max(probe.values())))
             t = interleaved(fns, calls, rounds)
             for name, seconds in t.items():
                 out[f"{name}/B{b}/P{n_paths}"] = b / seconds
