@@ -11,18 +11,19 @@ weight w (`SwarmParams.kernel="symmetric"`),
 
 one batch member at a time: the upper triangle of P row by row (N (N + 1) / 2 divisions
 instead of N^2: P is symmetric), mirrored below the diagonal, then s and P x as sums of P's rows
-(w += P[l, :] and w += x_l P[l, :], which the compiler vectorizes without reassociating a sum;
-P symmetric, so these are the row sums). Each entry of P is the same arithmetic as
-`fill_cucker_smale` (x_l - x_k, squared, summed over the coordinates, + alpha^2, w / .), up to
-the compiler fusing a multiply and an add into one rounding; s and P x are sums in another order
-than numpy's product, so the results agree with the numpy path to round-off
-(tests/test_compiled_kernel.py: 1e-15 for P, 1e-13 for the drift, relative). A member's result
-does not depend on the rest of the batch (the native vector env relies on it). No `fastmath`,
-no threads.
+(w += P[l, :] and w += x_l P[l, :], four rows per pass over w in the rows' order, which the
+compiler vectorizes without reassociating a sum; P symmetric, so these are the row sums).
+Each entry of P is the same arithmetic as `fill_cucker_smale` (x_l - x_k, squared, summed over
+the coordinates, + alpha^2, w / .), up to the compiler fusing a multiply and an add into one
+rounding; s and P x are sums in another order than numpy's product, so the results agree with
+the numpy path to round-off (tests/test_compiled_kernel.py: 1e-15 for P, 1e-13 for the drift,
+relative). A member's result does not depend on the rest of the batch (the native vector env
+relies on it). No `fastmath`, no threads.
 
 Measured by `benchmarks/bench_throughput.py` (part 2, N = 100, 20 paths, d = 1): 8.9 us per
-member against 12.6 us for numpy's four in-place passes and the product; the N (N + 1) / 2
-divisions are most of it.
+member against 12.6 us for numpy's four in-place passes and the product on one machine; on a
+slower one 12-15 us, of which the N (N + 1) / 2 divisions take 7.4 us, the mirror 2.1 us and
+the sums 2.2 us (2.9 us one row per pass).
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
