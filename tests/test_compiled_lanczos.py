@@ -72,6 +72,21 @@ def test_compiled_equals_numpy_and_reference_lanczos(compiled, n, d, batch, spre
     assert np.max(np.abs(got - reference)) <= TOL * scale
 
 
+@pytest.mark.parametrize("scale", [0.1, 0.3])
+def test_compiled_equals_numpy_at_large_krylov_dimensions(compiled, scale):
+    """Steps long enough for 35-60 Krylov dimensions: at 0.3 the checks' QL iteration needs
+    more rotations than its buffers hold (m above about 40) and takes LAPACK's eigh instead;
+    either way the phi-action equals the numpy Lanczos."""
+    _, _, f, op = _frozen(100, 1, (3,), 1.0, seed=5, scale=scale)
+    got, got_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    expected, expected_ok = pf._lanczos_numpy(pf._RowOperator(op), f, 1, 1e-10, 100)
+    assert got_ok.all() and expected_ok.all()
+    assert np.max(np.abs(got - expected)) <= TOL * np.max(np.abs(expected))
+    # at 0.3, 50 dimensions are not enough: the fallback's dimensions were reached
+    _, short_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 50, None)
+    assert short_ok.all() == (scale < 0.2)
+
+
 def test_compiled_result_is_phi_of_the_matrix(compiled):
     """Against an independent value: the dense eigendecomposition of c L (to the Krylov
     tolerance), including a column of zeros (breakdown at m = 1)."""

@@ -309,7 +309,8 @@ def _phi_of_tridiagonal(alphas, betas, m, col, order, fact, out, d, e, rows, rot
     Both come from the eigenvalues and rows 1 and m of Z alone (|Z y| = |y| for the
     orthogonal Z), so a check that fails forms no coefficients. out[:m] receives
     y = phi(Lambda) Z^T e_1 and K >= 0 the rotations of Z (`_tridiagonal_ql`), or, where the
-    QL iteration gave up (not seen in practice), the coefficients themselves from LAPACK's
+    QL iteration gave up (more rotations than the buffers hold, from m above about 40, or more
+    than 30 m iterations, not seen in practice), the coefficients themselves from LAPACK's
     eigh and K = -1. d, e (>= m), rows (2, >= m) and the rotation buffers are scratch."""
     for i in range(m):
         d[i] = alphas[i, col]
