@@ -182,6 +182,15 @@ class DiscreteCostObjective:
         self.last_failure: str | None = None
         self._warned_gradient = False
 
+    def _gradient_hint(self) -> str:
+        """What to try after a non-finite gradient: an exponential integrator for an explicit
+        one (EM's gradient at a stiff eps overflows, ~1e15 at eps = 0.05), else the other
+        phi-methods."""
+        if self.integrator not in ("erb", "serb"):
+            return "try integrator='serb': an explicit scheme's gradient overflows when stiff"
+        others = [m for m in ("eigh", "expm", "krylov") if m != self.phi_method]
+        return "try phi_method=" + " or ".join(repr(m) for m in others)
+
     def cost(self, controls: Any) -> Any:
         """The sample-mean discrete cost as a torch scalar (differentiable in `controls`)."""
         torch = self.torch
@@ -223,8 +232,8 @@ class DiscreteCostObjective:
                 self._warned_gradient = True
                 warnings.warn(
                     f"finite cost {float(value.detach()):.6g} but a non-finite gradient with "
-                    f"phi_method={self.phi_method!r}: the backward pass failed; treated as a "
-                    "diverged step (try phi_method='eigh' or 'expm')",
+                    f"integrator={self.integrator!r}, phi_method={self.phi_method!r}: the "
+                    f"backward pass failed; treated as a diverged step ({self._gradient_hint()})",
                     RuntimeWarning,
                     stacklevel=2,
                 )

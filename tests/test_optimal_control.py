@@ -306,8 +306,12 @@ def test_stiff_em_whose_gradient_overflows_is_a_failed_solve():
     test after 0 iterations (converged=True) before the fix: the README's "stiff EM does not
     solve (converged=False)"."""
     params = SwarmParams(n_agents=10, epsilon=0.001, sigma=0.01)
-    with pytest.warns(RuntimeWarning, match="did not converge: failed: at u = 0: .*non-finite"):
+    with pytest.warns(
+        RuntimeWarning, match="did not converge: failed: at u = 0: .*non-finite"
+    ) as record:
         res = solve_optimal_control(params, "em", n_steps=400, n_paths=2, max_iterations=20)
+    # the gradient's warning points at the integrator, not at EM's absent phi-method
+    assert any("try integrator='serb'" in str(w.message) for w in record)
     assert not res.converged
     assert res.failure is not None and "non-finite gradient" in res.failure
     assert np.isfinite(res.cost)
