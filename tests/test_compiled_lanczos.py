@@ -326,7 +326,8 @@ def test_steps_use_the_machine_code_loaded_at_make():
         from agent_envs.integrators import compiled_lanczos
         env = gym.make("agent_envs/Swarm-v0", n_agents=100, n_paths=3, integrator="serb")
         counts = lambda: (len(compiled_kernel.cucker_smale_drift.signatures),
-                          len(compiled_lanczos.frozen_lanczos.signatures))
+                          len(compiled_lanczos.frozen_lanczos.signatures),
+                          len(compiled_lanczos.frozen_advance.signatures))
         made = counts()
         env.reset(seed=0)
         for _ in range(3):
@@ -337,4 +338,91 @@ def test_steps_use_the_machine_code_loaded_at_make():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "(1, 1) (1, 1)"
+    assert done.stdout.strip() == "(1, 1, 1) (1, 1, 1)"
+
+
+def _episode(fused: bool, num_envs: int | None, steps: int = 60) -> list[np.ndarray]:
+    """Observations, rewards and final positions of a SERB run at N = 100, 20 paths, with the
+    fused step on or off (a single env resets at its horizon; the vector env autoresets)."""
+    from agent_envs.integrators import exponential
+
+    before = exponential.use_fused_step(fused)
+    try:
+        kwargs = {"n_agents": 100, "n_steps": 25, "n_paths": 20, "integrator": "serb"}
+        if num_envs is None:
+            env = gym.make("agent_envs/Swarm-v0", **kwargs).unwrapped
+        else:
+            env = gym.make_vec(
+                "agent_envs/Swarm-v0", num_envs=num_envs,
+                vectorization_mode="vector_entry_point", **kwargs,
+            )  # fmt: skip
+        env.reset(seed=3)
+        action = np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape)
+        action = action.astype(np.float32)
+        seen = []
+        for _ in range(steps):
+            obs, reward, terminated, truncated, _ = env.step(action)
+            seen += [np.array(obs), np.array(reward)]
+            if num_envs is None and (terminated or truncated):
+                env.reset()
+        return [*seen, np.array(env.unwrapped.positions)]
+    finally:
+        exponential.use_fused_step(before)
+
+
+@pytest.mark.parametrize("num_envs", [None, 3])
+def test_fused_step_equals_the_general_path_bit_for_bit(compiled, monkeypatch, num_envs):
+    """The fused step (phi-action, update and next kernel pass per member in one compiled
+    call) gives the envs the same observations, rewards and states as the phi-action and the
+    kernel pass taken apart, across episode ends; and the envs take it."""
+    from agent_envs.integrators import exponential
+
+    calls = []
+    original = exponential.frozen_advance
+    monkeypatch.setattr(exponential, "frozen_advance", lambda *a: calls.append(1) or original(*a))
+    fused = _episode(True, num_envs)
+    assert len(calls) == 60
+    general = _episode(False, num_envs)
+    assert len(calls) == 60
+    for got, expected in zip(fused, general, strict=True):
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_fused_step_that_gives_up_takes_the_general_path(compiled, monkeypatch):
+    """A member whose Lanczos did not converge leaves the workspace's P partly overwritten:
+    the step discards it, evaluates L(x) again and takes the general path, with the general
+    path's result (simulated: the compiled call reports member 0 unconverged)."""
+    calls = []
+    original = pf._compiled.frozen_advance
+
+    def unconverged(*args):
+        original(*args)
+        args[9][0] = False  # `converged`
+        calls.append(1)
+
+    monkeypatch.setattr(pf._compiled, "frozen_advance", unconverged)
+    gave_up = _episode(True, None, steps=8)
+    assert len(calls) == 8
+    monkeypatch.setattr(pf._compiled, "frozen_advance", original)
+    general = _episode(False, None, steps=8)
+    for got, expected in zip(gave_up, general, strict=True):
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_fused_step_leaves_the_linearization_of_its_result(compiled):
+    """After a fused step the model holds L(x_next) and its drift, equal bit for bit to a
+    fresh model's evaluation at x_next, and the operator of x^n is no longer current."""
+    from agent_envs.envs.episode import _CachedLinearizationModel
+
+    params = SwarmParams(n_agents=100, epsilon=0.05)
+    model = _CachedLinearizationModel(params)
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1, 1, (4, 100, 1))
+    x.flags.writeable = False
+    _, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+    x_next = make_integrator("serb").step(model, x, 0.1, 0.0, 0.02, rng.normal(size=x.shape))
+    assert not x_next.flags.writeable and not lin.matrix.current
+    drift, next_lin = model.drift_and_linearization(0.0, x_next, None, "frozen")
+    fresh_drift, fresh_lin = SwarmModel(params).drift_and_linearization(0.0, x_next, None, "frozen")
+    np.testing.assert_array_equal(drift, fresh_drift)
+    np.testing.assert_array_equal(next_lin.matrix.dense(), fresh_lin.matrix.dense())

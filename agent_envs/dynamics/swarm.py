@@ -164,9 +164,10 @@ class SwarmModel:
         p, augmented, product, scratch = ws.buffers(tuple(x.shape))
         ws.generation += 1
         weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
-        if self._peak is not None and x.dtype == np.float64 and load_compiled_kernel():
+        compiled = self.compiled_pass_parameters(x)
+        if compiled is not None:
             # the symmetric kernel with a scalar weight: P, s and L(x) x in one compiled pass
-            row_sums, drift = compiled_cucker_smale_drift(x, weights, kernel.alpha**2, p)
+            row_sums, drift = compiled_cucker_smale_drift(x, *compiled, p)
         else:
             fill_cucker_smale(x, kernel.alpha, weights, out=p, scratch=scratch)
             d = x.shape[-1]
@@ -175,15 +176,33 @@ class SwarmModel:
             row_sums = product[..., d].copy()
             drift = product[..., :d] - row_sums[..., None] * x
             drift /= self.n_agents
-        operator = FrozenLaplacian(
+        return self._workspace_operator(p, row_sums), drift
+
+    def _workspace_operator(self, p: np.ndarray, row_sums: np.ndarray) -> FrozenLaplacian:
+        """L(x) over the workspace's P (just written) and its row sums, at this generation."""
+        ws = self._workspace
+        return FrozenLaplacian(
             readonly_view(p),
             row_sums,
-            symmetric=bool(kernel.symmetric),
+            symmetric=bool(self.kernel.symmetric),
             peak=self._peak,
             workspace=ws,
             generation=ws.generation,
         )
-        return operator, drift
+
+    def compiled_pass_parameters(self, x: Any) -> tuple[float, float] | None:
+        """(w, alpha^2) when the compiled kernel pass serves x (float64 numpy states, the
+        symmetric Cucker-Smale kernel with a scalar weight w, numba loaded), else None."""
+        if (
+            self._peak is None
+            or not isinstance(x, np.ndarray)
+            or x.dtype != np.float64
+            or not load_compiled_kernel()
+        ):
+            return None
+        kernel = self.kernel
+        weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
+        return float(weights), float(kernel.alpha**2)
 
     def matrix_free(self, x: Any, kind: str = "frozen") -> bool:
         """Whether the drift and the `kind` linearization at x go matrix-free (see class doc).

@@ -285,6 +285,38 @@ class _CachedLinearizationModel(SwarmModel):
             self._cached_state = self._cached_matrix = None
         return found
 
+    def fused_relinearization(self, x: Any) -> tuple[np.ndarray, float, float] | None:
+        """What an exponential integrator needs to take the kernel pass at its next state in
+        its own compiled pass, member by member (`agent_envs.integrators.compiled_lanczos.
+        frozen_advance`): (the workspace's P for x's shape, writable; w; alpha^2), or None
+        where the compiled kernel pass does not serve x or x is not on the dense workspace path.
+        The integrator then hands the result to `adopt_linearization`, or calls
+        `discard_linearization` if it wrote part of P and gave up."""
+        compiled = self.compiled_pass_parameters(x)
+        if compiled is None or not self._uses_workspace(x):
+            return None
+        return (self._workspace.buffers(tuple(x.shape))[0], *compiled)
+
+    def adopt_linearization(self, x_next: np.ndarray, row_sums: Any, drift: Any) -> None:
+        """Keep L(x_next), whose P the integrator wrote into the workspace, with its row sums
+        and drift L(x_next) x_next, as `_laplacian(x_next)` would have (x_next, the
+        integrator's fresh array, and the drift are made read-only)."""
+        ws = self._workspace
+        ws.generation += 1
+        p = ws.buffers(tuple(x_next.shape))[0]
+        *batch, n, _ = x_next.shape
+        operator = self._workspace_operator(p, row_sums.reshape(*batch, n))
+        drift = drift.reshape(x_next.shape)
+        x_next.flags.writeable = False
+        drift.flags.writeable = False
+        self._cached_state, self._cached_matrix = x_next, (operator, drift)
+
+    def discard_linearization(self) -> None:
+        """The workspace's P no longer holds the kernel of any state (an integrator wrote part
+        of it): the operators built on it stop being current, and nothing is cached."""
+        self._workspace.generation += 1
+        self._cached_state = self._cached_matrix = None
+
     def linearization_operator(self, x: np.ndarray, kind: str = "frozen") -> LinearizationOperator:
         # the matrix-free L(x) (large N), cached like the matrix (it holds no mutable state)
         cached = self._cached_matrix

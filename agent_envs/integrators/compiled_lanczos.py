@@ -44,6 +44,8 @@ import math
 import numpy as np
 from numba import njit
 
+from agent_envs.dynamics.compiled_kernel import cucker_smale_drift
+
 #: Taylor terms of phi_p near 0 (as `phi_functions._TAYLOR_TERMS`)
 TAYLOR_TERMS = 16
 
@@ -369,6 +371,63 @@ def frozen_lanczos(
     `extra` W (B, N, k) and e = `extra_scale`, or an empty W for phi_order(c L) V: the product
     c L W is taken with the member's P in cache, before its Lanczos iteration (SERB's sigma L dW).
     """
+    none3 = np.empty((0, 0, 0))
+    _members(
+        p, s, scale, v, order, rtol, max_dim, check_every, norms, widths, peak, out, converged,
+        extra, extra_scale, False, none3, 0.0, none3, 0.0, 0.0, none3, none3, np.empty((0, 0)),
+        none3,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def frozen_advance(
+    p: np.ndarray,
+    s: np.ndarray,
+    scale: float,
+    v: np.ndarray,
+    rtol: float,
+    max_dim: int,
+    check_every: int,
+    peak: float,
+    out: np.ndarray,
+    converged: np.ndarray,
+    extra: np.ndarray,
+    extra_scale: float,
+    x: np.ndarray,
+    dt: float,
+    noise: np.ndarray,
+    weight: float,
+    alpha2: float,
+    x_next: np.ndarray,
+    s_next: np.ndarray,
+    drift_next: np.ndarray,
+) -> None:
+    """An exponential Rosenbrock-Euler step and the next kernel pass, member by member.
+
+    For each member: phi_1(c L) (V + e c L W) into out (as `frozen_lanczos`, order 1, the
+    bounds from s and P_kk), then x_next = x + dt out + noise (the integrator's update, the same
+    operations in the same order), then, if the member converged, P(x_next) into p (over
+    P(x), which this member no longer needs), s_next = P(x_next) 1 and L(x_next) x_next into
+    drift_next (`agent_envs.dynamics.compiled_kernel.cucker_smale_drift`, the symmetric kernel
+    w / (alpha^2 + |x_k - x_l|^2)). The next pass writes the 80 KB of P that the member's
+    Lanczos products just read, while they are in cache. x, noise, x_next (B, N, k); s_next
+    (B, N); drift_next (B, N, k). A member that did not converge keeps P(x) (the caller then
+    takes the general path).
+    """
+    _members(
+        p, s, scale, v, 1, rtol, max_dim, check_every, np.empty(0), np.empty(0), peak, out,
+        converged, extra, extra_scale, True, x, dt, noise, weight, alpha2, p, x_next, s_next,
+        drift_next,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _members(p, s, scale, v, order, rtol, max_dim, check_every, norms, widths, peak, out,
+             converged, extra, extra_scale, advance, x, dt, noise, weight, alpha2, p_next, x_next,
+             s_next, drift_next):  # fmt: skip
+    """The body of `frozen_lanczos` (advance False) and `frozen_advance` (advance True, p_next
+    the same array as p, writable: numba types every branch, and p is read-only in
+    `frozen_lanczos`)."""
     n_members, n, _ = p.shape
     k = v.shape[2]
     max_dim = min(max_dim, n)
@@ -492,3 +551,18 @@ def frozen_lanczos(
                     acc[i] += coef * q[i]
             for i in range(n):
                 out[member, i, c] = acc[i] * beta0[c] + means[c] / fact[order]
+        if advance:
+            for i in range(n):
+                for c in range(k):
+                    x_next[member, i, c] = (
+                        x[member, i, c] + dt * out[member, i, c] + noise[member, i, c]
+                    )
+            if ok_member:
+                cucker_smale_drift(
+                    x_next[member : member + 1],
+                    weight,
+                    alpha2,
+                    p_next[member : member + 1],
+                    s_next[member : member + 1],
+                    drift_next[member : member + 1],
+                )

@@ -21,7 +21,13 @@ from typing import Any
 from agent_envs import arrays
 from agent_envs.dynamics.laplacian import FrozenLaplacian
 from agent_envs.integrators.base import DriftModel, Integrator
-from agent_envs.integrators.phi_functions import PHI_METHODS, load_compiled, phi_action
+from agent_envs.integrators.phi_functions import (
+    PHI_METHODS,
+    frozen_advance,
+    frozen_advance_applies,
+    load_compiled,
+    phi_action,
+)
 
 JACOBIAN_CHOICES = ("exact", "frozen")
 
@@ -49,6 +55,12 @@ class RosenbrockEuler(Integrator):
     def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> Any:
         rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
         noise = model.sigma * dW
+        if du_dt is None and dt != 0.0 and _fused[0]:
+            found = self._fused_step(model, lin, rhs, x, dt, noise)
+            if found is _GAVE_UP:  # the workspace's P was partly overwritten: L(x) again
+                rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
+            elif found is not None:
+                return found
         scaled = dt * lin.matrix
         kw = {"method": self.phi_method, "symmetric": lin.symmetric}
         if lin.bounds is not None:
@@ -67,8 +79,45 @@ class RosenbrockEuler(Integrator):
             incr = incr + dt**2 * phi_action(scaled, lin.as_columns(v), 2, **kw)
         return x + lin.from_columns(incr, x) + noise
 
+    def _fused_step(self, model: Any, lin: Any, rhs: Any, x: Any, dt: float, noise: Any) -> Any:
+        """The step and the model's next kernel pass in one compiled pass, member by member
+        (`phi_functions.frozen_advance`), for a model that keeps its linearization
+        (`fused_relinearization`: the envs' models) on the compiled frozen L(x): x_next, equal
+        bit for bit to the general path's; None where it does not apply; `_GAVE_UP` when a
+        member's Lanczos did not converge (the model's workspace is then discarded)."""
+        relinearize = getattr(model, "fused_relinearization", None)
+        if relinearize is None or not frozen_advance_applies(
+            lin.matrix, rhs, x, noise, self.phi_method
+        ):
+            return None
+        target = relinearize(x)
+        if target is None:
+            return None
+        correction = 1.0 / dt if self.stochastic_correction and model.sigma != 0.0 else None
+        found = frozen_advance(lin.matrix, rhs, x, dt, noise, correction, *target)
+        if found is None:
+            model.discard_linearization()
+            return _GAVE_UP
+        model.adopt_linearization(*found)
+        return found[0]
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}(jacobian={self.jacobian!r}, phi_method={self.phi_method!r})"
+
+
+#: returned by `RosenbrockEuler._fused_step` when it wrote part of the model's P and gave up
+_GAVE_UP: Any = object()
+#: whether the exponential integrators take the fused step where it applies (`use_fused_step`)
+_fused = [True]
+
+
+def use_fused_step(enabled: bool) -> bool:
+    """Switch the fused step (the phi-action and the model's next kernel pass in one compiled
+    pass, `phi_functions.frozen_advance`) on or off for this process; returns whether it was
+    on. Both give the same states bit for bit; for comparisons (tests, benchmarks)."""
+    before = _fused[0]
+    _fused[0] = bool(enabled)
+    return before
 
 
 class ExponentialRosenbrockEuler(RosenbrockEuler):

@@ -675,6 +675,12 @@ def _warm_up() -> None:
             p, s, 0.1, v, 1, 1e-10, 3, 2, _NO_BOUNDS, _NO_BOUNDS, 1.0, np.empty((1, 3, 1)),
             np.empty(1, dtype=bool), extra, 1.0,
         )  # fmt: skip
+        # `frozen_advance`'s types: P the workspace's writable buffer, the outputs fresh
+        _compiled.frozen_advance(
+            np.array(p), s, 0.1, v, 1e-10, 3, 2, 1.0, np.empty((1, 3, 1)),
+            np.empty(1, dtype=bool), extra, 1.0, v, 0.1, v, 1.0, 1.0, np.empty((1, 3, 1)),
+            np.empty((1, 3)), np.empty((1, 3, 1)),
+        )  # fmt: skip
 
 
 def _compiled_frozen_lanczos(
@@ -754,6 +760,74 @@ def _compiled_frozen_lanczos(
         extra, extra_scale,
     )  # fmt: skip
     return out.reshape(*batch, n, k), converged.reshape(batch)
+
+
+def frozen_advance_applies(a: Any, rhs: Any, x: Any, noise: Any, method: str) -> bool:
+    """Whether `frozen_advance` serves this exponential Rosenbrock-Euler step: A the symmetric
+    kernel's frozen L(x) over a current workspace, the compiled Lanczos loaded, rhs, x and
+    noise float64 numpy arrays of one shape batched exactly like P, and the phi-action's
+    method "krylov" (or "auto" choosing it, as `phi_action` would)."""
+    if not (
+        isinstance(a, FrozenLaplacian)
+        and a.symmetric
+        and a.peak is not None
+        and method in ("auto", "krylov")
+        and all(type(v) is np.ndarray and v.dtype == np.float64 for v in (rhs, x, noise))
+        and x.shape == rhs.shape == noise.shape
+        and x.shape[:-1] == a.matrix.shape[:-1]
+        and a.current
+        and load_compiled()
+    ):
+        return False
+    members = math.prod(x.shape[:-2])
+    return method == "krylov" or auto_phi_method(a.n, members, True) == "krylov"
+
+
+def frozen_advance(
+    a: FrozenLaplacian,
+    rhs: np.ndarray,
+    x: np.ndarray,
+    dt: float,
+    noise: np.ndarray,
+    extra_scale: float | None,
+    p_next: np.ndarray,
+    weight: float,
+    alpha2: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """x + dt phi_1(dt A) (rhs + e dt A noise) + noise, and the kernel pass at that state, by
+    the compiled `frozen_advance` (where `frozen_advance_applies`): (x_next, s_next, drift_next)
+    with P(x_next) written into `p_next` (the workspace buffer A's P views), or None if some
+    member's Lanczos did not converge within 100 dimensions (its P is P(x) still, the others'
+    P(x_next): the caller discards the workspace and takes the general path).
+
+    e = `extra_scale` (1 / dt for SERB's sigma A dW with sigma != 0; None: no product, ERB).
+    The phi-action is `phi_action`'s on dt A with rtol = 1e-10 and its default
+    max_krylov_dim; x_next is the integrators' x + dt phi + noise, the same operations in the
+    same order, so the result equals the general path's bit for bit.
+    """
+    _, row_sums = a.parts()  # (parts() refuses an operator whose P was overwritten)
+    *batch, n, d = x.shape
+    members = math.prod(batch)
+    extra = _NO_EXTRA
+    if extra_scale is not None:
+        extra = readonly_view(_contiguous(noise).reshape(members, n, d))
+    out = np.empty((members, n, d))
+    converged = np.empty(members, dtype=bool)
+    x_next = np.empty((members, n, d))
+    s_next = np.empty((members, n))
+    drift_next = np.empty((members, n, d))
+    _compiled.frozen_advance(
+        p_next.reshape(members, n, n),
+        readonly_view(_contiguous(row_sums).reshape(members, n)),
+        a.scale * float(dt), readonly_view(_contiguous(rhs).reshape(members, n, d)), 1e-10, 100,
+        2, a.peak, out, converged, extra, 0.0 if extra_scale is None else float(extra_scale),
+        readonly_view(_contiguous(x).reshape(members, n, d)), float(dt),
+        readonly_view(_contiguous(noise).reshape(members, n, d)), float(weight), float(alpha2),
+        x_next, s_next, drift_next,
+    )  # fmt: skip
+    if not converged.all():
+        return None
+    return x_next.reshape(x.shape), s_next, drift_next
 
 
 def _contiguous(a: np.ndarray) -> np.ndarray:
