@@ -341,14 +341,16 @@ def test_steps_use_the_machine_code_loaded_at_make():
     assert done.stdout.strip() == "(1, 1, 1) (1, 1, 1)"
 
 
-def _episode(fused: bool, num_envs: int | None, steps: int = 60) -> list[np.ndarray]:
-    """Observations, rewards and final positions of a SERB run at N = 100, 20 paths, with the
-    fused step on or off (a single env resets at its horizon; the vector env autoresets)."""
+def _episode(
+    fused: bool, num_envs: int | None, steps: int = 60, integrator: str = "serb"
+) -> list[np.ndarray]:
+    """Observations, rewards and final positions of a run at N = 100, 20 paths, with the fused
+    step on or off (a single env resets at its horizon; the vector env autoresets)."""
     from agent_envs.integrators import exponential
 
     before = exponential.use_fused_step(fused)
     try:
-        kwargs = {"n_agents": 100, "n_steps": 25, "n_paths": 20, "integrator": "serb"}
+        kwargs = {"n_agents": 100, "n_steps": 25, "n_paths": 20, "integrator": integrator}
         if num_envs is None:
             env = gym.make("agent_envs/Swarm-v0", **kwargs).unwrapped
         else:
@@ -370,19 +372,22 @@ def _episode(fused: bool, num_envs: int | None, steps: int = 60) -> list[np.ndar
         exponential.use_fused_step(before)
 
 
-@pytest.mark.parametrize("num_envs", [None, 3])
-def test_fused_step_equals_the_general_path_bit_for_bit(compiled, monkeypatch, num_envs):
+@pytest.mark.parametrize(("num_envs", "integrator"), [(None, "serb"), (3, "serb"), (None, "erb")])
+def test_fused_step_equals_the_general_path_bit_for_bit(
+    compiled, monkeypatch, num_envs, integrator
+):
     """The fused step (phi-action, update and next kernel pass per member in one compiled
     call) gives the envs the same observations, rewards and states as the phi-action and the
-    kernel pass taken apart, across episode ends; and the envs take it."""
+    kernel pass taken apart, across episode ends (SERB with its sigma L dW product, ERB
+    without); and the envs take it."""
     from agent_envs.integrators import exponential
 
     calls = []
     original = exponential.frozen_advance
     monkeypatch.setattr(exponential, "frozen_advance", lambda *a: calls.append(1) or original(*a))
-    fused = _episode(True, num_envs)
+    fused = _episode(True, num_envs, integrator=integrator)
     assert len(calls) == 60
-    general = _episode(False, num_envs)
+    general = _episode(False, num_envs, integrator=integrator)
     assert len(calls) == 60
     for got, expected in zip(fused, general, strict=True):
         np.testing.assert_array_equal(got, expected)
