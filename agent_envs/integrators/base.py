@@ -12,6 +12,11 @@ so every scheme can be compared on the same noise.
 `model` is anything with `drift(t, x, u)`, `sigma` and, for exponential schemes,
 `drift_and_linearization(t, x, u, kind)` (see `agent_envs.dynamics.swarm.SwarmModel`); a
 closed-loop model whose drift includes a time-dependent feedback law fits the same protocol.
+A model that keeps its linearization for the next step may also offer
+`fused_relinearization(x)`, `adopt_linearization(x_next, row_sums, drift)` and
+`discard_linearization()` (the envs' model, `agent_envs.envs.episode`): the exponential
+schemes then take the next kernel pass in the same compiled call as the step
+(`agent_envs.integrators.exponential`), with the same result.
 States are numpy arrays or torch tensors (`agent_envs.arrays`); the schemes only use
 operators and the model, so they run (and differentiate, on torch) on either.
 """
