@@ -133,10 +133,32 @@ def test_native_env_in_blocks_matches_sync_vector_env(monkeypatch, kwargs):
     kwargs = {**DIVERGING, **kwargs}
     n = kwargs["n_agents"]
     monkeypatch.setattr(vector_env, "BLOCK_BYTES", 8 * kwargs.get("n_paths", 1) * n * n * 2)
+    # blocks are for numpy passes over the batch; with numba every pass runs member by member
+    # and the env takes one block: forced here, so the blocks are tested with numba too
+    monkeypatch.setattr(SwarmVectorEnv, "_member_by_member", lambda self: False)
     assert len(SwarmVectorEnv(5, **kwargs)._blocks) == 3
     terminated, truncated = run_side_by_side(5, 3 * kwargs["n_steps"] + 2, **kwargs)
     assert terminated >= 2
     assert truncated >= 6
+
+
+def test_member_by_member_steps_take_one_block(monkeypatch):
+    """With numba's kernel pass and Lanczos every pass runs one system at a time, so the envs
+    are not split into blocks (which only add Python per block there); without numba, or for
+    a kernel numba does not serve, the BLOCK_BYTES blocks stay."""
+    import agent_envs.envs.vector_env as vector_env
+    from agent_envs.integrators import phi_functions
+
+    monkeypatch.setattr(vector_env, "BLOCK_BYTES", 8 * 100 * 100 * 2)
+    compiled = phi_functions.load_compiled()
+    assert len(SwarmVectorEnv(5, n_agents=100)._blocks) == (1 if compiled else 3)
+    assert len(SwarmVectorEnv(5, n_agents=100, integrator="em")._blocks) == (1 if compiled else 3)
+    assert len(SwarmVectorEnv(5, n_agents=100, kernel="nonsymmetric")._blocks) == 3
+    before = phi_functions.use_compiled(False)
+    try:
+        assert len(SwarmVectorEnv(5, n_agents=100)._blocks) == 3
+    finally:
+        phi_functions.use_compiled(before)
 
 
 def test_arnoldi_members_match_exactly():

@@ -57,16 +57,18 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.integrators import Integrator, make_integrator
-from agent_envs.integrators.phi_functions import auto_phi_method
+from agent_envs.integrators.phi_functions import auto_phi_method, load_compiled
 from agent_envs.simulator import brownian_increments
 from agent_envs.validation import check_seed, real_array
 
-#: Bytes of kernel matrices one block of envs holds at most (numpy): the envs are stepped in
+#: Bytes of kernel matrices one block of envs holds at most (numpy passes over the whole batch:
+#: without numba, or a kernel or Jacobian numba does not serve): the envs are stepped in
 #: balanced blocks of at most this size, so that a block's P(x) (B_block x P x N x N floats)
 #: stays in the cache while the Krylov iteration multiplies with it, instead of streaming the
 #: whole batch's P from memory at every product (N = 100, 20 paths, B = 16: 25.6 MB per product
 #: in one batch). 8 MiB measured best of 1, 2, 4, 8 MiB and one batch on a 32 MiB L3
-#: (benchmarks/bench_throughput.py prints the vector env's figures).
+#: (benchmarks/bench_throughput.py prints the vector env's figures). Where every pass runs
+#: member by member (`SwarmVectorEnv._member_by_member`), one block.
 BLOCK_BYTES = 2**23
 
 #: Autoreset modes the native env implements (Gymnasium's names).
@@ -219,9 +221,12 @@ class SwarmVectorEnv(VectorEnv):
             params, self.config.linear_operator, cache_tensors=True
         )
         # numpy: the envs in blocks of about BLOCK_BYTES of kernel matrices, each block with its
-        # own model (workspace and cached L(x)); torch: one block (a device wants one batch)
+        # own model (workspace and cached L(x)), unless every pass over them runs member by
+        # member; torch: one block (a device wants one batch)
         per_env = 8 * self.config.n_paths * n * n
-        n_blocks = 1 if self._device is not None else -(-self.num_envs * per_env // BLOCK_BYTES)
+        n_blocks = -(-self.num_envs * per_env // BLOCK_BYTES)
+        if self._device is not None or self._member_by_member():
+            n_blocks = 1
         n_blocks = max(1, min(self.num_envs, n_blocks))
         envs_per_block = -(-self.num_envs // n_blocks)  # balanced: blocks differ by <= 1 env
         self._blocks = [
@@ -412,6 +417,25 @@ class SwarmVectorEnv(VectorEnv):
         drift = np.concatenate([part[1] for part in parts])
         diverged = np.concatenate([part[2] for part in parts])
         return x_next, drift, diverged
+
+    def _member_by_member(self) -> bool:
+        """Whether every pass of a step over the kernel matrices runs one system at a time:
+        numba's kernel pass (the symmetric Cucker-Smale kernel on the dense workspace), and
+        for an exponential integrator the compiled Lanczos on the frozen L(x). Blocks keep a
+        numpy pass's batch of P in cache; member by member, a system's P is in cache anyway
+        (the fused step writes the next one right after its phi-action read it), and blocks
+        only add each block's Python: one block measured 5 % faster than blocks of 8 MiB at
+        B = 16, 20 paths (`benchmarks/bench_throughput.py`, docs/benchmarks.md)."""
+        config = self.config
+        n, d = config.params.n_agents, config.params.dim
+        like = np.empty((config.n_paths, n, d))
+        if self.model.compiled_pass_parameters(like) is None or not self.model._uses_workspace(
+            like
+        ):
+            return False
+        if make_integrator(config.integrator).needs_jacobian:  # ERB, SERB
+            return config.jacobian == "frozen" and load_compiled()
+        return True
 
     def _state_info(self) -> dict[str, Any]:
         every = np.ones(self.num_envs, dtype=bool)
