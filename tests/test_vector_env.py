@@ -159,6 +159,11 @@ def test_member_by_member_steps_take_one_block(monkeypatch):
         assert len(SwarmVectorEnv(5, n_agents=100)._blocks) == 3
     finally:
         phi_functions.use_compiled(before)
+    # a batch whose kernel matrices in one block would exceed the dense budget (where the model
+    # goes matrix-free) keeps its blocks: each env stays on the dense path, as alone
+    four_envs = 4 * 8 * 3 * 100 * 100  # `dense_bytes` of 4 envs of one path, N = 100, d = 1
+    monkeypatch.setattr("agent_envs.dynamics.swarm.DENSE_MEMORY_BUDGET_BYTES", four_envs)
+    assert len(SwarmVectorEnv(5, n_agents=100)._blocks) == 3
 
 
 def test_arnoldi_members_match_exactly():

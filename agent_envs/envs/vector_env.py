@@ -428,7 +428,9 @@ class SwarmVectorEnv(VectorEnv):
         B = 16, 20 paths (`benchmarks/bench_throughput.py`, docs/benchmarks.md)."""
         config = self.config
         n, d = config.params.n_agents, config.params.dim
-        like = np.empty((config.n_paths, n, d))
+        # the whole batch as one block (shape only): it must stay on the dense workspace path,
+        # as each env does alone (beyond DENSE_MEMORY_BUDGET_BYTES the model goes matrix-free)
+        like = np.broadcast_to(np.empty(()), (self.num_envs, config.n_paths, n, d))
         if self.model.compiled_pass_parameters(like) is None or not self.model._uses_workspace(
             like
         ):
