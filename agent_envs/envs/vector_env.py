@@ -420,8 +420,9 @@ class SwarmVectorEnv(VectorEnv):
 
     def _member_by_member(self) -> bool:
         """Whether every pass of a step over the kernel matrices runs one system at a time:
-        numba's kernel pass (the symmetric Cucker-Smale kernel on the dense workspace), and
-        for an exponential integrator the compiled Lanczos on the frozen L(x). Blocks keep a
+        numba's kernel pass (the symmetric Cucker-Smale kernel on the dense workspace, the
+        whole batch within the dense budget), and for an exponential integrator the compiled
+        Lanczos on the frozen L(x). Blocks keep a
         numpy pass's batch of P in cache; member by member, a system's P is in cache anyway
         (the fused step writes the next one right after its phi-action read it), and blocks
         only add each block's Python: one block measured 5 % faster than blocks of 8 MiB at
