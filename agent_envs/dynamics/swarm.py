@@ -163,12 +163,12 @@ class SwarmModel:
         ws = self._workspace
         p, augmented, product, scratch = ws.buffers(tuple(x.shape))
         ws.generation += 1
-        weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
         compiled = self.compiled_pass_parameters(x)
         if compiled is not None:
             # the symmetric kernel with a scalar weight: P, s and L(x) x in one compiled pass
             row_sums, drift = compiled_cucker_smale_drift(x, *compiled, p)
         else:
+            weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
             fill_cucker_smale(x, kernel.alpha, weights, out=p, scratch=scratch)
             d = x.shape[-1]
             augmented[..., :d] = x

@@ -220,6 +220,10 @@ class SwarmVectorEnv(VectorEnv):
         self.model = _CachedLinearizationModel(
             params, self.config.linear_operator, cache_tensors=True
         )
+        self.phi_method = single_env_phi_method(self.config)
+        self.integrator: Integrator = make_integrator(
+            self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
+        )
         # numpy: the envs in blocks of about BLOCK_BYTES of kernel matrices, each block with its
         # own model (workspace and cached L(x)), unless every pass over them runs member by
         # member; torch: one block (a device wants one batch)
@@ -240,10 +244,6 @@ class SwarmVectorEnv(VectorEnv):
         self._block_views: list[Any] = []
         self._block_views_of: Any = None
         arrays.prepare_hot_path()
-        self.phi_method = single_env_phi_method(self.config)
-        self.integrator: Integrator = make_integrator(
-            self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
-        )
         self.dt = self.config.dt
         rows = action_rows(self.config.action_basis, n)
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(rows * d,), dtype=np.float32)
@@ -436,7 +436,7 @@ class SwarmVectorEnv(VectorEnv):
             like
         ):
             return False
-        if make_integrator(config.integrator).needs_jacobian:  # ERB, SERB
+        if self.integrator.needs_jacobian:  # ERB, SERB
             return config.jacobian == "frozen" and load_compiled()
         return True
 

@@ -697,51 +697,20 @@ def _compiled_frozen_lanczos(
     `add_product` = (W, e) it acts on V + e (c L) W, the product taken in the compiled pass."""
     matrix, row_sums = a.parts()
     n, k = a.n, v.shape[-1]
-    batch = matrix.shape[:-2]
-    if (
-        v.shape[:-1] == matrix.shape[:-1]
-        and v.dtype == np.float64
-        and bounds is None
-        and (
-            add_product is None
-            or (add_product[0].shape == v.shape and add_product[0].dtype == np.float64)
-        )
-    ):
-        # the integrators' call: V (and W) batched exactly like P, float64, no bounds given (the
-        # compiled pass reads them off s and P_kk): no broadcasting, no copies
-        members = math.prod(batch)
-        extra, extra_scale = _NO_EXTRA, 0.0
-        if add_product is not None:
-            extra = readonly_view(_contiguous(add_product[0]).reshape(members, n, k))
-            extra_scale = float(add_product[1])
-        out = np.empty((members, n, k))
-        converged = np.empty(members, dtype=bool)
-        _compiled.frozen_lanczos(
-            readonly_view(matrix.reshape(members, n, n)),
-            readonly_view(_contiguous(row_sums).reshape(members, n)),
-            a.scale, readonly_view(_contiguous(v).reshape(members, n, k)), order, rtol, max_dim,
-            2, _NO_BOUNDS, _NO_BOUNDS, a.peak if a.peak is not None and a.symmetric else -1.0,
-            out, converged, extra, extra_scale,
-        )  # fmt: skip
-        return out.reshape(v.shape), converged.reshape(batch)
-    batch = tuple(batch)
-    shapes = [tuple(v.shape[:-2])]
+    batch = tuple(matrix.shape[:-2])
+    full = (*batch, n, k)
+    shapes = [tuple(v.shape)]
     if add_product is not None:
         if tuple(add_product[0].shape[-2:]) != (n, k):
             return None
-        shapes.append(tuple(add_product[0].shape[:-2]))
-    if np.broadcast_shapes(batch, *shapes) != batch:
+        shapes.append(tuple(add_product[0].shape))
+    # (np.broadcast_shapes only where a shape differs: the integrators' V and W are P's)
+    if any(shape != full for shape in shapes) and np.broadcast_shapes(full, *shapes) != full:
         return None
     members = math.prod(batch)
-    p = readonly_view(matrix.reshape(members, n, n))
-    s = readonly_view(np.ascontiguousarray(row_sums).reshape(members, n))
-    rhs = np.ascontiguousarray(np.broadcast_to(v, (*batch, n, k))).reshape(members, n, k)
-    rhs = readonly_view(rhs)
     extra, extra_scale = _NO_EXTRA, 0.0
     if add_product is not None:
-        extra = np.broadcast_to(np.asarray(add_product[0], dtype=np.float64), (*batch, n, k))
-        extra = readonly_view(np.ascontiguousarray(extra).reshape(members, n, k))
-        extra_scale = float(add_product[1])
+        extra, extra_scale = _as_members(add_product[0], full), float(add_product[1])
     if bounds is None:
         norms = widths = _NO_BOUNDS
     else:
@@ -756,10 +725,20 @@ def _compiled_frozen_lanczos(
     out = np.empty((members, n, k))
     converged = np.empty(members, dtype=bool)
     _compiled.frozen_lanczos(
-        p, s, a.scale, rhs, order, rtol, max_dim, 2, norms, widths, peak, out, converged,
-        extra, extra_scale,
+        readonly_view(matrix.reshape(members, n, n)),
+        readonly_view(_contiguous(row_sums).reshape(members, n)), a.scale, _as_members(v, full),
+        order, rtol, max_dim, 2, norms, widths, peak, out, converged, extra, extra_scale,
     )  # fmt: skip
-    return out.reshape(*batch, n, k), converged.reshape(batch)
+    return out.reshape(full), converged.reshape(batch)
+
+
+def _as_members(arr: np.ndarray, full: tuple[int, ...]) -> np.ndarray:
+    """arr broadcast to `full` = (*batch, n, k) as a read-only float64 C-contiguous
+    (members, n, k) array for the compiled calls: arr itself, reshaped, when it already is
+    one (the integrators' states), a copy otherwise."""
+    if tuple(arr.shape) != full or arr.dtype != np.float64:
+        arr = np.broadcast_to(np.asarray(arr, dtype=np.float64), full)
+    return readonly_view(_contiguous(arr).reshape(-1, *full[-2:]))
 
 
 def frozen_advance_applies(a: Any, rhs: Any, x: Any, noise: Any, method: str) -> bool:
@@ -806,11 +785,10 @@ def frozen_advance(
     same order, so the result equals the general path's bit for bit.
     """
     _, row_sums = a.parts()  # (parts() refuses an operator whose P was overwritten)
-    *batch, n, d = x.shape
+    *batch, n, d = full = tuple(x.shape)
     members = math.prod(batch)
-    extra = _NO_EXTRA
-    if extra_scale is not None:
-        extra = readonly_view(_contiguous(noise).reshape(members, n, d))
+    noise_members = _as_members(noise, full)
+    extra = _NO_EXTRA if extra_scale is None else noise_members
     out = np.empty((members, n, d))
     converged = np.empty(members, dtype=bool)
     x_next = np.empty((members, n, d))
@@ -819,11 +797,9 @@ def frozen_advance(
     _compiled.frozen_advance(
         p_next.reshape(members, n, n),
         readonly_view(_contiguous(row_sums).reshape(members, n)),
-        a.scale * float(dt), readonly_view(_contiguous(rhs).reshape(members, n, d)), 1e-10, 100,
-        2, a.peak, out, converged, extra, 0.0 if extra_scale is None else float(extra_scale),
-        readonly_view(_contiguous(x).reshape(members, n, d)), float(dt),
-        readonly_view(_contiguous(noise).reshape(members, n, d)), float(weight), float(alpha2),
-        x_next, s_next, drift_next,
+        a.scale * float(dt), _as_members(rhs, full), 1e-10, 100, 2, a.peak, out, converged,
+        extra, 0.0 if extra_scale is None else float(extra_scale), _as_members(x, full),
+        float(dt), noise_members, float(weight), float(alpha2), x_next, s_next, drift_next,
     )  # fmt: skip
     if not converged.all():
         return None
