@@ -10,6 +10,9 @@ namespace, and its plain functions carry the least per-call overhead); for torch
 The few pieces the standard lacks or where the libraries differ live here and nowhere else:
 
 - `expm`: `scipy.linalg.expm` (Pade, scaling and squaring) vs `torch.linalg.matrix_exp`.
+- `eigh`: `xp.linalg.eigh`, on CUDA in batches of at most `CUDA_EIGH_MAX_BATCH` matrices
+  (cuSOLVER's batched solver failed with an internal error on one call of 81 920 small
+  matrices: the paper's SERB at 4096 envs x 20 paths).
 - `symmetric_function_action`: f(A) V = Q f(Lambda) Q^T V for a symmetric A. On torch with
   autograd it is a custom `torch.autograd.Function` whose backward uses the Daleckii-Krein
   formula with divided differences of f, so the gradient stays finite at repeated eigenvalues
@@ -206,6 +209,34 @@ def expm(a: Any) -> Any:
     return scipy.linalg.expm(a)
 
 
+#: At most this many matrices per `torch.linalg.eigh` call on CUDA (`eigh`). cuSOLVER's batched
+#: eigensolver (`cusolverDnXsyevBatched`) raised CUSOLVER_STATUS_INTERNAL_ERROR on an H100
+#: (torch 2.11, CUDA 13) for one batch of 81 920 Lanczos tridiagonals (4096 envs x 20 paths).
+#: benchmarks/probe_cuda_eigh.py: batches of 4096-32 768 (m x m) tridiagonals ran and 65 536
+#: failed, for every m of 3-27 (the probe's 100 s ran out at m = 33: not measured). 4096 is what
+#: the GPU table of docs/benchmarks.md ran with; the time is linear in the batch, so the split
+#: costs only its launches.
+CUDA_EIGH_MAX_BATCH = 4096
+
+
+def eigh(a: Any) -> tuple[Any, Any]:
+    """Eigenvalues (..., n) ascending and eigenvectors (..., n, n) of a symmetric batch
+    (..., n, n): `xp.linalg.eigh`, on a CUDA tensor in batches of at most
+    `CUDA_EIGH_MAX_BATCH` matrices (each matrix's result does not depend on its batch)."""
+    if not is_torch(a) or a.device.type != "cuda" or a.ndim < 3:
+        return namespace(a).linalg.eigh(a)
+    import torch
+
+    batch = a.shape[:-2]
+    flat = a.reshape(-1, *a.shape[-2:])
+    if flat.shape[0] <= CUDA_EIGH_MAX_BATCH:
+        return torch.linalg.eigh(a)
+    parts = [torch.linalg.eigh(chunk) for chunk in flat.split(CUDA_EIGH_MAX_BATCH)]
+    lam = torch.cat([part[0] for part in parts]).reshape(*batch, a.shape[-1])
+    q = torch.cat([part[1] for part in parts]).reshape(a.shape)
+    return lam, q
+
+
 def tridiagonal(diag: Any, off: Any) -> Any:
     """The symmetric tridiagonal T (..., m, m) with diagonal `diag` (..., m) and off-diagonal
     `off` (..., m - 1)."""
@@ -285,7 +316,7 @@ def symmetric_function_action(
             return _symmetric_action_function().apply(a, v, f, df)
     xp = namespace(a, v)
     a = 0.5 * (a + xp.matrix_transpose(a))
-    lam, q = xp.linalg.eigh(a)
+    lam, q = eigh(a)
     coef = xp.matrix_transpose(q) @ v
     return q @ (f(lam)[..., None] * coef)
 
@@ -320,7 +351,7 @@ def _symmetric_action_function() -> Any:
         @staticmethod
         def forward(ctx, a, v, f, df):
             a_sym = 0.5 * (a + a.mT)
-            lam, q = torch.linalg.eigh(a_sym)
+            lam, q = eigh(a_sym)
             f_lam = f(lam)
             coef = q.mT @ v
             ctx.save_for_backward(lam, q, f_lam, coef)

@@ -30,6 +30,12 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
    termination; torch on one thread), `--ppo-timesteps` timesteps in a fresh process: env-steps/s
    of `model.learn` and the share of its wall time spent inside the env's reset/step_wait.
 
+5. `--device cuda` (or any torch device): the native vector env there at B = `--device-envs`
+   (4096), paper and quick settings, SERB and EM, 1 and 20 paths, each in a fresh process:
+   warm env-steps/s, cold/warm over the first `--device-steps` steps, the shares of the host's
+   Brownian draws and of the integrator's batched step, the device memory peak; against the
+   numpy native env on this host's CPU at B <= `--device-cpu-envs` (this tree only).
+
 `--baseline-python PATH` runs parts 1, 3 and 4 (and 2) again with another interpreter, e.g. a
 virtual environment with an older checkout of the project installed, and prints both (the
 "before" column): the workers only use public APIs that existed before the workspaces. For the
@@ -42,6 +48,7 @@ the compiled Lanczos from numba's cache (compiling it instead, a few seconds, th
 in a cache directory). It is not in the cold steps.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_throughput.py [--baseline-python PY]
+    python benchmarks/bench_throughput.py --device cuda --skip cold ratios krylov vector ppo
 
 The BLAS pools are set to one thread below, before numpy loads (the workers inherit it). On a
 shared machine absolute figures move with the load: compare the ratios, each measured within
@@ -515,12 +522,99 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
     return out
 
 
+def worker_device(
+    device: str, num_envs: int, setting: str, integrator: str, n_paths: int, steps: int, rounds: int
+) -> dict[str, float]:
+    """The native vector env on `device` ("cpu": numpy; else torch there), B = `num_envs`.
+
+    Fresh process: `setup` is import + (CUDA context) + make + reset; `cold` the seconds per
+    step of the first `steps` steps; `warm` the median over `rounds` blocks of the same steps
+    (reset with seed 0 first). `draws` and `advance` are the shares of the warm steps spent in
+    the host's Brownian draws (each env's numpy generator, as its single twin) and in the
+    integrator's batched step (`_advance`, synchronized with the device); `peak_gib` the device
+    memory torch allocated at most.
+    """
+    start = time.perf_counter()
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401
+    from agent_envs.envs import ENV_ID
+    from agent_envs.envs import vector_env as vector_module
+
+    sync: Callable[[], None] = lambda: None  # noqa: E731
+    if device != "cpu":
+        import torch
+
+        torch.zeros(1, device=device)  # the CUDA context, in the setup time
+        if device.startswith("cuda"):
+            sync = torch.cuda.synchronize
+    kwargs = env_kwargs(setting, integrator, n_paths=n_paths)
+    env = gym.make_vec(
+        ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", device=device, **kwargs
+    ).unwrapped
+    env.reset(seed=0)
+    sync()
+    setup = time.perf_counter() - start
+    spent = {"draws": 0.0, "advance": 0.0}
+    draw, advance = vector_module.brownian_increments, env._advance
+
+    def timed_draw(*args: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return draw(*args)
+        finally:
+            spent["draws"] += time.perf_counter() - t0
+
+    def timed_advance(*args: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            out = advance(*args)
+            sync()
+            return out
+        finally:
+            spent["advance"] += time.perf_counter() - t0
+
+    vector_module.brownian_increments = timed_draw
+    env._advance = timed_advance
+    actions = np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape)
+    actions = actions.astype(np.float32)
+
+    def block() -> float:
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            env.step(actions)
+        return (time.perf_counter() - t0) / steps
+
+    cold = block()
+    warm, shares = [], {"draws": [], "advance": []}
+    for _ in range(rounds):
+        env.reset(seed=0)
+        spent.update(draws=0.0, advance=0.0)
+        seconds = block()
+        warm.append(seconds)
+        for key in shares:
+            shares[key].append(spent[key] / (steps * seconds))
+    out = {
+        "setup": setup,
+        "cold": cold,
+        "warm": float(np.median(warm)),
+        "draws": float(np.median(shares["draws"])),
+        "advance": float(np.median(shares["advance"])),
+    }
+    if device.startswith("cuda"):
+        import torch
+
+        out["peak_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
+    return out
+
+
 WORKERS = {
     "cold": worker_cold,
     "ratios": worker_ratios,
     "krylov": worker_krylov,
     "vector": worker_vector,
     "ppo": worker_ppo,
+    "device": worker_device,
 }
 
 
@@ -540,11 +634,81 @@ def fmt_pair(after: float, before: float | None, spec: str = ",.0f") -> str:
     return f"{format(after, spec)} ({format(before, spec)})"
 
 
+def device_table(device: str, num_envs: int, steps: int, rounds: int, cpu_max_envs: int) -> None:
+    """Part 5: the native vector env on `device` at B = `num_envs` (torch), this tree only,
+    against the numpy native env on this host's CPU (one thread) at B = min(`num_envs`,
+    `cpu_max_envs`), halved until its dense matrices fit `DENSE_MEMORY_BUDGET_BYTES` (beyond it
+    numpy goes matrix-free, which the torch env never does). numpy steps its systems one by
+    one, so its env-steps/s hardly depend on B past a few envs (part 3)."""
+    import torch
+
+    from agent_envs.dynamics.operators import DENSE_MEMORY_BUDGET_BYTES, dense_bytes
+
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        print(f"## 5. {device}: torch sees no CUDA device here; skipped\n")
+        return
+    name = torch.cuda.get_device_name(device) if device.startswith("cuda") else device
+    print(
+        f"## 5. Native vector env on {name} (torch, float64), B = {num_envs}, against numpy on"
+        f" this host's CPU (one thread)\n"
+    )
+    print(
+        f"cold = the first {steps} steps of a fresh process (after make + reset), warm = the"
+        f" median of {rounds} blocks of the same steps; shares of the warm step: the host's"
+        " Brownian draws (each env's numpy generator) and the integrator's batched step\n"
+    )
+    print(
+        "| setting | integrator | paths | device env-steps/s (warm) | cold/warm | setup (s) |"
+        " draws | integrator step | peak GiB | CPU B | CPU env-steps/s | device / CPU |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for setting in SETTINGS:
+        n = SETTINGS[setting]["n_agents"]
+        for n_paths in (1, 20):
+            cpu_envs = min(num_envs, cpu_max_envs)
+            while cpu_envs > 1 and (
+                dense_bytes(n, 1, cpu_envs * n_paths, "frozen") > DENSE_MEMORY_BUDGET_BYTES
+            ):
+                cpu_envs //= 2
+            for integrator in ("serb", "em"):
+                common = {"setting": setting, "integrator": integrator, "n_paths": n_paths}
+                common.update(steps=steps, rounds=rounds)
+                try:
+                    dev = run_worker(
+                        sys.executable, "device", device=device, num_envs=num_envs, **common
+                    )
+                    cpu = run_worker(
+                        sys.executable, "device", device="cpu", num_envs=cpu_envs, **common
+                    )
+                except RuntimeError as err:  # one failed row (out of memory, say) is reported
+                    last = str(err).strip().splitlines()[-1][:200]
+                    print(f"| {setting} | {integrator} | {n_paths} | failed: {last} |", flush=True)
+                    continue
+                dev_rate, cpu_rate = num_envs / dev["warm"], cpu_envs / cpu["warm"]
+                print(
+                    f"| {setting} | {integrator} | {n_paths} | {dev_rate:,.0f} | "
+                    f"{dev['cold'] / dev['warm']:.2f} | {dev['setup']:.1f} | "
+                    f"{100 * dev['draws']:.0f} % | {100 * dev['advance']:.0f} % | "
+                    f"{dev.get('peak_gib', float('nan')):.1f} | {cpu_envs} | {cpu_rate:,.0f} | "
+                    f"{dev_rate / cpu_rate:.1f} |",
+                    flush=True,
+                )
+    print()
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5, help="rounds (medians)")
     parser.add_argument("--ppo-timesteps", type=int, default=4096)
     parser.add_argument("--baseline-python", default=None, help="interpreter of the 'before'")
+    parser.add_argument(
+        "--device", default=None, help="part 5: the native vector env on this torch device"
+    )
+    parser.add_argument("--device-envs", type=int, default=4096, help="part 5: B on the device")
+    parser.add_argument(
+        "--device-cpu-envs", type=int, default=512, help="part 5: B of numpy on the CPU, at most"
+    )
+    parser.add_argument("--device-steps", type=int, default=10, help="part 5: steps per block")
     parser.add_argument("--skip", nargs="*", default=[], choices=list(WORKERS))
     parser.add_argument("--worker", choices=list(WORKERS), help=argparse.SUPPRESS)
     parser.add_argument("--worker-args", default="{}", help=argparse.SUPPRESS)
@@ -704,6 +868,9 @@ def main() -> int:
         if b:
             print(f"\nPPO after / before: {a['steps_per_s'] / b['steps_per_s']:.2f}x")
         print()
+
+    if args.device and "device" not in args.skip:
+        device_table(args.device, args.device_envs, args.device_steps, r, args.device_cpu_envs)
     return 0
 
 

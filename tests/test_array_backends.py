@@ -257,6 +257,53 @@ def test_cuda_gradient_is_finite():
     assert torch.all(torch.isfinite(u.grad))
 
 
+def _symmetric_tridiagonals(batch: int, m: int, device: str) -> torch.Tensor:
+    gen = torch.Generator(device=device).manual_seed(0)
+    diag = torch.randn((batch, 1, m), generator=gen, device=device, dtype=torch.float64)
+    off = torch.rand((batch, 1, m - 1), generator=gen, device=device, dtype=torch.float64)
+    return torch.diag_embed(diag) + torch.diag_embed(off, 1) + torch.diag_embed(off, -1)
+
+
+def test_eigh_off_cuda_is_the_library_call():
+    from agent_envs import arrays
+
+    t = _symmetric_tridiagonals(7, 5, "cpu")
+    lam, q = arrays.eigh(t)
+    want = torch.linalg.eigh(t)
+    assert torch.equal(lam, want[0]) and torch.equal(q, want[1])
+    lam_np, q_np = arrays.eigh(t.numpy())
+    want_np = np.linalg.eigh(t.numpy())
+    np.testing.assert_array_equal(lam_np, want_np[0])
+    np.testing.assert_array_equal(q_np, want_np[1])
+
+
+@CUDA
+def test_cuda_eigh_in_batches_equals_one_call(monkeypatch):
+    from agent_envs import arrays
+
+    t = _symmetric_tridiagonals(10, 6, "cuda")
+    whole = torch.linalg.eigh(t)
+    monkeypatch.setattr(arrays, "CUDA_EIGH_MAX_BATCH", 3)
+    lam, q = arrays.eigh(t)
+    assert lam.shape == whole[0].shape and q.shape == whole[1].shape
+    torch.testing.assert_close(lam, whole[0], rtol=0, atol=1e-12)
+    residual = t @ q - q * lam[..., None, :]
+    assert float(residual.abs().max()) < 1e-12
+
+
+@CUDA
+def test_cuda_eigh_of_the_paper_scale_batch():
+    """81 920 tridiagonals (4096 envs x 20 paths): one cuSOLVER call of this batch failed with
+    an internal error on an H100; `arrays.eigh` splits it."""
+    from agent_envs import arrays
+
+    t = _symmetric_tridiagonals(81_920, 27, "cuda")
+    lam, q = arrays.eigh(t)
+    residual = t @ q - q * lam[..., None, :]
+    assert float(residual.abs().max()) < 1e-12
+    assert bool(torch.all(lam[..., 1:] >= lam[..., :-1]))
+
+
 def test_krylov_gradient_is_finite_when_some_columns_break_down():
     """Agents on a line in d = 2: the second coordinate's Krylov column is zero and breaks
     down at once while the first goes on; the gradient must stay finite (the Lanczos norm's
