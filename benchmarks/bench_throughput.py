@@ -428,13 +428,13 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
         if isinstance(a, FrozenLaplacian):
             if add_product is not None:  # SERB's F + sigma L dW, as the phi-action sees it
                 v = v + add_product[1] * (a @ add_product[0])
-            norms, widths = a.krylov_bounds() if bounds is None else bounds
+            norms, widths, low = a.krylov_bounds() if bounds is None else bounds
             widths = np.full(a.shape[:-2], np.inf) if widths is None else widths
             pick = slice(None, None, max(1, a.shape[0] // members))
             captured.append((a.dense()[pick], np.array(v[pick]), order, rtol,
                              np.broadcast_to(norms, a.shape[:-2])[pick],
                              np.broadcast_to(widths, a.shape[:-2])[pick],
-                             a.parts(), np.array(v), a.scale, a.peak))  # fmt: skip
+                             a.parts(), np.array(v), a.scale, a.peak, low))  # fmt: skip
             return original(a, v, order, symmetric, rtol, max_dim, bounds)
         return original(a, v, order, symmetric, rtol, max_dim, bounds, add_product)
 
@@ -453,7 +453,7 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
                 env.step(action.astype(np.float32))
                 # keep only the last step's whole batch (for the timing below)
                 if len(captured) > 1:
-                    captured[-2] = captured[-2][:6]
+                    captured[-2] = (*captured[-2][:6], captured[-2][-1])
     finally:
         exponential.use_fused_step(fused_before)
         pf._krylov = original
@@ -467,10 +467,10 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
     reached, oracle, step_of = [], [], []
     pf._RowOperator.apply = counted
     try:
-        for index, (dense, v, order, rtol, norms, widths, *_) in enumerate(captured):
+        for index, (dense, v, order, rtol, norms, widths, *_, low) in enumerate(captured):
             for j in range(dense.shape[0]):
                 count[0] = 0
-                bounds = (norms[j : j + 1], widths[j : j + 1])
+                bounds = (norms[j : j + 1], widths[j : j + 1], low)
                 pf._lanczos_numpy(pf._RowOperator(dense[j : j + 1]), v[j : j + 1], order, rtol,
                                   100, bounds=bounds)  # fmt: skip
                 reached.append(count[0])
@@ -515,8 +515,9 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
         result, ok = np.empty(rhs.shape), np.empty(members_all, dtype=bool)
 
         def call() -> None:
-            cl.frozen_lanczos(p_all, s_all, scale, rhs, 1, 1e-10, 100, 2, pf._NO_BOUNDS,
-                              pf._NO_BOUNDS, peak, result, ok, pf._NO_EXTRA, 0.0)  # fmt: skip
+            cl.frozen_lanczos(p_all, s_all, scale, rhs, 1, 1e-10, 100, pf.MAX_CHECK_STEP,
+                              pf._NO_BOUNDS, pf._NO_BOUNDS, peak, result, ok, pf._NO_EXTRA,
+                              0.0)  # fmt: skip
 
         out["member_us"] = 1e6 * interleaved({"call": call}, 200, 5)["call"] / members_all
     return out

@@ -74,17 +74,18 @@ def test_compiled_equals_numpy_and_reference_lanczos(compiled, n, d, batch, spre
 
 @pytest.mark.parametrize("scale", [0.1, 0.3])
 def test_compiled_equals_numpy_at_large_krylov_dimensions(compiled, scale):
-    """Steps long enough for 35-60 Krylov dimensions: at 0.3 the checks' QL iteration needs
-    more rotations than its buffers hold (m above about 40) and takes LAPACK's eigh instead;
-    either way the phi-action equals the numpy Lanczos."""
+    """Steps long enough for 23-27 Krylov dimensions (35-60 with Saad's estimate, before the
+    error bound): the phi-action equals the numpy Lanczos, and a dimension short of what the
+    members need leaves them flagged as not converged."""
     _, _, f, op = _frozen(100, 1, (3,), 1.0, seed=5, scale=scale)
     got, got_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
     expected, expected_ok = pf._lanczos_numpy(pf._RowOperator(op), f, 1, 1e-10, 100)
     assert got_ok.all() and expected_ok.all()
     assert np.max(np.abs(got - expected)) <= TOL * np.max(np.abs(expected))
-    # at 0.3, 50 dimensions are not enough: the fallback's dimensions were reached
-    _, short_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 50, None)
-    assert short_ok.all() == (scale < 0.2)
+    _, short_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 20, None)
+    _, short_numpy_ok = pf._lanczos_numpy(pf._RowOperator(op), f, 1, 1e-10, 20)
+    assert not short_ok.any()
+    np.testing.assert_array_equal(short_ok, short_numpy_ok)
 
 
 def test_compiled_result_is_phi_of_the_matrix(compiled):
@@ -187,8 +188,9 @@ def test_tridiagonal_eigensolver_reports_a_full_rotation_buffer(compiled):
 
 @pytest.mark.parametrize("order", [1, 2])
 def test_phi_of_tridiagonal_from_rotations_equals_lapack(compiled, order):
-    """phi_p(T_m) e_1 and Saad's estimate's parts from the QL rotations equal those from
-    LAPACK's eigh, which the compiled Lanczos takes when the rotation buffer is full."""
+    """phi_p(T_m) e_1, Saad's estimate's parts and the error bound's (eigenvalues, Z's first
+    and last rows, phi_p of the eigenvalues) from the QL rotations equal those from LAPACK's
+    eigh, which the compiled Lanczos takes when the rotation buffer is full."""
     m = 9
     rng = np.random.default_rng(2)
     alphas, betas = -np.abs(rng.normal(size=(m, 1))) * 5, np.abs(rng.normal(size=(m, 1)))
@@ -197,18 +199,28 @@ def test_phi_of_tridiagonal_from_rotations_equals_lapack(compiled, order):
     lam, vec = np.linalg.eigh(t)
     phi = (np.expm1(lam) / lam) if order == 1 else (np.expm1(lam) - lam) / lam**2
     expected = vec @ (phi * vec[0])
+    bounds = []
     for capacity in (2 * m * m + 8, 2):
         out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
         rot_c, rot_s, rot_at = np.empty(capacity), np.empty(capacity), np.empty(capacity, int)
+        phis = np.empty(m)
         last, size, count = compiled._phi_of_tridiagonal(
-            alphas, betas, m, 0, order, fact, out, d, e, rows, rot_c, rot_s, rot_at
+            alphas, betas, m, 0, order, fact, out, d, e, rows, rot_c, rot_s, rot_at, phis
         )
+        order_of = np.argsort(d)
+        np.testing.assert_allclose(d[order_of], lam, rtol=1e-12, atol=1e-13)
+        np.testing.assert_allclose(phis[order_of], phi, rtol=1e-12)
+        # Z's rows up to the sign of each eigenvector: their products g_j are sign-free
+        g = rows[0] * rows[1]
+        np.testing.assert_allclose(g[order_of], vec[0] * vec[-1], rtol=1e-9, atol=1e-14)
+        bounds.append(compiled._error_bound(d, rows, phis, m, order, fact, -10.0, 0.0))
         assert (count >= 0) == (capacity > 2)
         if count > 0:
             compiled._apply_z(out, count, rot_c, rot_s, rot_at)
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-15)
         assert last == pytest.approx(abs(expected[-1]), rel=1e-10)
         assert size == pytest.approx(np.linalg.norm(expected), rel=1e-12)
+    assert bounds[0] == pytest.approx(bounds[1], rel=1e-8)
 
 
 @pytest.mark.parametrize(

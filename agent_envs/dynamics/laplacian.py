@@ -316,15 +316,21 @@ class FrozenLaplacian:
         diagonal entry of each row is its largest), half of ||c L||_inf."""
         return 0.5 * self.krylov_bounds()[0][..., None]
 
-    def krylov_bounds(self) -> tuple[np.ndarray, np.ndarray | None]:
+    def krylov_bounds(self) -> tuple[np.ndarray, np.ndarray | None, float | None]:
         """(||c L||_inf, width of spec(c L) without 0 or None) per batch member: `krylov_bounds`
-        of the row sums and the diagonal of P, times |c|."""
+        of the row sums and the diagonal of P, times |c|; and the bottom -c p_max of the
+        interval of that width holding spec(c L) on 1^perp, for c > 0 (None otherwise): L is
+        -p_max plus a graph Laplacian of p_max - P there, whose spectrum lies in [0, width / c]
+        (`phi_functions._spectrum_interval`)."""
         idx = np.arange(self.n)
         norms, widths = krylov_bounds(
             self.row_sums, self.matrix[..., idx, idx], self.n, self.peak, self.symmetric
         )
         c = abs(self.scale)
-        return c * norms, None if widths is None else c * widths
+        low = None
+        if widths is not None and self.scale > 0:
+            low = -self.scale * self.peak
+        return c * norms, None if widths is None else c * widths, low
 
     def __repr__(self) -> str:
         return f"FrozenLaplacian(shape={self.shape}, scale={self.scale})"

@@ -80,16 +80,19 @@ class Linearization:
     matrix: Any  # an array, or an operator (`@`, scalar `*`: dynamics.operators, .laplacian)
     per_coordinate: bool
     symmetric: bool
-    #: (||A||_inf per batch member, width of spec(A) without its eigenvalue 0 or None), numpy
-    #: arrays of the batch shape, for the Krylov phi-action (scaled with A by `scaled_bounds`)
-    bounds: tuple[np.ndarray, np.ndarray | None] | None = None
+    #: (||A||_inf per batch member, width of spec(A) without its eigenvalue 0 or None, the
+    #: bottom of an interval of that width holding spec(A) on 1^perp or None), numpy arrays of
+    #: the batch shape (the bottom a float), for the Krylov phi-action (scaled with A by
+    #: `scaled_bounds`)
+    bounds: tuple[np.ndarray, np.ndarray | None, float | None] | None = None
 
-    def scaled_bounds(self, c: float) -> tuple[np.ndarray, np.ndarray | None] | None:
-        """`bounds` of c A."""
+    def scaled_bounds(self, c: float) -> tuple[np.ndarray, np.ndarray | None, float | None] | None:
+        """`bounds` of c A (the interval's bottom for c > 0 only: c A flips it otherwise)."""
         if self.bounds is None:
             return None
-        norms, widths = self.bounds
-        return abs(c) * norms, None if widths is None else abs(c) * widths
+        norms, widths, low = self.bounds
+        scaled_low = c * low if low is not None and c > 0 else None
+        return abs(c) * norms, None if widths is None else abs(c) * widths, scaled_low
 
     def as_columns(self, v: Any) -> Any:
         """The state-shaped v (..., N, d) as the block of vectors A acts on."""
@@ -342,9 +345,11 @@ class SwarmModel:
             if isinstance(self.kernel, CuckerSmaleKernel):
                 # the same bounds the workspace path reads off its operator (torch, reference)
                 diagonal = self.kernel.weights / self.kernel.alpha**2
-                bounds = krylov_bounds(
+                norms, widths = krylov_bounds(
                     arrays.to_numpy(row_sums), diagonal, self.n_agents, self._peak, symmetric
                 )
+                # the bottom -p_max of spec(L) on 1^perp, as FrozenLaplacian.krylov_bounds
+                bounds = (norms, widths, None if widths is None else -1.0 * self._peak)
             return f, Linearization(frozen, True, symmetric, bounds)
         # r ⊗ dp/dy is a symmetric block only for radial kernels (p a function of |x - y|).
         symmetric = symmetric and bool(getattr(self.kernel, "radial", False))

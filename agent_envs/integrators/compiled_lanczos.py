@@ -11,14 +11,15 @@ recurrence (b_j q_{j+1} = A q_j - a_j q_j - <., q_{j-1}> q_{j-1}, no reorthogona
 same per-member bounds (||c L||_inf and the width of spec(c L) on 1^perp, from s and P_kk as
 `agent_envs.dynamics.laplacian.krylov_bounds` has them), the same deflation of the constant
 vector (with a finite width: Lanczos on v - mean(v) 1, phi_p(0) mean(v) 1 added at the end),
-the same first check, breakdown tolerance, check interval, Saad's error estimate and stopping
-dimension, and phi_p(T_m) e_1 from the eigendecomposition of T_m. Only the order of the
+the same breakdown tolerance, error bound (`_error_bound`, or Saad's estimate where no interval
+holding the spectrum is known), checks and stopping dimension, and phi_p(T_m) e_1 from the
+eigendecomposition of T_m. Only the order of the
 floating-point sums (loops instead of BLAS and numpy's pairwise sums, fused multiply-adds in
 the product) and the eigensolver differ, so each phi-action agrees with the reference to
 round-off (tests/test_compiled_lanczos.py: 1e-12). The eigensolver is the implicit QL
 iteration for tridiagonal matrices (EISPACK's tql2; numpy's `eigh` calls LAPACK's syevd: both
 backward stable), allocation-free, and it does not form the eigenvector matrix Z: it records
-its plane rotations and carries only Z's first and last rows, all that Saad's estimate reads
+its plane rotations and carries only Z's first and last rows, all that the error bound reads
 (O(m^2) per check instead of O(m^3): a check at m = 25, as the first steps of an episode from a
 spread start need, cost 40 us with the full Z and 20 us without; `math.sqrt` of the sum of
 squares replaces `math.hypot` in the rotations, whose entries are bounded by ||c L||);
@@ -48,6 +49,8 @@ from agent_envs.dynamics.compiled_kernel import cucker_smale_drift
 
 #: Taylor terms of phi_p near 0 (as `phi_functions._TAYLOR_TERMS`)
 TAYLOR_TERMS = 16
+#: the first check's dimension where the error bound applies (`phi_functions.FIRST_BOUND_CHECK`)
+FIRST_BOUND_CHECK = 3
 
 
 @njit(cache=True)
@@ -302,18 +305,21 @@ def _apply_z(y, count, rot_c, rot_s, rot_at) -> None:
 
 @njit(cache=True)
 def _phi_of_tridiagonal(alphas, betas, m, col, order, fact, out, d, e, rows, rot_c, rot_s,
-                        rot_at):  # fmt: skip
-    """What Saad's error estimate of column `col` at dimension m reads,
-    (|e_m^T phi(T_m) e_1|, |phi(T_m) e_1|) (the estimate is b_m times the first), and what
-    `_apply_z` needs to form phi_order(T_m) e_1 = Z phi(Lambda) Z^T e_1 (T_m from
-    alphas[:m, col] and betas[:m - 1, col]): returns (last, size, K).
+                        rot_at, phis):  # fmt: skip
+    """What the error bound of column `col` at dimension m reads (`_error_bound`: the
+    eigenvalues of T_m, rows 1 and m of its eigenvector matrix Z, phi_order of the eigenvalues;
+    Saad's estimate: |e_m^T phi(T_m) e_1|), |phi(T_m) e_1|, and what `_apply_z` needs to form
+    phi_order(T_m) e_1 = Z phi(Lambda) Z^T e_1 (T_m from alphas[:m, col] and betas[:m - 1,
+    col]): returns (last, size, K).
 
-    Both come from the eigenvalues and rows 1 and m of Z alone (|Z y| = |y| for the
-    orthogonal Z), so a check that fails forms no coefficients. out[:m] receives
+    All come from the eigenvalues and rows 1 and m of Z alone (|Z y| = |y| for the orthogonal
+    Z), so a check that fails forms no coefficients. out[:m] receives
     y = phi(Lambda) Z^T e_1 and K >= 0 the rotations of Z (`_tridiagonal_ql`), or, where the
     QL iteration gave up (more rotations than the buffers hold, from m above about 40, or more
     than 30 m iterations, not seen in practice), the coefficients themselves from LAPACK's
-    eigh and K = -1. d, e (>= m), rows (2, >= m) and the rotation buffers are scratch."""
+    eigh and K = -1. d, e (>= m), rows (2, >= m) and the rotation buffers are scratch; on
+    return d[:m] holds the eigenvalues, rows[:, :m] Z's first and last rows and phis[:m]
+    phi_order of the eigenvalues (what `_error_bound` reads)."""
     for i in range(m):
         d[i] = alphas[i, col]
     for i in range(m - 1):
@@ -329,20 +335,78 @@ def _phi_of_tridiagonal(alphas, betas, m, col, order, fact, out, d, e, rows, rot
             t[i, i + 1] = betas[i, col]
             t[i + 1, i] = betas[i, col]
         lam, vectors = np.linalg.eigh(t)
+        for j in range(m):
+            d[j] = lam[j]
+            rows[0, j] = vectors[0, j]
+            rows[1, j] = vectors[m - 1, j]
+            phis[j] = _phi(lam[j], order, fact)
         for i in range(m):
             acc = 0.0
             for j in range(m):
-                acc += vectors[i, j] * (_phi(lam[j], order, fact) * vectors[0, j])
+                acc += vectors[i, j] * (phis[j] * vectors[0, j])
             out[i] = acc
             size += acc * acc
         last = out[m - 1]
     else:
         for j in range(m):
-            y = _phi(d[j], order, fact) * rows[0, j]
+            phis[j] = _phi(d[j], order, fact)
+            y = phis[j] * rows[0, j]
             out[j] = y
             last += rows[1, j] * y
             size += y * y
     return abs(last), math.sqrt(size), count
+
+
+@njit(cache=True)
+def _error_bound(d, rows, phis, m, order, fact, lo, hi) -> float:
+    """max over mu in [lo, hi] of |sum_j g_j phi[lambda_j, mu]|, g_j = Z_1j Z_mj, on the m + 1
+    points lo + (hi - lo) j / m: the Lanczos error at dimension m is b_m |v| f(A) q_{m+1} with
+    f(mu) = sum_j g_j phi[lambda_j, mu] (`phi_functions._error_bounds`, the same arithmetic).
+    phi[l, mu] = (phi(l) - phi(mu)) / (l - mu), phi'((l + mu) / 2) = phi_p - p phi_{p+1} there
+    where |l - mu| <= 1e-6 max(1, |l|, |mu|)."""
+    largest = 0.0
+    for i in range(m + 1):
+        mu = lo + (hi - lo) * (i / m)
+        phi_mu = _phi(mu, order, fact)
+        acc = 0.0
+        for j in range(m):
+            lam = d[j]
+            gap = lam - mu
+            scale = max(max(abs(lam), abs(mu)), 1.0)
+            if abs(gap) <= 1e-6 * scale:
+                mid = 0.5 * (lam + mu)
+                dd = _phi(mid, order, fact) - order * _phi(mid, order + 1, fact)
+            else:
+                dd = (phis[j] - phi_mu) / gap
+            acc += (rows[0, j] * rows[1, j]) * dd
+        if abs(acc) > largest:
+            largest = abs(acc)
+    return largest
+
+
+@njit(cache=True)
+def _spectrum_interval(norm, width, low):
+    """[lo, hi] holding the spectrum the Lanczos vectors see (`phi_functions.
+    _spectrum_interval`): [low, low + width] within [-norm, 0] for the deflated frozen c L with
+    c > 0 (low = -c p_max, the bottom of spec(c L) on 1^perp; nan if unknown), and True; else
+    (-norm, norm, False): then the iteration keeps Saad's estimate and its schedule."""
+    if width < np.inf and low <= 0.0:
+        lo = max(low, -norm)
+        hi = min(low + width, 0.0)
+        if lo <= hi:
+            return lo, hi, True
+    return -norm, norm, False
+
+
+@njit(cache=True)
+def _next_check(m, ratio, prev_m, prev_ratio, max_step) -> int:
+    """The dimension of the next check after a failed one at m (`phi_functions._next_check`,
+    the same arithmetic)."""
+    step = 1
+    if prev_m > 0 and prev_ratio > ratio and prev_ratio < np.inf and ratio < np.inf:
+        predicted = math.ceil(math.log(ratio) * (m - prev_m) / math.log(prev_ratio / ratio))
+        step = max(1, min(max_step, (predicted + 1) // 2))
+    return m + step
 
 
 @njit(cache=True)
@@ -354,7 +418,7 @@ def frozen_lanczos(
     order: int,
     rtol: float,
     max_dim: int,
-    check_every: int,
+    max_step: int,
     norms: np.ndarray,
     widths: np.ndarray,
     peak: float,
@@ -373,7 +437,7 @@ def frozen_lanczos(
     """
     none3 = np.empty((0, 0, 0))
     _members(
-        p, s, scale, v, order, rtol, max_dim, check_every, norms, widths, peak, out, converged,
+        p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, peak, out, converged,
         extra, extra_scale, False, none3, 0.0, none3, 0.0, 0.0, none3, none3, np.empty((0, 0)),
         none3,
     )  # fmt: skip
@@ -387,7 +451,7 @@ def frozen_advance(
     v: np.ndarray,
     rtol: float,
     max_dim: int,
-    check_every: int,
+    max_step: int,
     peak: float,
     out: np.ndarray,
     converged: np.ndarray,
@@ -415,14 +479,14 @@ def frozen_advance(
     takes the general path).
     """
     _members(
-        p, s, scale, v, 1, rtol, max_dim, check_every, np.empty(0), np.empty(0), peak, out,
+        p, s, scale, v, 1, rtol, max_dim, max_step, np.empty(0), np.empty(0), peak, out,
         converged, extra, extra_scale, True, x, dt, noise, weight, alpha2, p, x_next, s_next,
         drift_next,
     )  # fmt: skip
 
 
 @njit(cache=True)
-def _members(p, s, scale, v, order, rtol, max_dim, check_every, norms, widths, peak, out,
+def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, peak, out,
              converged, extra, extra_scale, advance, x, dt, noise, weight, alpha2, p_next, x_next,
              s_next, drift_next):  # fmt: skip
     """The body of `frozen_lanczos` (advance False) and `frozen_advance` (advance True, p_next
@@ -452,6 +516,7 @@ def _members(p, s, scale, v, order, rtol, max_dim, check_every, norms, widths, p
     rot_at = np.empty(capacity, dtype=np.int64)
     means = np.empty(k)
     ones = np.ones(n)
+    phis = np.empty(max_dim)
     for member in range(n_members):
         pm = p[member]
         sm = s[member]
@@ -462,10 +527,17 @@ def _members(p, s, scale, v, order, rtol, max_dim, check_every, norms, widths, p
         # a finite width: c L 1 = 0 and spec(c L) on 1^perp lies in an interval of that width;
         # the constant vector is deflated (phi_p(0) = 1/p! on the mean, Lanczos on the rest)
         deflate = width < np.inf
-        first = math.ceil(3.5 * math.sqrt(norm))
-        if deflate:
-            first = min(first, math.ceil(3.5 * math.sqrt(width)))
-        first_check = int(min(max(first, 2.0), float(max_dim)))
+        low = -scale * peak if peak > 0.0 and scale > 0.0 else np.nan
+        lo, hi, tight = _spectrum_interval(norm, width, low)
+        if tight:
+            next_check = min(FIRST_BOUND_CHECK, max_dim)
+        else:  # Saad's estimate, from m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)), every 2
+            first = math.ceil(3.5 * math.sqrt(norm))
+            if deflate:
+                first = min(first, math.ceil(3.5 * math.sqrt(width)))
+            next_check = int(min(max(first, 2.0), float(max_dim)))
+        prev_m = 0
+        prev_ratio = 0.0
         tiny = 1e-12 * (norm + 1e-300)
         for c in range(k):
             q0 = basis[0, c]
@@ -511,23 +583,34 @@ def _members(p, s, scale, v, order, rtol, max_dim, check_every, norms, widths, p
                 if not b[c] <= tiny:
                     all_small = False
             stops = all_small or m == max_dim
-            check = (not stops) and m >= first_check and (m - first_check) % check_every == 0
+            check = (not stops) and m == next_check
             if stops or check:
                 passed = True
+                ratio = 0.0
                 for c in range(k):
                     last, size, count = _phi_of_tridiagonal(
                         alphas, betas, m, c, order, fact, coeffs[c], eig_d, eig_e, rows,
-                        rot_c, rot_s, rot_at,
+                        rot_c, rot_s, rot_at, phis,
                     )  # fmt: skip
-                    if check and not b[c] * last <= rtol * size + 1e-300:
-                        passed = False
-                        break  # this dimension is not accepted: no coefficients needed
-                    if count > 0:
+                    if check:
+                        if tight:
+                            bound = b[c] * _error_bound(eig_d, rows, phis, m, order, fact, lo, hi)
+                        else:
+                            bound = b[c] * last
+                        if not bound <= rtol * size + 1e-300:
+                            passed = False
+                            ratio = max(ratio, bound / (rtol * size + 1e-300))
+                    if count > 0 and (stops or passed):  # (coefficients of an accepted m)
                         _apply_z(coeffs[c], count, rot_c, rot_s, rot_at)
                 if stops or passed:
                     ok_member = all_small or (check and passed)
                     stop_m = m
                     break
+                if tight:
+                    next_check = _next_check(m, ratio, prev_m, prev_ratio, max_step)
+                    prev_m, prev_ratio = m, ratio
+                else:
+                    next_check = m + 2
             for c in range(k):
                 betas[j, c] = b[c]
                 nxt = basis[j + 1, c]

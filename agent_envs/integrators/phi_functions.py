@@ -16,7 +16,8 @@
   L(x) at consensus), where torch.linalg.eigh's own backward is not.
 - ``"krylov"``: phi_p(A) v ~ |v| Q_m phi_p(H_m) e_1 on an orthonormal basis Q_m of
   span{v, Av, ..., A^{m-1} v}, H_m = Q_m^T A Q_m. Symmetric A: Lanczos (three-term recurrence,
-  H_m tridiagonal, stopped by Saad's a posteriori error estimate); otherwise Arnoldi with
+  H_m tridiagonal, stopped by an a posteriori error bound where an interval holding the
+  spectrum is known (the swarm's frozen L(x)), else by Saad's estimate); otherwise Arnoldi with
   classical Gram-Schmidt run twice, stopped when two successive approximations agree to
   `rtol`. O(m n^2) for a dense A, so the method of choice for large n and for batches. If it
   has not converged at `max_krylov_dim`, a `RuntimeWarning` is issued and the dense method is
@@ -184,20 +185,27 @@ class _RowOperator:
             self._at = arrays.namespace(a).matrix_transpose(a)
             self.arrays = (a,)
 
-    def member_bounds(self, batch: tuple, bounds: Any = None) -> tuple[np.ndarray, np.ndarray]:
-        """(||A||_inf, width) per batch member, float64 arrays of shape `batch`.
+    def member_bounds(
+        self, batch: tuple, bounds: Any = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(||A||_inf, width, low) per batch member, float64 arrays of shape `batch`.
 
         A finite width says that A 1 = 0 and A is symmetric (the frozen L(x)), and bounds the
         spread of spec(A) on 1^perp; the Lanczos iteration then deflates the constant vector
         (`_deflate_constant`). Without that knowledge it is inf. The bounds come
         from `bounds` (the caller's, e.g. `Linearization.scaled_bounds`), else from the
         operator's `krylov_bounds()`, else ||A||_inf of the matrix (one pass over A) or the
-        operator's shared `norm_inf`.
+        operator's shared `norm_inf`. `low` is the bottom of an interval of that width holding
+        spec(A) on 1^perp (`_spectrum_interval`), from a third entry of the bounds (nan where
+        unknown or not given).
         """
         if bounds is None and self._op is not None and hasattr(self._op, "krylov_bounds"):
             bounds = self._op.krylov_bounds()
+        low: Any = np.nan
         if bounds is not None:
-            norms, widths = bounds
+            norms, widths = bounds[0], bounds[1]
+            if len(bounds) > 2 and bounds[2] is not None and widths is not None:
+                low = bounds[2]
             if widths is None:
                 widths = np.inf
         elif self._op is not None:
@@ -207,7 +215,11 @@ class _RowOperator:
             norms = arrays.to_numpy(xp.max(xp.sum(xp.abs(self._a), axis=-1), axis=-1))
             widths = np.inf
         norms = np.broadcast_to(np.asarray(norms, dtype=np.float64), batch)
-        return norms, np.broadcast_to(np.asarray(widths, dtype=np.float64), batch)
+        return (
+            norms,
+            np.broadcast_to(np.asarray(widths, dtype=np.float64), batch),
+            np.broadcast_to(np.asarray(low, dtype=np.float64), batch),
+        )
 
     @property
     def max_abs(self) -> Any:
@@ -313,10 +325,172 @@ def _krylov_action(
 
 
 def _first_check(norm_inf: np.ndarray, width: np.ndarray) -> np.ndarray:
-    """The Krylov dimension m_0 of the first convergence check, per member (before clipping):
-    min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)), w the width of an interval holding spec(A) on the
-    complement of the deflated constant vector (inf where unknown)."""
+    """The Krylov dimension m_0 of the first convergence check with Saad's estimate, per member
+    (before clipping): min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)), w the width of an interval holding
+    spec(A) on the complement of the deflated constant vector (inf where unknown)."""
     return np.minimum(np.ceil(3.5 * np.sqrt(norm_inf)), np.ceil(3.5 * np.sqrt(width)))
+
+
+def _first_checks(
+    norm_inf: np.ndarray, width: np.ndarray, tight: np.ndarray, max_dim: int
+) -> np.ndarray:
+    """Per member, the dimension of the first check: `FIRST_BOUND_CHECK` where the error bound
+    applies (`tight`), else Saad's m_0 (`_first_check`), within [2, max_dim]."""
+    first = np.clip(_first_check(norm_inf, width), 2, max_dim)
+    return np.where(tight, min(FIRST_BOUND_CHECK, max_dim), first).astype(np.int64)
+
+
+#: The largest step between two convergence checks of the Lanczos phi-action (`_next_check`).
+MAX_CHECK_STEP = 8
+#: The dimension of the first check where the error bound applies (`_error_bounds`). A check
+#: at m = 2 passes only where a Krylov space of 2 is exact to rtol, and on the swarm a check
+#: there fails every time: near consensus phi_p(A) v needs 4 dimensions (the error falls by
+#: about 10^3 per dimension from 10^-3 at m = 1), so the checks are at 3 and 4.
+FIRST_BOUND_CHECK = 3
+
+
+def _spectrum_interval(
+    norm_inf: np.ndarray, width: np.ndarray, low: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """[lo, hi] per member, an interval holding the spectrum that the Lanczos vectors see:
+    [low, low + w] within [-|A|_inf, 0] where the constant vector is deflated (finite width w)
+    and the bottom `low` <= 0 of spec(A) on 1^perp is known (the frozen c L with c > 0:
+    low = -c p_max, its width w = 2 c max_k (p_max - s_k / N), and c L is negative
+    semidefinite), with tight = True; else [-|A|_inf, |A|_inf] (|A|_2 <= |A|_inf for a
+    symmetric A) and tight = False: there phi_p may grow like e^{|A|_inf} on the interval and
+    the bound would be useless, so the iteration keeps Saad's estimate for those members.
+    `low` is nan where unknown. Returns (lo, hi, tight)."""
+    with np.errstate(invalid="ignore"):
+        lo = np.maximum(low, -norm_inf)
+        hi = np.minimum(low + width, 0.0)
+        tight = np.isfinite(width) & (low <= 0.0) & (lo <= hi)
+    return np.where(tight, lo, -norm_inf), np.where(tight, hi, norm_inf), tight
+
+
+def _error_bounds(lam: Any, first: Any, last: Any, phis: Any, order: int, lo: Any, hi: Any) -> Any:
+    """max_{mu in [lo, hi]} |f(mu)|, f(mu) = sum_j g_j phi[lambda_j, mu], per member and column.
+
+    The Lanczos error. With A Q_m = Q_m T_m + b_m q_{m+1} e_m^T and T_m = Z diag(lambda) Z^T,
+    the error of |v| Q_m phi_p(T_m) e_1 is |v| b_m f(A) q_{m+1} (A symmetric, exact
+    arithmetic), with g_j = Z_1j Z_mj and the divided difference phi[l, mu] = (phi_p(l) -
+    phi_p(mu)) / (l - mu): the error e(t) of t^p phi_p(t A) v solves e' = A e + r(t) with the
+    residual r(t) = |v| b_m t^p e_m^T phi_p(t T_m) e_1 q_{m+1}, so e(1) = int_0^1 e^{(1-t) A}
+    r(t) dt, and int_0^1 e^{(1-t) mu} t^p phi_p(t l) dt = exp[mu, l, 0, ..., 0] (p zeros) =
+    phi[l, mu]. Hence |error| <= |v| b_m max over spec(A) of |f|, spec(A) in [lo, hi]
+    (`_spectrum_interval`); the max is taken on the m + 1 points lo + (hi - lo) j / m. Where
+    |l - mu| <= 1e-6 max(1, |l|, |mu|) the divided difference is phi_p'((l + mu) / 2) =
+    phi_p - p phi_{p+1} there. Unlike Saad's estimate b_m |e_m^T phi_p(T_m) e_1| (the residual
+    at t = 1), it is not an upper bound that the stiffness inflates: on the swarm near consensus
+    (spec(A) on 1^perp about -c p_max) the error is the residual divided by about c p_max.
+
+    lam, first, last (Z's first and last rows), phis = phi_p(lam): (count, k, m); lo, hi
+    (count,). Returns (count, k). The sums run over j in order, as the compiled
+    `compiled_lanczos._error_bound` does.
+    """
+    xp = arrays.namespace(lam)
+    m = lam.shape[-1]
+    lo = arrays.asarray(lo, like=lam)
+    hi = arrays.asarray(hi, like=lam)
+    steps = arrays.asarray(np.arange(m + 1) / m, like=lam)
+    mu = lo[:, None] + (hi - lo)[:, None] * steps  # (count, m + 1)
+    phi_mu = phi_scalar(mu, order)[:, None, :]  # (count, 1, m + 1)
+    mu = mu[:, None, :]
+    acc = None
+    for j in range(m):
+        lam_j = lam[..., j : j + 1]  # (count, k, 1)
+        gap = lam_j - mu
+        scale = xp.maximum(xp.maximum(xp.abs(lam_j), xp.abs(mu)), xp.ones_like(gap))
+        close = xp.abs(gap) <= 1e-6 * scale
+        term = (phis[..., j : j + 1] - phi_mu) / xp.where(close, 1.0, gap)
+        if bool(xp.any(close)):
+            mid = 0.5 * (lam_j + mu)
+            slope = phi_scalar(mid, order) - order * phi_scalar(mid, order + 1)
+            term = xp.where(close, slope, term)
+        term = (first[..., j : j + 1] * last[..., j : j + 1]) * term
+        acc = term if acc is None else acc + term
+    return xp.max(xp.abs(acc), axis=-1)
+
+
+def _next_check(
+    m: int, ratio: np.ndarray, prev_m: np.ndarray, prev_ratio: np.ndarray, max_step: int
+) -> np.ndarray:
+    """The dimension of the next check after a failed one at m, per member: ratio = bound /
+    (rtol |phi_p(T_m) e_1|) > 1 there and at the previous check (prev_m, prev_ratio; prev_m 0:
+    none). The bound falls geometrically or faster, so m + Delta, Delta = ceil(log(ratio) /
+    rate) with the rate log(prev_ratio / ratio) / (m - prev_m) of the last two checks, is at or
+    beyond the dimension it passes: the next check is half way there, at least 1 and at most
+    `max_step` dimensions on (1 without two checks or a falling bound). A check costs O(m^2)
+    (the QL iteration on T_m), a dimension one product with A: near consensus (m = 2-5) checks
+    are cheaper than products; an episode's first steps (m = 12-26) take few checks."""
+    m_arr = np.full(ratio.shape, float(m))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        known = (prev_m > 0) & (prev_ratio > ratio) & (prev_ratio < np.inf) & (ratio < np.inf)
+        predicted = np.ceil(
+            np.log(ratio) * (m_arr - prev_m) / np.log(np.where(known, prev_ratio / ratio, 2.0))
+        )
+        predicted = np.where(known, predicted, 1.0)
+    step = np.where(known, np.clip((predicted + 1) // 2, 1, max_step), 1)
+    return (m + step).astype(np.int64)
+
+
+def _check_bounds(
+    b: np.ndarray,
+    eig: tuple[Any, Any],
+    coeffs: Any,
+    order: int,
+    tight: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> np.ndarray:
+    """The error bounds (count, k) of the checked members (all arrays over them): b_m max |f|
+    (`_error_bounds`) where `tight`, Saad's b_m |e_m^T phi_p(T_m) e_1| elsewhere. eig =
+    (eigenvalues, eigenvectors) of their T_m, coeffs = phi_p(T_m) e_1 (numpy)."""
+    bound = b * np.abs(coeffs[..., -1])
+    if tight.any():
+        lam, vectors = eig
+        if not tight.all():
+            lam, vectors = lam[_rows(tight, lam)], vectors[_rows(tight, vectors)]
+        m = lam.shape[-1]
+        exact = _error_bounds(lam, vectors[..., 0, :], vectors[..., m - 1, :],
+                              phi_scalar(lam, order), order, lo[tight], hi[tight])  # fmt: skip
+        bound[tight] = b[tight] * arrays.to_numpy(exact)
+    return bound
+
+
+def _passed(bound: np.ndarray, coeffs: np.ndarray, rtol: float) -> np.ndarray:
+    """Whether every column's bound (count, k) is within rtol |phi_p(T_m) e_1| (count,)."""
+    return np.all(bound <= rtol * _norms(coeffs) + 1e-300, axis=-1)
+
+
+def _schedule(
+    m: int,
+    bound: np.ndarray,
+    coeffs: np.ndarray,
+    rtol: float,
+    failed: np.ndarray,
+    tight: np.ndarray,
+    needed: np.ndarray,
+    max_step: int,
+    next_check: np.ndarray,
+    prev_m: np.ndarray,
+    prev_ratio: np.ndarray,
+) -> None:
+    """For the members that `failed` their check at m (a mask of the batch; bound and coeffs
+    are over the `needed` members): their next check (`_next_check`) and their (m, ratio) for
+    the one after, in place. ratio = the largest bound / (rtol |phi_p(T_m) e_1| + 1e-300) of a
+    failing column, as the compiled iteration takes it. Members without the bound (`tight`
+    False: Saad's estimate) check every second dimension."""
+    legacy = failed & ~tight
+    next_check[legacy] = m + 2
+    failed = failed & tight
+    if not failed.any():
+        return
+    limit = rtol * _norms(coeffs) + 1e-300
+    ratios = np.max(np.where(bound <= limit, 0.0, bound / limit), axis=-1)
+    ratio = ratios[failed[needed]]
+    next_check[failed] = _next_check(m, ratio, prev_m[failed], prev_ratio[failed], max_step)
+    prev_m[failed] = m
+    prev_ratio[failed] = ratio
 
 
 def _deflate_constant(xp: Any, q: Any, width: np.ndarray) -> tuple[Any, Any]:
@@ -349,7 +523,7 @@ def _lanczos_action(
     order: int,
     rtol: float,
     max_dim: int,
-    check_every: int = 2,
+    max_step: int = MAX_CHECK_STEP,
     bounds: Any = None,
 ) -> Any | None:
     """Lanczos for symmetric A: phi_p(A) v ~ |v| Q_m phi_p(T_m) e_1, T_m tridiagonal.
@@ -359,16 +533,27 @@ def _lanczos_action(
     rounding) and no reorthogonalization against older vectors: for functions of a matrix with
     a bounded spectrum the approximation converges in spite of the loss of orthogonality
     (Druskin, Greenbaum & Knizhnerman, 1998); tests/test_phi_functions.py checks it against the
-    dense eigh on the swarm's L(x) and exact Jacobian. Stopped when Saad's error estimate
-    b_m |e_m^T phi_p(T_m) e_1| is below rtol |phi_p(T_m) e_1|, checked every `check_every`
-    steps from m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)) (about the dimension below which the
-    Krylov approximation of the exponential has not converged yet: 3.5 sqrt of the width of an
-    interval holding the spectrum, by Hochbruck & Lubich 1997), or at a happy breakdown. w is
-    known for the frozen L(x) (A 1 = 0, A symmetric; `_RowOperator.member_bounds`): it bounds
-    the spectrum on 1^perp, and the iteration runs on v - mean(v) 1, the mean's part
+    dense eigh on the swarm's L(x) and exact Jacobian. Stopped at a happy breakdown, or when
+    an error bound is below rtol |phi_p(T_m) e_1|:
+
+    - where an interval [lo, hi] holding the spectrum is known (the frozen c L(x), c > 0:
+      `_spectrum_interval`), the bound b_m max_[lo, hi] |f| of `_error_bounds`, which the error
+      reaches within a few per cent where it matters (benchmarks/bench_throughput.py part 2b:
+      the dimensions reached are the smallest that meet rtol, 4.79 per member and step on the
+      paper setting against 6.13 with Saad's estimate). Checked at m = `FIRST_BOUND_CHECK`, then
+      at the dimension `_next_check` extrapolates from the last two checks;
+    - elsewhere Saad's estimate b_m |e_m^T phi_p(T_m) e_1|, checked every second step from
+      m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)) (about the dimension below which the Krylov
+      approximation of the exponential has not converged yet: 3.5 sqrt of the width of an
+      interval holding the spectrum, by Hochbruck & Lubich 1997). It is the residual at t = 1,
+      which overstates the error of a stiff A by about its smallest |eigenvalue| (40 on the
+      swarm near consensus).
+
+    w is known for the frozen L(x) (A 1 = 0, A symmetric; `_RowOperator.member_bounds`): it
+    bounds the spectrum on 1^perp, and the iteration runs on v - mean(v) 1, the mean's part
     phi_p(0) mean(v) 1 added at the end (`_deflate_constant`): the eigenvalue 0 then costs no
-    Krylov dimension (one per step near consensus, where L is about -p_max on 1^perp and 5
-    dimensions reach rtol = 1e-10 instead of 6). A member that reaches `max_dim`
+    Krylov dimension (one per step near consensus, where L is about -p_max on 1^perp). `max_step`
+    caps the step between two checks. A member that reaches `max_dim`
     first (also when m reaches n: the basis is then not exact) counts as not converged.
     Returns (result, converged per batch member). Differentiable on torch
     (list-built basis, no in-place writes to the basis).
@@ -386,7 +571,7 @@ def _lanczos_action(
     batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
     q = xp.matrix_transpose(xp.broadcast_to(v, (*batch, *v.shape[-2:])))  # (..., k, n)
     # per member: |A|_inf, the first check and the breakdown tolerance
-    norm_inf, width = a.member_bounds(batch, bounds)
+    norm_inf, width, low = a.member_bounds(batch, bounds)
     q, mean = _deflate_constant(xp, q, width)
     beta0 = xp.linalg.vector_norm(q, axis=-1)  # (..., k)
     if bool(xp.any(beta0 == 0)):
@@ -396,8 +581,10 @@ def _lanczos_action(
     basis = [q]
     alphas: list[Any] = []
     betas: list[Any] = []
-    first_check = _first_check(norm_inf, width)
-    first_check = np.clip(first_check, 2, max_dim).astype(np.int64)
+    lo, hi, tight = _spectrum_interval(norm_inf, width, low)
+    next_check = _first_checks(norm_inf, width, tight, max_dim)
+    prev_m = np.zeros(batch)
+    prev_ratio = np.zeros(batch)
     tiny = 1e-12 * (norm_inf + 1e-300)
     done = np.zeros(batch, dtype=bool)
     converged = np.zeros(batch, dtype=bool)
@@ -421,18 +608,25 @@ def _lanczos_action(
         # reorthogonalization, the basis is not exact; the caller then uses the dense method.
         breakdown = ~done & np.all(small, axis=-1)
         stops = breakdown | (~done & (m == max_dim))
-        check = ~done & ~stops & (m >= first_check) & ((m - first_check) % check_every == 0)
+        check = ~done & ~stops & (next_check == m)
         needed = stops | check
         if np.any(needed):
             t = arrays.tridiagonal(xp.stack(alphas, axis=-1), _stack_or_empty(xp, betas, alpha))
             t = xp.broadcast_to(t, (*batch, *t.shape[-3:]))
-            coeffs = _small_phi_e1(t[_rows(needed, t)], order, True)  # (count, k, m)
+            t = t[_rows(needed, t)]
+            coeffs = _small_phi_e1(t, order, True)  # (count, k, m)
             passed = np.zeros(batch, dtype=bool)
             if np.any(check):
                 c = arrays.to_numpy(coeffs)
-                est = b_host[needed] * np.abs(c[..., -1])
-                ok = np.all(est <= rtol * np.linalg.norm(c, axis=-1) + 1e-300, axis=-1)
-                passed[needed] = ok & check[needed]
+                eig = (None, None)
+                if np.any(tight[needed]):
+                    # the bound reads a decomposition of its own (no autograd through a check)
+                    eig = arrays.eigh(t.detach() if arrays.is_torch(t) else t)
+                bound = _check_bounds(b_host[needed], eig, c, order, tight[needed], lo[needed],
+                                      hi[needed])  # fmt: skip
+                passed[needed] = _passed(bound, c, rtol) & check[needed]
+                _schedule(m, bound, c, rtol, check & ~passed, tight, needed, max_step,
+                          next_check, prev_m, prev_ratio)  # fmt: skip
             now = stops | passed
             if np.any(now):
                 stopped[m] = (now, coeffs[_rows(now[needed], coeffs)])
@@ -475,7 +669,7 @@ def _lanczos_numpy(
     order: int,
     rtol: float,
     max_dim: int,
-    check_every: int = 2,
+    max_step: int = MAX_CHECK_STEP,
     bounds: Any = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`_lanczos_action` for numpy arrays with the per-step overhead taken out.
@@ -491,7 +685,7 @@ def _lanczos_numpy(
     max_dim = min(max_dim, n)
     batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
     q = np.swapaxes(np.broadcast_to(v, (*batch, *v.shape[-2:])), -1, -2)  # (..., k, n)
-    norm_inf, width = a.member_bounds(batch, bounds)
+    norm_inf, width, low = a.member_bounds(batch, bounds)
     q, mean = _deflate_constant(xp, q, width)
     beta0 = _norms(q)  # (..., k)
     if (beta0 == 0).any():
@@ -501,10 +695,12 @@ def _lanczos_numpy(
     basis = [q]
     alphas: list[np.ndarray] = []
     betas: list[np.ndarray] = []
-    first_check = _first_check(norm_inf, width)
-    first_check = np.clip(first_check, 2, max_dim).astype(np.int64)
+    lo, hi, tight = _spectrum_interval(norm_inf, width, low)
+    next_check = _first_checks(norm_inf, width, tight, max_dim)
+    earliest = int(next_check.min())
+    prev_m = np.zeros(batch)
+    prev_ratio = np.zeros(batch)
     tiny = (1e-12 * (norm_inf + 1e-300))[..., None]
-    earliest = int(first_check.min())
     done = np.zeros(batch, dtype=bool)
     converged = np.zeros(batch, dtype=bool)
     stopped: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -524,7 +720,7 @@ def _lanczos_numpy(
         if any_small or m == max_dim or m >= earliest:
             breakdown = ~done & small.all(axis=-1)
             stops = breakdown | (~done & (m == max_dim))
-            check = ~done & ~stops & (m >= first_check) & ((m - first_check) % check_every == 0)
+            check = ~done & ~stops & (next_check == m)
             needed = stops | check
             if needed.any():
                 t = arrays.tridiagonal(np.stack(alphas, axis=-1), _stack_or_empty(np, betas, alpha))
@@ -537,9 +733,11 @@ def _lanczos_numpy(
                 coeffs = (vectors @ (phi_scalar(lam, order)[..., None] * coef))[..., 0]
                 passed = np.zeros(batch, dtype=bool)
                 if check.any():
-                    est = b[needed] * np.abs(coeffs[..., -1])
-                    ok = (est <= rtol * _norms(coeffs) + 1e-300).all(axis=-1)
-                    passed[needed] = ok & check[needed]
+                    bound = _check_bounds(b[needed], (lam, vectors), coeffs, order,
+                                          tight[needed], lo[needed], hi[needed])  # fmt: skip
+                    passed[needed] = _passed(bound, coeffs, rtol) & check[needed]
+                    _schedule(m, bound, coeffs, rtol, check & ~passed, tight, needed, max_step,
+                              next_check, prev_m, prev_ratio)  # fmt: skip
                 now = stops | passed
                 if now.any():
                     stopped[m] = (now, coeffs[now[needed]])
@@ -727,7 +925,8 @@ def _compiled_frozen_lanczos(
     _compiled.frozen_lanczos(
         readonly_view(matrix.reshape(members, n, n)),
         readonly_view(_contiguous(row_sums).reshape(members, n)), a.scale, _as_members(v, full),
-        order, rtol, max_dim, 2, norms, widths, peak, out, converged, extra, extra_scale,
+        order, rtol, max_dim, MAX_CHECK_STEP, norms, widths, peak, out, converged, extra,
+        extra_scale,
     )  # fmt: skip
     return out.reshape(full), converged.reshape(batch)
 
@@ -797,7 +996,8 @@ def frozen_advance(
     _compiled.frozen_advance(
         p_next.reshape(members, n, n),
         readonly_view(_contiguous(row_sums).reshape(members, n)),
-        a.scale * float(dt), _as_members(rhs, full), 1e-10, 100, 2, a.peak, out, converged,
+        a.scale * float(dt), _as_members(rhs, full), 1e-10, 100, MAX_CHECK_STEP, a.peak, out,
+        converged,
         extra, 0.0 if extra_scale is None else float(extra_scale), _as_members(x, full),
         float(dt), noise_members, float(weight), float(alpha2), x_next, s_next, drift_next,
     )  # fmt: skip
