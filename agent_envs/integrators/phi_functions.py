@@ -150,6 +150,28 @@ def _small_phi_e1(hess: Any, order: int, symmetric: bool) -> Any:
     return _augmented_expm(hess, e1, order)[..., 0]
 
 
+def _phi_e1_and_eigh(t: Any, order: int) -> tuple[Any, tuple[Any, Any]]:
+    """phi_order(T) e_1 (..., m) for symmetric tridiagonal T (..., m, m), with the
+    eigendecomposition it came from: `_small_phi_e1`'s operations (those of
+    `arrays.symmetric_function_action`) for a T that needs no gradient, so that a convergence
+    check reuses the decomposition instead of taking a second one."""
+    xp = arrays.namespace(t)
+    m = t.shape[-1]
+    e1 = np.zeros((m, 1))
+    e1[0, 0] = 1.0
+    e1 = arrays.asarray(e1, like=t)
+    a = 0.5 * (t + xp.matrix_transpose(t))
+    lam, q = arrays.eigh(a)
+    coef = xp.matrix_transpose(q) @ e1
+    return (q @ (phi_scalar(lam, order)[..., None] * coef))[..., 0], (lam, q)
+
+
+def _grad_enabled() -> bool:
+    import torch
+
+    return torch.is_grad_enabled()
+
+
 def _hessenberg(columns: list[Any], subdiag: list[Any], m: int) -> Any:
     """H (..., m, m) from its columns h_j (..., j + 1) and subdiagonal entries (...)."""
     xp = arrays.namespace(columns[0])
@@ -444,16 +466,22 @@ def _check_bounds(
 ) -> np.ndarray:
     """The error bounds (count, k) of the checked members (all arrays over them): b_m max |f|
     (`_error_bounds`) where `tight`, Saad's b_m |e_m^T phi_p(T_m) e_1| elsewhere. eig =
-    (eigenvalues, eigenvectors) of their T_m, coeffs = phi_p(T_m) e_1 (numpy)."""
+    (eigenvalues, eigenvectors) of their T_m, coeffs = phi_p(T_m) e_1 (numpy). The bound is
+    computed on the host, in numpy, from the eigenvalues and Z's first and last rows (a loop of
+    small array operations: on a GPU each would be a kernel launch)."""
     bound = b * np.abs(coeffs[..., -1])
     if tight.any():
         lam, vectors = eig
-        if not tight.all():
-            lam, vectors = lam[_rows(tight, lam)], vectors[_rows(tight, vectors)]
         m = lam.shape[-1]
-        exact = _error_bounds(lam, vectors[..., 0, :], vectors[..., m - 1, :],
-                              phi_scalar(lam, order), order, lo[tight], hi[tight])  # fmt: skip
-        bound[tight] = b[tight] * arrays.to_numpy(exact)
+        lam, first, last = (
+            arrays.to_numpy(lam), arrays.to_numpy(vectors[..., 0, :]),
+            arrays.to_numpy(vectors[..., m - 1, :]),
+        )  # fmt: skip
+        if not tight.all():
+            lam, first, last = lam[tight], first[tight], last[tight]
+        exact = _error_bounds(lam, first, last, phi_scalar(lam, order), order, lo[tight],
+                              hi[tight])  # fmt: skip
+        bound[tight] = b[tight] * exact
     return bound
 
 
@@ -614,14 +642,17 @@ def _lanczos_action(
             t = arrays.tridiagonal(xp.stack(alphas, axis=-1), _stack_or_empty(xp, betas, alpha))
             t = xp.broadcast_to(t, (*batch, *t.shape[-3:]))
             t = t[_rows(needed, t)]
-            coeffs = _small_phi_e1(t, order, True)  # (count, k, m)
+            if arrays.is_torch(t) and t.requires_grad and _grad_enabled():
+                coeffs = _small_phi_e1(t, order, True)  # (count, k, m), differentiable
+                eig = None
+            else:
+                coeffs, eig = _phi_e1_and_eigh(t, order)
             passed = np.zeros(batch, dtype=bool)
             if np.any(check):
                 c = arrays.to_numpy(coeffs)
-                eig = (None, None)
-                if np.any(tight[needed]):
+                if eig is None and np.any(tight[needed]):
                     # the bound reads a decomposition of its own (no autograd through a check)
-                    eig = arrays.eigh(t.detach() if arrays.is_torch(t) else t)
+                    eig = arrays.eigh(t.detach())
                 bound = _check_bounds(b_host[needed], eig, c, order, tight[needed], lo[needed],
                                       hi[needed])  # fmt: skip
                 passed[needed] = _passed(bound, c, rtol) & check[needed]
