@@ -516,8 +516,8 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
 
         def call() -> None:
             cl.frozen_lanczos(p_all, s_all, scale, rhs, 1, 1e-10, 100, pf.MAX_CHECK_STEP,
-                              pf._NO_BOUNDS, pf._NO_BOUNDS, peak, result, ok, pf._NO_EXTRA,
-                              0.0)  # fmt: skip
+                              pf._NO_BOUNDS, pf._NO_BOUNDS, pf._NO_BOUNDS, peak, result, ok,
+                              pf._NO_EXTRA, 0.0)  # fmt: skip
 
         out["member_us"] = 1e6 * interleaved({"call": call}, 200, 5)["call"] / members_all
     return out

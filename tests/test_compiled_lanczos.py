@@ -213,7 +213,7 @@ def test_phi_of_tridiagonal_from_rotations_equals_lapack(compiled, order):
         # Z's rows up to the sign of each eigenvector: their products g_j are sign-free
         g = rows[0] * rows[1]
         np.testing.assert_allclose(g[order_of], vec[0] * vec[-1], rtol=1e-9, atol=1e-14)
-        bounds.append(compiled._error_bound(d, rows, phis, m, order, fact, -10.0, 0.0))
+        bounds.append(compiled._error_bound(d, rows, phis, m, order, fact, 0.0))
         assert (count >= 0) == (capacity > 2)
         if count > 0:
             compiled._apply_z(out, count, rot_c, rot_s, rot_at)
@@ -443,3 +443,22 @@ def test_fused_step_leaves_the_linearization_of_its_result(compiled):
     fresh_drift, fresh_lin = SwarmModel(params).drift_and_linearization(0.0, x_next, None, "frozen")
     np.testing.assert_array_equal(drift, fresh_drift)
     np.testing.assert_array_equal(next_lin.matrix.dense(), fresh_lin.matrix.dense())
+
+
+def test_compiled_reads_the_callers_interval_like_numpy(compiled):
+    """Bounds from the caller: without the interval's bottom (a 2-tuple, or None there) both
+    iterations fall back to Saad's estimate, with it both take the error bound; either way they
+    stop at the same dimensions (equal to round-off, where a different dimension differs by
+    about the Krylov tolerance)."""
+    _, _, f, op = _frozen(100, 1, (4,), 0.01, seed=7, scale=0.02)
+    norms, widths, low = op.krylov_bounds()
+    rows = pf._RowOperator(op)
+    results = []
+    for bounds in ((norms, widths), (norms, widths, None), (norms, widths, low)):
+        got, got_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, bounds)
+        want, want_ok = pf._lanczos_numpy(rows, f, 1, 1e-10, 100, bounds=bounds)
+        np.testing.assert_array_equal(got_ok, want_ok)
+        assert np.max(np.abs(got - want)) <= 1e-14 * np.max(np.abs(want))
+        results.append(got)
+    # the bound stops earlier than Saad's estimate near consensus: other values
+    assert np.max(np.abs(results[2] - results[0])) > 1e-14 * np.max(np.abs(results[0]))

@@ -321,10 +321,21 @@ def test_lanczos_error_bound_is_above_the_error(order, scale):
                 error = np.linalg.norm(approx - exact) / np.linalg.norm(v)
                 bound = b * _error_bounds(
                     tl[None, None], tz[0][None, None], tz[-1][None, None], phis[None, None],
-                    order, lo[member : member + 1], hi[member : member + 1],
+                    order, hi[member : member + 1],
                 )[0, 0]  # fmt: skip
                 if error > 1e-12 * np.linalg.norm(exact) / np.linalg.norm(v):
                     assert bound >= 0.999 * error, (member, m, bound, error)
+                    # f is increasing: its max over the interval is at the top (to 1e-4: near
+                    # consensus f, an m-th divided difference, is a sum of first-order ones
+                    # that cancel)
+                    mus = np.linspace(lo[member], hi[member], 9)
+                    f = np.array([
+                        _error_bounds(tl[None, None], tz[0][None, None], tz[-1][None, None],
+                                      phis[None, None], order, np.array([mu]))[0, 0]
+                        for mu in mus
+                    ])  # fmt: skip
+                    assert np.all(np.diff(f) >= -1e-4 * f[-1]), (member, m, f)
+                    assert f[-1] >= 0.9999 * np.max(f)
                     if error < 1e-6:  # where the stopping decisions are taken
                         assert bound <= 30 * error, (member, m, bound, error)
                     checked += 1

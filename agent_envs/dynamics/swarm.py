@@ -91,7 +91,7 @@ class Linearization:
         if self.bounds is None:
             return None
         norms, widths, low = self.bounds
-        scaled_low = c * low if low is not None and c > 0 else None
+        scaled_low = c * low if low is not None and np.all(np.asarray(c) > 0) else None
         return abs(c) * norms, None if widths is None else abs(c) * widths, scaled_low
 
     def as_columns(self, v: Any) -> Any:

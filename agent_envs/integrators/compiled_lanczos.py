@@ -223,8 +223,8 @@ def _tridiagonal_ql(d, e, rows, m, rot_c, rot_s, rot_at) -> int:
     (i, i + 1), i = rot_at[r], by (c, s) = (rot_c[r], rot_s[r]):
     (G y)_i = c y_i + s y_{i+1}, (G y)_{i+1} = c y_{i+1} - s y_i. tql2 multiplies them into a
     full Z, O(m^3); here the rotations are recorded and applied to the two rows of Z that
-    Saad's error estimate reads, rows[0] = e_1^T Z and rows[1] = e_m^T Z, O(m^2); `_apply_z`
-    forms Z y for the one vector the phi-action needs."""
+    the error bound (and Saad's estimate) read, rows[0] = e_1^T Z and rows[1] = e_m^T Z, O(m^2);
+    `_apply_z` forms Z y for the one vector the phi-action needs."""
     for j in range(m):
         rows[0, j] = 0.0
         rows[1, j] = 0.0
@@ -358,30 +358,25 @@ def _phi_of_tridiagonal(alphas, betas, m, col, order, fact, out, d, e, rows, rot
 
 
 @njit(cache=True)
-def _error_bound(d, rows, phis, m, order, fact, lo, hi) -> float:
-    """max over mu in [lo, hi] of |sum_j g_j phi[lambda_j, mu]|, g_j = Z_1j Z_mj, on the m + 1
-    points lo + (hi - lo) j / m: the Lanczos error at dimension m is b_m |v| f(A) q_{m+1} with
-    f(mu) = sum_j g_j phi[lambda_j, mu] (`phi_functions._error_bounds`, the same arithmetic).
+def _error_bound(d, rows, phis, m, order, fact, hi) -> float:
+    """|f(hi)|, f(mu) = sum_j g_j phi[lambda_j, mu], g_j = Z_1j Z_mj: the Lanczos error at
+    dimension m is at most b_m |v| max over spec(A) of |f|, and f is positive and increasing,
+    so its max over [lo, hi] is f(hi) (`phi_functions._error_bounds`, the same arithmetic).
     phi[l, mu] = (phi(l) - phi(mu)) / (l - mu), phi'((l + mu) / 2) = phi_p - p phi_{p+1} there
     where |l - mu| <= 1e-6 max(1, |l|, |mu|)."""
-    largest = 0.0
-    for i in range(m + 1):
-        mu = lo + (hi - lo) * (i / m)
-        phi_mu = _phi(mu, order, fact)
-        acc = 0.0
-        for j in range(m):
-            lam = d[j]
-            gap = lam - mu
-            scale = max(max(abs(lam), abs(mu)), 1.0)
-            if abs(gap) <= 1e-6 * scale:
-                mid = 0.5 * (lam + mu)
-                dd = _phi(mid, order, fact) - order * _phi(mid, order + 1, fact)
-            else:
-                dd = (phis[j] - phi_mu) / gap
-            acc += (rows[0, j] * rows[1, j]) * dd
-        if abs(acc) > largest:
-            largest = abs(acc)
-    return largest
+    phi_mu = _phi(hi, order, fact)
+    acc = 0.0
+    for j in range(m):
+        lam = d[j]
+        gap = lam - hi
+        scale = max(max(abs(lam), abs(hi)), 1.0)
+        if abs(gap) <= 1e-6 * scale:
+            mid = 0.5 * (lam + hi)
+            dd = _phi(mid, order, fact) - order * _phi(mid, order + 1, fact)
+        else:
+            dd = (phis[j] - phi_mu) / gap
+        acc += (rows[0, j] * rows[1, j]) * dd
+    return abs(acc)
 
 
 @njit(cache=True)
@@ -404,8 +399,9 @@ def _next_check(m, ratio, prev_m, prev_ratio, max_step) -> int:
     the same arithmetic)."""
     step = 1
     if prev_m > 0 and prev_ratio > ratio and prev_ratio < np.inf and ratio < np.inf:
-        predicted = math.ceil(math.log(ratio) * (m - prev_m) / math.log(prev_ratio / ratio))
-        step = max(1, min(max_step, (predicted + 1) // 2))
+        predicted = math.log(ratio) * (m - prev_m) / math.log(prev_ratio / ratio)
+        # (clamped before the integer conversion: a ratio that barely falls predicts ~inf)
+        step = max(1, min(max_step, (math.ceil(min(predicted, 1e9)) + 1) // 2))
     return m + step
 
 
@@ -421,6 +417,7 @@ def frozen_lanczos(
     max_step: int,
     norms: np.ndarray,
     widths: np.ndarray,
+    lows: np.ndarray,
     peak: float,
     out: np.ndarray,
     converged: np.ndarray,
@@ -430,16 +427,19 @@ def frozen_lanczos(
     """phi_order(c L) (V + e c L W) into `out` (B, N, k) and the members' convergence into
     `converged` (B,).
 
-    p (B, N, N) symmetric, s (B, N), v (B, N, k); c = `scale`; `norms`, `widths` (B,) the
-    bounds of c L per member, or empty to compute them from s and P_kk (`peak` < 0: none);
+    p (B, N, N) symmetric, s (B, N), v (B, N, k); c = `scale`; `norms`, `widths`, `lows` (B,)
+    the bounds of c L per member (`lows`: the bottom of the interval of that width holding
+    spec(c L) on 1^perp, nan or empty where unknown: Saad's estimate then), or `norms` empty to
+    compute all three from s, P_kk, `peak` and c (`peak` < 0: none; the bottom -c p_max for
+    c > 0);
     `extra` W (B, N, k) and e = `extra_scale`, or an empty W for phi_order(c L) V: the product
     c L W is taken with the member's P in cache, before its Lanczos iteration (SERB's sigma L dW).
     """
     none3 = np.empty((0, 0, 0))
     _members(
-        p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, peak, out, converged,
-        extra, extra_scale, False, none3, 0.0, none3, 0.0, 0.0, none3, none3, np.empty((0, 0)),
-        none3,
+        p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, lows, peak, out,
+        converged, extra, extra_scale, False, none3, 0.0, none3, 0.0, 0.0, none3, none3,
+        np.empty((0, 0)), none3,
     )  # fmt: skip
 
 
@@ -479,14 +479,14 @@ def frozen_advance(
     takes the general path).
     """
     _members(
-        p, s, scale, v, 1, rtol, max_dim, max_step, np.empty(0), np.empty(0), peak, out,
-        converged, extra, extra_scale, True, x, dt, noise, weight, alpha2, p, x_next, s_next,
+        p, s, scale, v, 1, rtol, max_dim, max_step, np.empty(0), np.empty(0), np.empty(0), peak,
+        out, converged, extra, extra_scale, True, x, dt, noise, weight, alpha2, p, x_next, s_next,
         drift_next,
     )  # fmt: skip
 
 
 @njit(cache=True)
-def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, peak, out,
+def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, lows, peak, out,
              converged, extra, extra_scale, advance, x, dt, noise, weight, alpha2, p_next, x_next,
              s_next, drift_next):  # fmt: skip
     """The body of `frozen_lanczos` (advance False) and `frozen_advance` (advance True, p_next
@@ -522,13 +522,14 @@ def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, peak
         sm = s[member]
         if norms.size == 0:
             norm, width = _member_bounds(pm, sm, n, abs(scale), peak)
+            low = -scale * peak if peak > 0.0 and scale > 0.0 else np.nan
         else:
             norm, width = norms[member], widths[member]
+            low = lows[member] if lows.size > 0 else np.nan
         # a finite width: c L 1 = 0 and spec(c L) on 1^perp lies in an interval of that width;
         # the constant vector is deflated (phi_p(0) = 1/p! on the mean, Lanczos on the rest)
         deflate = width < np.inf
-        low = -scale * peak if peak > 0.0 and scale > 0.0 else np.nan
-        lo, hi, tight = _spectrum_interval(norm, width, low)
+        _, hi, tight = _spectrum_interval(norm, width, low)
         if tight:
             next_check = min(FIRST_BOUND_CHECK, max_dim)
         else:  # Saad's estimate, from m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)), every 2
@@ -594,7 +595,7 @@ def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, peak
                     )  # fmt: skip
                     if check:
                         if tight:
-                            bound = b[c] * _error_bound(eig_d, rows, phis, m, order, fact, lo, hi)
+                            bound = b[c] * _error_bound(eig_d, rows, phis, m, order, fact, hi)
                         else:
                             bound = b[c] * last
                         if not bound <= rtol * size + 1e-300:

@@ -389,48 +389,47 @@ def _spectrum_interval(
     return np.where(tight, lo, -norm_inf), np.where(tight, hi, norm_inf), tight
 
 
-def _error_bounds(lam: Any, first: Any, last: Any, phis: Any, order: int, lo: Any, hi: Any) -> Any:
-    """max_{mu in [lo, hi]} |f(mu)|, f(mu) = sum_j g_j phi[lambda_j, mu], per member and column.
+def _error_bounds(lam: Any, first: Any, last: Any, phis: Any, order: int, hi: Any) -> Any:
+    """|f(hi)|, f(mu) = sum_j g_j phi[lambda_j, mu], per member and column: the Lanczos error
+    bound at dimension m over b_m |v|.
 
-    The Lanczos error. With A Q_m = Q_m T_m + b_m q_{m+1} e_m^T and T_m = Z diag(lambda) Z^T,
-    the error of |v| Q_m phi_p(T_m) e_1 is |v| b_m f(A) q_{m+1} (A symmetric, exact
-    arithmetic), with g_j = Z_1j Z_mj and the divided difference phi[l, mu] = (phi_p(l) -
-    phi_p(mu)) / (l - mu): the error e(t) of t^p phi_p(t A) v solves e' = A e + r(t) with the
-    residual r(t) = |v| b_m t^p e_m^T phi_p(t T_m) e_1 q_{m+1}, so e(1) = int_0^1 e^{(1-t) A}
-    r(t) dt, and int_0^1 e^{(1-t) mu} t^p phi_p(t l) dt = exp[mu, l, 0, ..., 0] (p zeros) =
-    phi[l, mu]. Hence |error| <= |v| b_m max over spec(A) of |f|, spec(A) in [lo, hi]
-    (`_spectrum_interval`); the max is taken on the m + 1 points lo + (hi - lo) j / m. Where
-    |l - mu| <= 1e-6 max(1, |l|, |mu|) the divided difference is phi_p'((l + mu) / 2) =
+    With A Q_m = Q_m T_m + b_m q_{m+1} e_m^T and T_m = Z diag(lambda) Z^T, the error of
+    |v| Q_m phi_p(T_m) e_1 is |v| b_m f(A) q_{m+1} (A symmetric, exact arithmetic), with
+    g_j = Z_1j Z_mj and the divided difference phi[l, mu] = (phi_p(l) - phi_p(mu)) / (l - mu):
+    the error e(t) of t^p phi_p(t A) v solves e' = A e + r(t) with the residual
+    r(t) = |v| b_m t^p e_m^T phi_p(t T_m) e_1 q_{m+1}, so e(1) = int_0^1 e^{(1-t) A} r(t) dt,
+    and int_0^1 e^{(1-t) mu} t^p phi_p(t l) dt = exp[mu, l, 0, ..., 0] (p zeros) = phi[l, mu].
+    Hence |error| <= |v| b_m max over spec(A) of |f|, spec(A) in [lo, hi]
+    (`_spectrum_interval`). And f(mu) = (b_1 ... b_{m-1}) phi_p[lambda_1, ..., lambda_m, mu]
+    (sum_j g_j h(lambda_j) is that multiple of the divided difference of any h on the Ritz
+    values), positive and increasing in mu since every derivative of phi_p is positive
+    (phi_p(z) = int_0^1 e^{(1-s) z} s^{p-1} / (p-1)! ds): the max is f(hi). Where
+    |l - hi| <= 1e-6 max(1, |l|, |hi|) the divided difference is phi_p'((l + hi) / 2) =
     phi_p - p phi_{p+1} there. Unlike Saad's estimate b_m |e_m^T phi_p(T_m) e_1| (the residual
-    at t = 1), it is not an upper bound that the stiffness inflates: on the swarm near consensus
-    (spec(A) on 1^perp about -c p_max) the error is the residual divided by about c p_max.
+    at t = 1), it is not inflated by the stiffness: on the swarm near consensus (spec(A) on
+    1^perp about -c p_max) the error is the residual divided by about c p_max.
 
-    lam, first, last (Z's first and last rows), phis = phi_p(lam): (count, k, m); lo, hi
-    (count,). Returns (count, k). The sums run over j in order, as the compiled
+    lam, first, last (Z's first and last rows), phis = phi_p(lam): (count, k, m) numpy arrays;
+    hi (count,). Returns (count, k). The sum runs over j in order, as the compiled
     `compiled_lanczos._error_bound` does.
     """
-    xp = arrays.namespace(lam)
     m = lam.shape[-1]
-    lo = arrays.asarray(lo, like=lam)
-    hi = arrays.asarray(hi, like=lam)
-    steps = arrays.asarray(np.arange(m + 1) / m, like=lam)
-    mu = lo[:, None] + (hi - lo)[:, None] * steps  # (count, m + 1)
-    phi_mu = phi_scalar(mu, order)[:, None, :]  # (count, 1, m + 1)
-    mu = mu[:, None, :]
+    hi = np.asarray(hi, dtype=np.float64)[:, None]  # (count, 1)
+    phi_hi = phi_scalar(hi, order)
     acc = None
     for j in range(m):
-        lam_j = lam[..., j : j + 1]  # (count, k, 1)
-        gap = lam_j - mu
-        scale = xp.maximum(xp.maximum(xp.abs(lam_j), xp.abs(mu)), xp.ones_like(gap))
-        close = xp.abs(gap) <= 1e-6 * scale
-        term = (phis[..., j : j + 1] - phi_mu) / xp.where(close, 1.0, gap)
-        if bool(xp.any(close)):
-            mid = 0.5 * (lam_j + mu)
+        lam_j = lam[..., j]  # (count, k)
+        gap = lam_j - hi
+        scale = np.maximum(np.maximum(np.abs(lam_j), np.abs(hi)), 1.0)
+        close = np.abs(gap) <= 1e-6 * scale
+        term = (phis[..., j] - phi_hi) / np.where(close, 1.0, gap)
+        if close.any():
+            mid = 0.5 * (lam_j + hi)
             slope = phi_scalar(mid, order) - order * phi_scalar(mid, order + 1)
-            term = xp.where(close, slope, term)
-        term = (first[..., j : j + 1] * last[..., j : j + 1]) * term
+            term = np.where(close, slope, term)
+        term = (first[..., j] * last[..., j]) * term
         acc = term if acc is None else acc + term
-    return xp.max(xp.abs(acc), axis=-1)
+    return np.abs(acc)
 
 
 def _next_check(
@@ -438,9 +437,11 @@ def _next_check(
 ) -> np.ndarray:
     """The dimension of the next check after a failed one at m, per member: ratio = bound /
     (rtol |phi_p(T_m) e_1|) > 1 there and at the previous check (prev_m, prev_ratio; prev_m 0:
-    none). The bound falls geometrically or faster, so m + Delta, Delta = ceil(log(ratio) /
-    rate) with the rate log(prev_ratio / ratio) / (m - prev_m) of the last two checks, is at or
-    beyond the dimension it passes: the next check is half way there, at least 1 and at most
+    none). Where the bound falls geometrically or faster (as it does once the iteration
+    converges), m + Delta, Delta = ceil(log(ratio) / rate) with the rate log(prev_ratio / ratio)
+    / (m - prev_m) of the last two checks, is at or beyond the dimension it passes (where it
+    falls slower, the prediction only costs another check, never an early stop): the next
+    check is half way there, at least 1 and at most
     `max_step` dimensions on (1 without two checks or a falling bound). A check costs O(m^2)
     (the QL iteration on T_m), a dimension one product with A: near consensus (m = 2-5) checks
     are cheaper than products; an episode's first steps (m = 12-26) take few checks."""
@@ -461,11 +462,11 @@ def _check_bounds(
     coeffs: Any,
     order: int,
     tight: np.ndarray,
-    lo: np.ndarray,
     hi: np.ndarray,
 ) -> np.ndarray:
     """The error bounds (count, k) of the checked members (all arrays over them): b_m max |f|
-    (`_error_bounds`) where `tight`, Saad's b_m |e_m^T phi_p(T_m) e_1| elsewhere. eig =
+    (`_error_bounds`, f at the top `hi` of the spectrum's interval) where `tight`, Saad's
+    b_m |e_m^T phi_p(T_m) e_1| elsewhere. eig =
     (eigenvalues, eigenvectors) of their T_m, coeffs = phi_p(T_m) e_1 (numpy). The bound is
     computed on the host, in numpy, from the eigenvalues and Z's first and last rows (a loop of
     small array operations: on a GPU each would be a kernel launch)."""
@@ -479,8 +480,7 @@ def _check_bounds(
         )  # fmt: skip
         if not tight.all():
             lam, first, last = lam[tight], first[tight], last[tight]
-        exact = _error_bounds(lam, first, last, phi_scalar(lam, order), order, lo[tight],
-                              hi[tight])  # fmt: skip
+        exact = _error_bounds(lam, first, last, phi_scalar(lam, order), order, hi[tight])
         bound[tight] = b[tight] * exact
     return bound
 
@@ -565,10 +565,11 @@ def _lanczos_action(
     an error bound is below rtol |phi_p(T_m) e_1|:
 
     - where an interval [lo, hi] holding the spectrum is known (the frozen c L(x), c > 0:
-      `_spectrum_interval`), the bound b_m max_[lo, hi] |f| of `_error_bounds`, which the error
-      reaches within a few per cent where it matters (benchmarks/bench_throughput.py part 2b:
-      the dimensions reached are the smallest that meet rtol, 4.79 per member and step on the
-      paper setting against 6.13 with Saad's estimate). Checked at m = `FIRST_BOUND_CHECK`, then
+      `_spectrum_interval`), the bound b_m max_[lo, hi] |f| = b_m f(hi) of `_error_bounds`,
+      which the error reaches within a few per cent where it matters
+      (benchmarks/bench_throughput.py part 2b: the dimensions reached are the smallest that
+      meet rtol, 4.79 per member and step on the paper setting against 6.13 with Saad's
+      estimate). Checked at m = `FIRST_BOUND_CHECK`, then
       at the dimension `_next_check` extrapolates from the last two checks;
     - elsewhere Saad's estimate b_m |e_m^T phi_p(T_m) e_1|, checked every second step from
       m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)) (about the dimension below which the Krylov
@@ -609,7 +610,7 @@ def _lanczos_action(
     basis = [q]
     alphas: list[Any] = []
     betas: list[Any] = []
-    lo, hi, tight = _spectrum_interval(norm_inf, width, low)
+    _, hi, tight = _spectrum_interval(norm_inf, width, low)
     next_check = _first_checks(norm_inf, width, tight, max_dim)
     prev_m = np.zeros(batch)
     prev_ratio = np.zeros(batch)
@@ -653,8 +654,7 @@ def _lanczos_action(
                 if eig is None and np.any(tight[needed]):
                     # the bound reads a decomposition of its own (no autograd through a check)
                     eig = arrays.eigh(t.detach())
-                bound = _check_bounds(b_host[needed], eig, c, order, tight[needed], lo[needed],
-                                      hi[needed])  # fmt: skip
+                bound = _check_bounds(b_host[needed], eig, c, order, tight[needed], hi[needed])
                 passed[needed] = _passed(bound, c, rtol) & check[needed]
                 _schedule(m, bound, c, rtol, check & ~passed, tight, needed, max_step,
                           next_check, prev_m, prev_ratio)  # fmt: skip
@@ -726,7 +726,7 @@ def _lanczos_numpy(
     basis = [q]
     alphas: list[np.ndarray] = []
     betas: list[np.ndarray] = []
-    lo, hi, tight = _spectrum_interval(norm_inf, width, low)
+    _, hi, tight = _spectrum_interval(norm_inf, width, low)
     next_check = _first_checks(norm_inf, width, tight, max_dim)
     earliest = int(next_check.min())
     prev_m = np.zeros(batch)
@@ -765,7 +765,7 @@ def _lanczos_numpy(
                 passed = np.zeros(batch, dtype=bool)
                 if check.any():
                     bound = _check_bounds(b[needed], (lam, vectors), coeffs, order,
-                                          tight[needed], lo[needed], hi[needed])  # fmt: skip
+                                          tight[needed], hi[needed])  # fmt: skip
                     passed[needed] = _passed(bound, coeffs, rtol) & check[needed]
                     _schedule(m, bound, coeffs, rtol, check & ~passed, tight, needed, max_step,
                               next_check, prev_m, prev_ratio)  # fmt: skip
@@ -901,12 +901,12 @@ def _warm_up() -> None:
     v = readonly_view(np.ones((1, 3, 1)))
     for extra in (_NO_EXTRA, v):
         _compiled.frozen_lanczos(
-            p, s, 0.1, v, 1, 1e-10, 3, 2, _NO_BOUNDS, _NO_BOUNDS, 1.0, np.empty((1, 3, 1)),
-            np.empty(1, dtype=bool), extra, 1.0,
+            p, s, 0.1, v, 1, 1e-10, 3, MAX_CHECK_STEP, _NO_BOUNDS, _NO_BOUNDS, _NO_BOUNDS, 1.0,
+            np.empty((1, 3, 1)), np.empty(1, dtype=bool), extra, 1.0,
         )  # fmt: skip
         # `frozen_advance`'s types: P the workspace's writable buffer, the outputs fresh
         _compiled.frozen_advance(
-            np.array(p), s, 0.1, v, 1e-10, 3, 2, 1.0, np.empty((1, 3, 1)),
+            np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((1, 3, 1)),
             np.empty(1, dtype=bool), extra, 1.0, v, 0.1, v, 1.0, 1.0, np.empty((1, 3, 1)),
             np.empty((1, 3)), np.empty((1, 3, 1)),
         )  # fmt: skip
@@ -941,14 +941,18 @@ def _compiled_frozen_lanczos(
     if add_product is not None:
         extra, extra_scale = _as_members(add_product[0], full), float(add_product[1])
     if bounds is None:
-        norms = widths = _NO_BOUNDS
+        norms = widths = lows = _NO_BOUNDS
     else:
         norms = np.ascontiguousarray(np.broadcast_to(bounds[0], batch), dtype=float)
         widths = np.inf if bounds[1] is None else bounds[1]
         widths = np.ascontiguousarray(np.broadcast_to(widths, batch), dtype=float)
-        norms, widths = (
+        # the interval's bottom as `_RowOperator.member_bounds` reads it (nan: unknown)
+        low = bounds[2] if len(bounds) > 2 and bounds[2] is not None else np.nan
+        lows = np.ascontiguousarray(np.broadcast_to(low, batch), dtype=float)
+        norms, widths, lows = (
             readonly_view(norms.reshape(members)),
             readonly_view(widths.reshape(members)),
+            readonly_view(lows.reshape(members)),
         )
     peak = a.peak if a.peak is not None and a.symmetric else -1.0
     out = np.empty((members, n, k))
@@ -956,7 +960,7 @@ def _compiled_frozen_lanczos(
     _compiled.frozen_lanczos(
         readonly_view(matrix.reshape(members, n, n)),
         readonly_view(_contiguous(row_sums).reshape(members, n)), a.scale, _as_members(v, full),
-        order, rtol, max_dim, MAX_CHECK_STEP, norms, widths, peak, out, converged, extra,
+        order, rtol, max_dim, MAX_CHECK_STEP, norms, widths, lows, peak, out, converged, extra,
         extra_scale,
     )  # fmt: skip
     return out.reshape(full), converged.reshape(batch)
@@ -1164,11 +1168,15 @@ def phi_action(
         symmetric: whether A is symmetric (enables "eigh").
         rtol: relative tolerance of the Krylov approximation.
         max_krylov_dim: largest Krylov dimension tried.
-        bounds: (||A||_inf, width or None) per batch member, numpy arrays, when the caller
-            knows them (`Linearization.scaled_bounds`); the Lanczos iteration reads them
-            instead of a pass over A (see `_lanczos_action`). A width may only be given for a
-            symmetric A with A 1 = 0 (the frozen L(x)): it bounds spec(A) on 1^perp, and
-            Lanczos deflates the constant vector.
+        bounds: (||A||_inf, width or None[, low or None]) per batch member, numpy arrays (low
+            a float or an array), when the caller knows them (`Linearization.scaled_bounds`);
+            the Lanczos iteration reads them instead of a pass over A (see `_lanczos_action`).
+            A width may only be given for a symmetric A with A 1 = 0 (the frozen L(x)): it
+            bounds spec(A) on 1^perp, and Lanczos deflates the constant vector. low, with a
+            width, promises that spec(A) on 1^perp lies in [low, low + width] with low <= 0
+            and A negative semidefinite (the frozen c L(x), c > 0: low = -c p_max): the
+            iteration then stops by its error bound (`_error_bounds`), else by Saad's
+            estimate. Without `bounds` a `FrozenLaplacian` gives all three itself.
         add_product: (W, e) with W shaped like V: phi_order(A) (V + e A W) instead, e.g.
             SERB's F + sigma J dW with A = tau J and e = 1 / tau. On the compiled frozen L(x)
             the product A W is taken in the same pass over each member's matrix as its
