@@ -344,3 +344,17 @@ def test_lanczos_error_bound_is_above_the_error(order, scale):
                 betas.append(b)
                 basis.append(w / b)
     assert checked > 50
+
+
+@pytest.mark.parametrize("method", ["krylov", "eigh", "expm", "auto"])
+def test_an_empty_batch_gives_an_empty_result(method):
+    """No batch member: every method returns the (0, n, k) result (the Lanczos iteration raised
+    on the minimum of an empty array)."""
+    torch = pytest.importorskip("torch")
+
+    for a, v in (
+        (np.zeros((0, 5, 5)), np.zeros((0, 5, 2))),
+        (torch.zeros((0, 5, 5), dtype=torch.float64), torch.zeros((0, 5, 2), dtype=torch.float64)),
+    ):
+        got = phi_action(a, v, 1, method=method, symmetric=True)
+        assert tuple(got.shape) == (0, 5, 2)

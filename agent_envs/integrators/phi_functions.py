@@ -598,6 +598,8 @@ def _lanczos_action(
     n = a.n
     max_dim = min(max_dim, n)
     batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
+    if math.prod(batch) == 0:  # no member: nothing to iterate (the dense methods agree)
+        return xp.zeros((*batch, *v.shape[-2:]), dtype=v.dtype), np.ones(batch, dtype=bool)
     q = xp.matrix_transpose(xp.broadcast_to(v, (*batch, *v.shape[-2:])))  # (..., k, n)
     # per member: |A|_inf, the first check and the breakdown tolerance
     norm_inf, width, low = a.member_bounds(batch, bounds)
@@ -715,6 +717,8 @@ def _lanczos_numpy(
     n = a.n
     max_dim = min(max_dim, n)
     batch = tuple(np.broadcast_shapes(a.batch, tuple(v.shape[:-2])))
+    if math.prod(batch) == 0:  # as `_lanczos_action`
+        return np.zeros((*batch, *v.shape[-2:])), np.ones(batch, dtype=bool)
     q = np.swapaxes(np.broadcast_to(v, (*batch, *v.shape[-2:])), -1, -2)  # (..., k, n)
     norm_inf, width, low = a.member_bounds(batch, bounds)
     q, mean = _deflate_constant(xp, q, width)
