@@ -314,11 +314,18 @@ def symmetric_function_action(
 
         if torch.is_grad_enabled() and (a.requires_grad or v.requires_grad):
             return _symmetric_action_function().apply(a, v, f, df)
+    return eigh_function_action(a, v, f)[0]
+
+
+def eigh_function_action(a: Any, v: Any, f: Callable[[Any], Any]) -> tuple[Any, tuple[Any, Any]]:
+    """f(A) V = Q f(Lambda) Q^T V for symmetric A (..., n, n), V (..., n, k), without autograd
+    (`symmetric_function_action`'s forward), and the decomposition (Lambda, Q) of the
+    symmetrized A it came from, for callers that read it too."""
     xp = namespace(a, v)
     a = 0.5 * (a + xp.matrix_transpose(a))
     lam, q = eigh(a)
     coef = xp.matrix_transpose(q) @ v
-    return q @ (f(lam)[..., None] * coef)
+    return q @ (f(lam)[..., None] * coef), (lam, q)
 
 
 #: Relative gap below which two eigenvalues count as equal in the divided differences.

@@ -380,17 +380,17 @@ def _error_bound(d, rows, phis, m, order, fact, hi) -> float:
 
 
 @njit(cache=True)
-def _spectrum_interval(norm, width, low):
-    """[lo, hi] holding the spectrum the Lanczos vectors see (`phi_functions.
-    _spectrum_interval`): [low, low + width] within [-norm, 0] for the deflated frozen c L with
-    c > 0 (low = -c p_max, the bottom of spec(c L) on 1^perp; nan if unknown), and True; else
-    (-norm, norm, False): then the iteration keeps Saad's estimate and its schedule."""
+def _spectrum_top(norm, width, low):
+    """The top hi of the interval [lo, hi] holding the spectrum the Lanczos vectors see, and
+    whether it is known (`phi_functions._spectrum_interval`; the bound reads only hi, f being
+    increasing): [low, low + width] within [-norm, 0] for the deflated frozen c L with c > 0
+    (low = -c p_max, the bottom of spec(c L) on 1^perp; nan if unknown), (hi, True); else
+    (norm, False): then the iteration keeps Saad's estimate and its schedule."""
     if width < np.inf and low <= 0.0:
-        lo = max(low, -norm)
         hi = min(low + width, 0.0)
-        if lo <= hi:
-            return lo, hi, True
-    return -norm, norm, False
+        if max(low, -norm) <= hi:
+            return hi, True
+    return norm, False
 
 
 @njit(cache=True)
@@ -529,7 +529,7 @@ def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, lows
         # a finite width: c L 1 = 0 and spec(c L) on 1^perp lies in an interval of that width;
         # the constant vector is deflated (phi_p(0) = 1/p! on the mean, Lanczos on the rest)
         deflate = width < np.inf
-        _, hi, tight = _spectrum_interval(norm, width, low)
+        hi, tight = _spectrum_top(norm, width, low)
         if tight:
             next_check = min(FIRST_BOUND_CHECK, max_dim)
         else:  # Saad's estimate, from m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)), every 2

@@ -136,13 +136,18 @@ def _eigh_action(a: Any, v: Any, order: int) -> Any:
     )
 
 
+def _first_unit(m: int, like: Any) -> Any:
+    """e_1 as an (m, 1) column in the library and on the device of `like`."""
+    e1 = np.zeros((m, 1))
+    e1[0, 0] = 1.0
+    return arrays.asarray(e1, like=like)
+
+
 def _small_phi_e1(hess: Any, order: int, symmetric: bool) -> Any:
     """phi_order(H) e_1 for a batch of small (m, m) matrices H; returns (..., m)."""
     xp = arrays.namespace(hess)
     m = hess.shape[-1]
-    e1 = np.zeros((m, 1))
-    e1[0, 0] = 1.0
-    e1 = arrays.asarray(e1, like=hess)
+    e1 = _first_unit(m, hess)
     if symmetric:
         # Arnoldi on a symmetric matrix gives a symmetric tridiagonal H (up to round-off).
         return _eigh_action(hess, e1, order)[..., 0]
@@ -155,15 +160,9 @@ def _phi_e1_and_eigh(t: Any, order: int) -> tuple[Any, tuple[Any, Any]]:
     eigendecomposition it came from: `_small_phi_e1`'s operations (those of
     `arrays.symmetric_function_action`) for a T that needs no gradient, so that a convergence
     check reuses the decomposition instead of taking a second one."""
-    xp = arrays.namespace(t)
-    m = t.shape[-1]
-    e1 = np.zeros((m, 1))
-    e1[0, 0] = 1.0
-    e1 = arrays.asarray(e1, like=t)
-    a = 0.5 * (t + xp.matrix_transpose(t))
-    lam, q = arrays.eigh(a)
-    coef = xp.matrix_transpose(q) @ e1
-    return (q @ (phi_scalar(lam, order)[..., None] * coef))[..., 0], (lam, q)
+    e1 = _first_unit(t.shape[-1], t)
+    result, eig = arrays.eigh_function_action(t, e1, lambda lam: phi_scalar(lam, order))
+    return result[..., 0], eig
 
 
 def _grad_enabled() -> bool:
@@ -223,25 +222,14 @@ class _RowOperator:
         """
         if bounds is None and self._op is not None and hasattr(self._op, "krylov_bounds"):
             bounds = self._op.krylov_bounds()
-        low: Any = np.nan
         if bounds is not None:
-            norms, widths = bounds[0], bounds[1]
-            if len(bounds) > 2 and bounds[2] is not None and widths is not None:
-                low = bounds[2]
-            if widths is None:
-                widths = np.inf
-        elif self._op is not None:
-            norms, widths = float(self._op.norm_inf), np.inf
+            return _given_bounds(bounds, batch)
+        if self._op is not None:
+            norms = float(self._op.norm_inf)
         else:
             xp = arrays.namespace(self._a)
             norms = arrays.to_numpy(xp.max(xp.sum(xp.abs(self._a), axis=-1), axis=-1))
-            widths = np.inf
-        norms = np.broadcast_to(np.asarray(norms, dtype=np.float64), batch)
-        return (
-            norms,
-            np.broadcast_to(np.asarray(widths, dtype=np.float64), batch),
-            np.broadcast_to(np.asarray(low, dtype=np.float64), batch),
-        )
+        return _given_bounds((norms, None), batch)
 
     @property
     def max_abs(self) -> Any:
@@ -260,6 +248,21 @@ class _RowOperator:
             return self._op.apply_rows(rows)
         xp = arrays.namespace(rows)
         return xp.matrix_transpose(self._op.matvec(xp.matrix_transpose(rows)))
+
+
+def _given_bounds(bounds: Any, batch: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(||A||_inf, width, low) float64 arrays of shape `batch` from bounds (norms, widths or
+    None[, low or None]): width None is inf; low (the bottom of the interval of that width,
+    `_spectrum_interval`) is nan where not given or without a width."""
+    norms, widths = bounds[0], bounds[1]
+    low = bounds[2] if len(bounds) > 2 and bounds[2] is not None else np.nan
+    if widths is None:
+        widths, low = np.inf, np.nan
+    return (
+        np.broadcast_to(np.asarray(norms, dtype=np.float64), batch),
+        np.broadcast_to(np.asarray(widths, dtype=np.float64), batch),
+        np.broadcast_to(np.asarray(low, dtype=np.float64), batch),
+    )
 
 
 def is_operator(a: Any) -> bool:
@@ -485,16 +488,16 @@ def _check_bounds(
     return bound
 
 
-def _passed(bound: np.ndarray, coeffs: np.ndarray, rtol: float) -> np.ndarray:
-    """Whether every column's bound (count, k) is within rtol |phi_p(T_m) e_1| (count,)."""
-    return np.all(bound <= rtol * _norms(coeffs) + 1e-300, axis=-1)
+def _limits(coeffs: np.ndarray, rtol: float) -> np.ndarray:
+    """rtol |phi_p(T_m) e_1| + 1e-300 per checked member and column (count, k): what each
+    column's error bound must not exceed."""
+    return rtol * _norms(coeffs) + 1e-300
 
 
 def _schedule(
     m: int,
     bound: np.ndarray,
-    coeffs: np.ndarray,
-    rtol: float,
+    limit: np.ndarray,
     failed: np.ndarray,
     tight: np.ndarray,
     needed: np.ndarray,
@@ -503,17 +506,16 @@ def _schedule(
     prev_m: np.ndarray,
     prev_ratio: np.ndarray,
 ) -> None:
-    """For the members that `failed` their check at m (a mask of the batch; bound and coeffs
-    are over the `needed` members): their next check (`_next_check`) and their (m, ratio) for
-    the one after, in place. ratio = the largest bound / (rtol |phi_p(T_m) e_1| + 1e-300) of a
-    failing column, as the compiled iteration takes it. Members without the bound (`tight`
+    """For the members that `failed` their check at m (a mask of the batch; bound and limit
+    (`_limits`) are over the `needed` members): their next check (`_next_check`) and their
+    (m, ratio) for the one after, in place. ratio = the largest bound / limit of a failing
+    column, as the compiled iteration takes it. Members without the bound (`tight`
     False: Saad's estimate) check every second dimension."""
     legacy = failed & ~tight
     next_check[legacy] = m + 2
     failed = failed & tight
     if not failed.any():
         return
-    limit = rtol * _norms(coeffs) + 1e-300
     ratios = np.max(np.where(bound <= limit, 0.0, bound / limit), axis=-1)
     ratio = ratios[failed[needed]]
     next_check[failed] = _next_check(m, ratio, prev_m[failed], prev_ratio[failed], max_step)
@@ -657,8 +659,9 @@ def _lanczos_action(
                     # the bound reads a decomposition of its own (no autograd through a check)
                     eig = arrays.eigh(t.detach())
                 bound = _check_bounds(b_host[needed], eig, c, order, tight[needed], hi[needed])
-                passed[needed] = _passed(bound, c, rtol) & check[needed]
-                _schedule(m, bound, c, rtol, check & ~passed, tight, needed, max_step,
+                limit = _limits(c, rtol)
+                passed[needed] = np.all(bound <= limit, axis=-1) & check[needed]
+                _schedule(m, bound, limit, check & ~passed, tight, needed, max_step,
                           next_check, prev_m, prev_ratio)  # fmt: skip
             now = stops | passed
             if np.any(now):
@@ -770,8 +773,9 @@ def _lanczos_numpy(
                 if check.any():
                     bound = _check_bounds(b[needed], (lam, vectors), coeffs, order,
                                           tight[needed], hi[needed])  # fmt: skip
-                    passed[needed] = _passed(bound, coeffs, rtol) & check[needed]
-                    _schedule(m, bound, coeffs, rtol, check & ~passed, tight, needed, max_step,
+                    limit = _limits(coeffs, rtol)
+                    passed[needed] = np.all(bound <= limit, axis=-1) & check[needed]
+                    _schedule(m, bound, limit, check & ~passed, tight, needed, max_step,
                               next_check, prev_m, prev_ratio)  # fmt: skip
                 now = stops | passed
                 if now.any():
@@ -946,17 +950,10 @@ def _compiled_frozen_lanczos(
         extra, extra_scale = _as_members(add_product[0], full), float(add_product[1])
     if bounds is None:
         norms = widths = lows = _NO_BOUNDS
-    else:
-        norms = np.ascontiguousarray(np.broadcast_to(bounds[0], batch), dtype=float)
-        widths = np.inf if bounds[1] is None else bounds[1]
-        widths = np.ascontiguousarray(np.broadcast_to(widths, batch), dtype=float)
-        # the interval's bottom as `_RowOperator.member_bounds` reads it (nan: unknown)
-        low = bounds[2] if len(bounds) > 2 and bounds[2] is not None else np.nan
-        lows = np.ascontiguousarray(np.broadcast_to(low, batch), dtype=float)
+    else:  # as `_RowOperator.member_bounds` reads them
         norms, widths, lows = (
-            readonly_view(norms.reshape(members)),
-            readonly_view(widths.reshape(members)),
-            readonly_view(lows.reshape(members)),
+            readonly_view(np.ascontiguousarray(part).reshape(members))
+            for part in _given_bounds(bounds, batch)
         )
     peak = a.peak if a.peak is not None and a.symmetric else -1.0
     out = np.empty((members, n, k))
