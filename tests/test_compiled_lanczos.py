@@ -462,3 +462,21 @@ def test_compiled_reads_the_callers_interval_like_numpy(compiled):
         results.append(got)
     # the bound stops earlier than Saad's estimate near consensus: other values
     assert np.max(np.abs(results[2] - results[0])) > 1e-14 * np.max(np.abs(results[0]))
+
+
+def test_check_schedule_is_the_same_rule_compiled_and_numpy(compiled):
+    """`_next_check` compiled and numpy: the same next dimension over a grid of (m, ratio,
+    previous check), on both sides of the full-step threshold FULL_STEP_FROM n, and the two
+    modules' constants agree."""
+    assert compiled.FIRST_BOUND_CHECK == pf.FIRST_BOUND_CHECK
+    assert compiled.FULL_STEP_FROM == pf.FULL_STEP_FROM
+    for n in (20, 100, 400):
+        for m in (3, 4, 5, 6, 9, 13, 19, 25):
+            for prev_m in (0, 1, m - 1, max(m - 8, 1)):
+                for prev_ratio in (0.0, 2.0, 1e3, 1e9, np.inf):
+                    ratio = np.array([1.5, 10.0, 1e3, 1e8, 1e30, np.inf])
+                    want = pf._next_check(
+                        m, ratio, np.full(6, float(prev_m)), np.full(6, prev_ratio), 8, n
+                    )
+                    got = [compiled._next_check(m, r, prev_m, prev_ratio, 8, n) for r in ratio]
+                    np.testing.assert_array_equal(got, want)

@@ -1,11 +1,14 @@
 """phi-function actions of every strategy against a 30-digit mpmath reference."""
 
+import math
+
 import mpmath
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from agent_envs.integrators import phi_functions as pf
 from agent_envs.integrators.phi_functions import phi_action, phi_scalar
 
 
@@ -358,3 +361,18 @@ def test_an_empty_batch_gives_an_empty_result(method):
     ):
         got = phi_action(a, v, 1, method=method, symmetric=True)
         assert tuple(got.shape) == (0, 5, 2)
+
+
+def test_check_schedule_steps_half_way_then_all_the_way():
+    """A bound falling by 10x per dimension, 1e4 over its limit at m and 1e5 at the check
+    before: the next check is 4 dimensions on where a check costs more than a product
+    (m >= FULL_STEP_FROM n), half way (2 on) below, never more than max_step on, and 1 on
+    without a previous check or where the bound did not fall."""
+    n = 100
+    big = math.ceil(pf.FULL_STEP_FROM * n)
+    one = np.ones(1)
+    assert pf._next_check(big, 1e4 * one, (big - 1) * one, 1e5 * one, 8, n)[0] == big + 4
+    assert pf._next_check(big - 1, 1e4 * one, (big - 2) * one, 1e5 * one, 8, n)[0] == big + 1
+    assert pf._next_check(big, 1e4 * one, (big - 1) * one, 1e5 * one, 3, n)[0] == big + 3
+    assert pf._next_check(big, 1e4 * one, 0 * one, 0 * one, 8, n)[0] == big + 1
+    assert pf._next_check(big, 1e4 * one, (big - 1) * one, 1e3 * one, 8, n)[0] == big + 1

@@ -26,13 +26,13 @@ squares replaces `math.hypot` in the rotations, whose entries are bounded by ||c
 Z phi(Lambda) Z^T e_1 is formed from the rotations once, at the accepted dimension.
 
 One member at a time keeps its 80 KB kernel matrix (N = 100) in cache for all its Lanczos
-products, and the product is written as rows of axpys (w += q_l P[l, :], P symmetric, eight
-rows per pass over w), which the compiler vectorizes without reassociating a sum; the
-recurrence's scalings, projections and norms are fused into two passes over w
-(`_scale_dot`, `_axpy_dot`). A member's result does not depend on the
-rest of the batch (the native vector env relies on it). No reassociation (`fastmath` allows
-only the contraction of a multiply and an add into one fused operation), no threads: the BLAS
-pools of the hot path are one thread too.
+products, and the product reads only P's lower triangle (`_product`: P symmetric, each entry
+used for its row and its column); the recurrence's scalings, projections and norms are fused
+into two passes over w (`_scale_dot`, `_axpy_dot`). A member's result does not depend on the
+rest of the batch (the native vector env relies on it). `fastmath` allows the contraction of a
+multiply and an add into one fused operation everywhere, and the reassociation of sums in
+`_product` only (its dots vectorize no other way; the order is the machine code's, the same
+in every call); no threads: the BLAS pools of the hot path are one thread too.
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
@@ -50,7 +50,9 @@ from agent_envs.dynamics.compiled_kernel import cucker_smale_drift
 #: Taylor terms of phi_p near 0 (as `phi_functions._TAYLOR_TERMS`)
 TAYLOR_TERMS = 16
 #: the first check's dimension where the error bound applies (`phi_functions.FIRST_BOUND_CHECK`)
-FIRST_BOUND_CHECK = 3
+FIRST_BOUND_CHECK = 4
+#: the full predicted step from m >= FULL_STEP_FROM n (`phi_functions.FULL_STEP_FROM`)
+FULL_STEP_FROM = 0.05
 
 
 @njit(cache=True)
@@ -128,43 +130,63 @@ def _axpy_dot(w: np.ndarray, coef: float, x: np.ndarray, y: np.ndarray, n: int) 
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True, fastmath={"contract"})
+@njit(cache=True, fastmath={"contract", "reassoc"})
 def _product(p: np.ndarray, q: np.ndarray, w: np.ndarray, n: int) -> None:
-    """w = P q for a symmetric P (n, n), as rows of axpys (w += q_l P[l, :]) eight rows at a
-    time, in the order of the rows (w_i = (...((q_0 P_0i + q_1 P_1i) + q_2 P_2i) ...): each
-    pass over w reads eight rows of P, which the compiler vectorizes along the row without
-    reassociating a sum; `contract` lets it fuse each multiply-add (one rounding instead of
-    two). A separate function: inlined into the Lanczos loop, the compiler vectorized it worse.
-    At n = 100 the matrix (80 KB) is read from L2 and the pass is bound by that: 1.2-1.3 us,
-    against 1.5 us for four rows per pass without fused multiply-adds."""
+    """w = P q for a symmetric P (n, n), reading its lower triangle only (and the 4 x 4 blocks
+    on the diagonal): four rows j..j+3 per pass, each entry P[j + r, i] (i < j) read once and
+    used twice, in w_i += q_{j+r} P[j+r, i] (four rows of axpys: the part above the diagonal,
+    by symmetry) and in the dot w_{j+r} += sum_i P[j+r, i] q_i (the part below it).
+
+    Half of the 80 KB matrix (N = 100) is read, which is what bounds the full product (rows
+    of axpys over all of P read from L2: 1.2-1.3 us); the dots are reductions, which the
+    compiler vectorizes only when it may reassociate their sums (`reassoc`, this function
+    only; without it the pass took 2-6 us): 0.9-1.0 us, measured by
+    `benchmarks/bench_throughput.py` (part 2b). The order of the sums is then the
+    vectorizer's, fixed by the machine code: the same inputs give the same w bit for bit in
+    every call (the native vector env and its single twins agree bit for bit), and w agrees
+    with numpy's product to round-off (tests/test_compiled_lanczos.py). `contract` fuses each
+    multiply-add (one rounding instead of two). A separate function: inlined into the
+    Lanczos loop, the compiler vectorized it worse."""
     for i in range(n):
         w[i] = 0.0
-    top = n - n % 8
-    for col in range(0, top, 8):
-        q0 = q[col]
-        q1 = q[col + 1]
-        q2 = q[col + 2]
-        q3 = q[col + 3]
-        q4 = q[col + 4]
-        q5 = q[col + 5]
-        q6 = q[col + 6]
-        q7 = q[col + 7]
-        for i in range(n):
-            w[i] = (
-                w[i]
-                + q0 * p[col, i]
-                + q1 * p[col + 1, i]
-                + q2 * p[col + 2, i]
-                + q3 * p[col + 3, i]
-                + q4 * p[col + 4, i]
-                + q5 * p[col + 5, i]
-                + q6 * p[col + 6, i]
-                + q7 * p[col + 7, i]
-            )
-    for col in range(top, n):
-        q_col = q[col]
-        for i in range(n):
-            w[i] = w[i] + q_col * p[col, i]
+    top = n - n % 4
+    for j in range(0, top, 4):
+        q0 = q[j]
+        q1 = q[j + 1]
+        q2 = q[j + 2]
+        q3 = q[j + 3]
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        for i in range(j):
+            p0 = p[j, i]
+            p1 = p[j + 1, i]
+            p2 = p[j + 2, i]
+            p3 = p[j + 3, i]
+            w[i] += q0 * p0 + q1 * p1 + q2 * p2 + q3 * p3
+            qi = q[i]
+            a0 += p0 * qi
+            a1 += p1 * qi
+            a2 += p2 * qi
+            a3 += p3 * qi
+        for r in range(4):  # the block on the diagonal, both triangles
+            acc = 0.0
+            for c in range(4):
+                acc += p[j + r, j + c] * q[j + c]
+            w[j + r] += acc
+        w[j] += a0
+        w[j + 1] += a1
+        w[j + 2] += a2
+        w[j + 3] += a3
+    for j in range(top, n):  # the last n % 4 rows, one at a time
+        qj = q[j]
+        acc = 0.0
+        for i in range(j):
+            pv = p[j, i]
+            w[i] += qj * pv
+            acc += pv * q[i]
+        w[j] += acc + p[j, j] * qj
 
 
 @njit(cache=True)
@@ -394,14 +416,18 @@ def _spectrum_top(norm, width, low):
 
 
 @njit(cache=True)
-def _next_check(m, ratio, prev_m, prev_ratio, max_step) -> int:
+def _next_check(m, ratio, prev_m, prev_ratio, max_step, n) -> int:
     """The dimension of the next check after a failed one at m (`phi_functions._next_check`,
-    the same arithmetic)."""
+    the same arithmetic): half way to the extrapolated dimension below m = FULL_STEP_FROM n,
+    all the way from there."""
     step = 1
     if prev_m > 0 and prev_ratio > ratio and prev_ratio < np.inf and ratio < np.inf:
         predicted = math.log(ratio) * (m - prev_m) / math.log(prev_ratio / ratio)
         # (clamped before the integer conversion: a ratio that barely falls predicts ~inf)
-        step = max(1, min(max_step, (math.ceil(min(predicted, 1e9)) + 1) // 2))
+        ahead = math.ceil(min(predicted, 1e9))
+        if m < FULL_STEP_FROM * n:
+            ahead = (ahead + 1) // 2
+        step = max(1, min(max_step, ahead))
     return m + step
 
 
@@ -608,7 +634,7 @@ def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, lows
                     stop_m = m
                     break
                 if tight:
-                    next_check = _next_check(m, ratio, prev_m, prev_ratio, max_step)
+                    next_check = _next_check(m, ratio, prev_m, prev_ratio, max_step, n)
                     prev_m, prev_ratio = m, ratio
                 else:
                     next_check = m + 2

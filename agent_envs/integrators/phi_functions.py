@@ -367,11 +367,16 @@ def _first_checks(
 
 #: The largest step between two convergence checks of the Lanczos phi-action (`_next_check`).
 MAX_CHECK_STEP = 8
-#: The dimension of the first check where the error bound applies (`_error_bounds`). A check
-#: at m = 2 passes only where a Krylov space of 2 is exact to rtol, and on the swarm a check
-#: there fails every time: near consensus phi_p(A) v needs 4 dimensions (the error falls by
-#: about 10^3 per dimension from 10^-3 at m = 1), so the checks are at 3 and 4.
-FIRST_BOUND_CHECK = 3
+#: The dimension of the first check where the error bound applies (`_error_bounds`). On the
+#: swarm a check below 4 fails every time: near consensus phi_p(A) v needs 4 dimensions (the
+#: error falls by about 10^3 per dimension from 10^-3 at m = 1; 91 % of 6,000 captured
+#: members passed at 4, none at 3), and the spread first steps of an episode need 12-18. A
+#: first check at 3 cost 0.6 us per member and step for nothing (a product costs 1 us).
+FIRST_BOUND_CHECK = 4
+#: From m >= FULL_STEP_FROM n a failed check schedules the next at the dimension the last two
+#: checks extrapolate to, below it half way there (`_next_check`): a check at m costs about
+#: 0.03 m^2 us and a product with a dense n x n matrix about 1e-4 n^2 us, equal at m = 0.058 n.
+FULL_STEP_FROM = 0.05
 
 
 def _spectrum_interval(
@@ -436,18 +441,30 @@ def _error_bounds(lam: Any, first: Any, last: Any, phis: Any, order: int, hi: An
 
 
 def _next_check(
-    m: int, ratio: np.ndarray, prev_m: np.ndarray, prev_ratio: np.ndarray, max_step: int
+    m: int,
+    ratio: np.ndarray,
+    prev_m: np.ndarray,
+    prev_ratio: np.ndarray,
+    max_step: int,
+    n: int,
 ) -> np.ndarray:
     """The dimension of the next check after a failed one at m, per member: ratio = bound /
     (rtol |phi_p(T_m) e_1|) > 1 there and at the previous check (prev_m, prev_ratio; prev_m 0:
     none). Where the bound falls geometrically or faster (as it does once the iteration
     converges), m + Delta, Delta = ceil(log(ratio) / rate) with the rate log(prev_ratio / ratio)
     / (m - prev_m) of the last two checks, is at or beyond the dimension it passes (where it
-    falls slower, the prediction only costs another check, never an early stop): the next
-    check is half way there, at least 1 and at most
-    `max_step` dimensions on (1 without two checks or a falling bound). A check costs O(m^2)
-    (the QL iteration on T_m), a dimension one product with A: near consensus (m = 2-5) checks
-    are cheaper than products; an episode's first steps (m = 12-26) take few checks."""
+    falls slower, the prediction only costs another check, never an early stop). The next
+    check is at most `max_step` dimensions on (1 without two checks or a falling bound), and:
+
+    - half way there (at least 1 on) while m < `FULL_STEP_FROM` n: there a check (the QL
+      iteration on T_m, O(m^2)) costs less than a product with the dense n x n A (O(n^2)), so
+      a check too early costs less than dimensions beyond the one that passes;
+    - at m + Delta itself from m >= `FULL_STEP_FROM` n, where a check costs more than a
+      product: at n = 100 a check at m = 18 took 9.5 us and a product 1.0 us
+      (benchmarks/bench_throughput.py part 2b), and an episode's first steps (m = 12-18)
+      took five or six checks half way against three or four now.
+
+    n is the size of A (the matrices the members' checks run on are at most max_dim)."""
     m_arr = np.full(ratio.shape, float(m))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         known = (prev_m > 0) & (prev_ratio > ratio) & (prev_ratio < np.inf) & (ratio < np.inf)
@@ -455,7 +472,8 @@ def _next_check(
             np.log(ratio) * (m_arr - prev_m) / np.log(np.where(known, prev_ratio / ratio, 2.0))
         )
         predicted = np.where(known, predicted, 1.0)
-    step = np.where(known, np.clip((predicted + 1) // 2, 1, max_step), 1)
+    ahead = predicted if m >= FULL_STEP_FROM * n else (predicted + 1) // 2
+    step = np.where(known, np.clip(ahead, 1, max_step), 1)
     return (m + step).astype(np.int64)
 
 
@@ -496,6 +514,7 @@ def _limits(coeffs: np.ndarray, rtol: float) -> np.ndarray:
 
 def _schedule(
     m: int,
+    n: int,
     bound: np.ndarray,
     limit: np.ndarray,
     failed: np.ndarray,
@@ -518,7 +537,7 @@ def _schedule(
         return
     ratios = np.max(np.where(bound <= limit, 0.0, bound / limit), axis=-1)
     ratio = ratios[failed[needed]]
-    next_check[failed] = _next_check(m, ratio, prev_m[failed], prev_ratio[failed], max_step)
+    next_check[failed] = _next_check(m, ratio, prev_m[failed], prev_ratio[failed], max_step, n)
     prev_m[failed] = m
     prev_ratio[failed] = ratio
 
@@ -661,7 +680,7 @@ def _lanczos_action(
                 bound = _check_bounds(b_host[needed], eig, c, order, tight[needed], hi[needed])
                 limit = _limits(c, rtol)
                 passed[needed] = np.all(bound <= limit, axis=-1) & check[needed]
-                _schedule(m, bound, limit, check & ~passed, tight, needed, max_step,
+                _schedule(m, n, bound, limit, check & ~passed, tight, needed, max_step,
                           next_check, prev_m, prev_ratio)  # fmt: skip
             now = stops | passed
             if np.any(now):
@@ -775,7 +794,7 @@ def _lanczos_numpy(
                                           tight[needed], hi[needed])  # fmt: skip
                     limit = _limits(coeffs, rtol)
                     passed[needed] = np.all(bound <= limit, axis=-1) & check[needed]
-                    _schedule(m, bound, limit, check & ~passed, tight, needed, max_step,
+                    _schedule(m, n, bound, limit, check & ~passed, tight, needed, max_step,
                               next_check, prev_m, prev_ratio)  # fmt: skip
                 now = stops | passed
                 if now.any():
