@@ -480,7 +480,6 @@ def frozen_advance(
     max_step: int,
     peak: float,
     out: np.ndarray,
-    converged: np.ndarray,
     extra: np.ndarray,
     extra_scale: float,
     x: np.ndarray,
@@ -491,8 +490,9 @@ def frozen_advance(
     x_next: np.ndarray,
     s_next: np.ndarray,
     drift_next: np.ndarray,
-) -> None:
-    """An exponential Rosenbrock-Euler step and the next kernel pass, member by member.
+) -> int:
+    """An exponential Rosenbrock-Euler step and the next kernel pass, member by member;
+    returns the number of members whose Lanczos did not converge (0: all did).
 
     For each member: phi_1(c L) (V + e c L W) into out (as `frozen_lanczos`, order 1, the
     bounds from s and P_kk), then x_next = x + dt out + noise (the integrator's update, the same
@@ -504,11 +504,17 @@ def frozen_advance(
     (B, N); drift_next (B, N, k). A member that did not converge keeps P(x) (the caller then
     takes the general path).
     """
+    converged = np.empty(p.shape[0], dtype=np.bool_)
     _members(
         p, s, scale, v, 1, rtol, max_dim, max_step, np.empty(0), np.empty(0), np.empty(0), peak,
         out, converged, extra, extra_scale, True, x, dt, noise, weight, alpha2, p, x_next, s_next,
         drift_next,
     )  # fmt: skip
+    failed = 0
+    for member in range(p.shape[0]):
+        if not converged[member]:
+            failed += 1
+    return failed
 
 
 @njit(cache=True)

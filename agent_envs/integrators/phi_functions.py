@@ -934,9 +934,8 @@ def _warm_up() -> None:
         )  # fmt: skip
         # `frozen_advance`'s types: P the workspace's writable buffer, the outputs fresh
         _compiled.frozen_advance(
-            np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((1, 3, 1)),
-            np.empty(1, dtype=bool), extra, 1.0, v, 0.1, v, 1.0, 1.0, np.empty((1, 3, 1)),
-            np.empty((1, 3)), np.empty((1, 3, 1)),
+            np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((1, 3, 1)), extra,
+            1.0, v, 0.1, v, 1.0, 1.0, np.empty((1, 3, 1)), np.empty((1, 3)), np.empty((1, 3, 1)),
         )  # fmt: skip
 
 
@@ -989,9 +988,13 @@ def _compiled_frozen_lanczos(
 
 def _as_members(arr: np.ndarray, full: tuple[int, ...]) -> np.ndarray:
     """arr broadcast to `full` = (*batch, n, k) as a read-only float64 C-contiguous
-    (members, n, k) array for the compiled calls: arr itself, reshaped, when it already is
-    one (the integrators' states), a copy otherwise."""
-    if tuple(arr.shape) != full or arr.dtype != np.float64:
+    (members, n, k) array for the compiled calls: arr itself when it already is one (a single
+    env's read-only state), a read-only view of it reshaped when it is C-contiguous float64 of
+    that shape (the integrators' other arrays), a copy otherwise."""
+    if type(arr) is np.ndarray and arr.shape == full and arr.dtype == np.float64:
+        if len(full) == 3 and not arr.flags.writeable and arr.flags.c_contiguous:
+            return arr
+    else:
         arr = np.broadcast_to(np.asarray(arr, dtype=np.float64), full)
     return readonly_view(_contiguous(arr).reshape(-1, *full[-2:]))
 
@@ -1000,21 +1003,31 @@ def frozen_advance_applies(a: Any, rhs: Any, x: Any, noise: Any, method: str) ->
     """Whether `frozen_advance` serves this exponential Rosenbrock-Euler step: A the symmetric
     kernel's frozen L(x) over a current workspace, the compiled Lanczos loaded, rhs, x and
     noise float64 numpy arrays of one shape batched exactly like P, and the phi-action's
-    method "krylov" (or "auto" choosing it, as `phi_action` would)."""
-    if not (
-        isinstance(a, FrozenLaplacian)
-        and a.symmetric
-        and a.peak is not None
-        and method in ("auto", "krylov")
-        and all(type(v) is np.ndarray and v.dtype == np.float64 for v in (rhs, x, noise))
-        and x.shape == rhs.shape == noise.shape
-        and x.shape[:-1] == a.matrix.shape[:-1]
-        and a.current
-        and load_compiled()
+    method "krylov" (or "auto" choosing it, as `phi_action` would). (Plain comparisons in the
+    order of their cost: the check runs every env step.)"""
+    if (
+        type(x) is not np.ndarray
+        or type(rhs) is not np.ndarray
+        or type(noise) is not np.ndarray
+        or method not in ("auto", "krylov")
+        or not isinstance(a, FrozenLaplacian)
+        or not a.symmetric
+        or a.peak is None
+        or x.dtype != np.float64
+        or rhs.dtype != np.float64
+        or noise.dtype != np.float64
     ):
         return False
-    members = math.prod(x.shape[:-2])
-    return method == "krylov" or auto_phi_method(a.n, members, True) == "krylov"
+    shape = x.shape
+    if (
+        rhs.shape != shape
+        or noise.shape != shape
+        or shape[:-1] != a.matrix.shape[:-1]
+        or not a.current
+        or not load_compiled()
+    ):
+        return False
+    return method == "krylov" or auto_phi_method(a.n, math.prod(shape[:-2]), True) == "krylov"
 
 
 def frozen_advance(
@@ -1045,19 +1058,17 @@ def frozen_advance(
     noise_members = _as_members(noise, full)
     extra = _NO_EXTRA if extra_scale is None else noise_members
     out = np.empty((members, n, d))
-    converged = np.empty(members, dtype=bool)
     x_next = np.empty((members, n, d))
     s_next = np.empty((members, n))
     drift_next = np.empty((members, n, d))
-    _compiled.frozen_advance(
+    failed = _compiled.frozen_advance(
         p_next.reshape(members, n, n),
         readonly_view(_contiguous(row_sums).reshape(members, n)),
         a.scale * float(dt), _as_members(rhs, full), 1e-10, 100, MAX_CHECK_STEP, a.peak, out,
-        converged,
         extra, 0.0 if extra_scale is None else float(extra_scale), _as_members(x, full),
         float(dt), noise_members, float(weight), float(alpha2), x_next, s_next, drift_next,
     )  # fmt: skip
-    if not converged.all():
+    if failed:
         return None
     return x_next.reshape(x.shape), s_next, drift_next
 
