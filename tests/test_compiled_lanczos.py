@@ -480,3 +480,27 @@ def test_check_schedule_is_the_same_rule_compiled_and_numpy(compiled):
                     )
                     got = [compiled._next_check(m, r, prev_m, prev_ratio, 8, n) for r in ratio]
                     np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 100])
+def test_product_reads_the_lower_triangle_and_equals_the_dense_product(compiled, n):
+    """`_product` (four rows per block, the n % 4 rows after them one by one) against P q for
+    a symmetric P, to round-off; NaN above the diagonal blocks does not reach the result (only
+    the lower triangle and the 4 x 4 blocks on the diagonal are read); and a second call with
+    the same inputs, from other buffers, gives the same bits."""
+    rng = np.random.default_rng(n)
+    half = rng.uniform(0.1, 2.0, (n, n))
+    p = np.tril(half) + np.tril(half, -1).T
+    q = rng.standard_normal(n)
+    want = p @ q
+    w = np.full(n, np.nan)
+    compiled._product(p, q, w, n)
+    assert np.all(np.abs(w - want) <= 1e-14 * np.maximum(np.abs(p) @ np.abs(q), 1e-300))
+    upper = p.copy()
+    top = n - n % 4
+    for i in range(n):
+        block_end = (i // 4 + 1) * 4 if i < top else i + 1
+        upper[i, block_end:] = np.nan
+    again = np.full(n, np.nan)
+    compiled._product(upper.copy(), q.copy(), again, n)
+    np.testing.assert_array_equal(again, w)

@@ -142,9 +142,14 @@ def _product(p: np.ndarray, q: np.ndarray, w: np.ndarray, n: int) -> None:
     compiler vectorizes only when it may reassociate their sums (`reassoc`, this function
     only; without it the pass took 2-6 us): 0.9-1.0 us, measured by
     `benchmarks/bench_throughput.py` (part 2b). The order of the sums is then the
-    vectorizer's, fixed by the machine code: the same inputs give the same w bit for bit in
-    every call (the native vector env and its single twins agree bit for bit), and w agrees
-    with numpy's product to round-off (tests/test_compiled_lanczos.py). `contract` fuses each
+    vectorizer's, fixed by the machine code (and so per machine): the same inputs give the
+    same w bit for bit in every call (the native vector env and its single twins agree bit for
+    bit), and w agrees with numpy's product to round-off (tests/test_compiled_lanczos.py).
+    `frozen_lanczos` (read-only P) and `frozen_advance` (the writable workspace buffer) each
+    compile their own copy; their equality bit for bit (the fused step against the general
+    path) rests on the vectorizer treating both alike, which it does here and which
+    tests/test_compiled_lanczos.py checks (passing a read-only view in `frozen_advance` too, for
+    one copy, made the fused call 1-2 us per member slower). `contract` fuses each
     multiply-add (one rounding instead of two). A separate function: inlined into the
     Lanczos loop, the compiler vectorized it worse."""
     for i in range(n):

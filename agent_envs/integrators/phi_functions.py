@@ -469,8 +469,12 @@ def _next_check(
     m_arr = np.full(ratio.shape, float(m))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         known = (prev_m > 0) & (prev_ratio > ratio) & (prev_ratio < np.inf) & (ratio < np.inf)
+        # (capped at 1e9 as the compiled rule caps it before its integer conversion)
         predicted = np.ceil(
-            np.log(ratio) * (m_arr - prev_m) / np.log(np.where(known, prev_ratio / ratio, 2.0))
+            np.minimum(
+                np.log(ratio) * (m_arr - prev_m) / np.log(np.where(known, prev_ratio / ratio, 2.0)),
+                1e9,
+            )
         )
         predicted = np.where(known, predicted, 1.0)
     ahead = predicted if m >= FULL_STEP_FROM * n else (predicted + 1) // 2
