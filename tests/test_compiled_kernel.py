@@ -40,9 +40,14 @@ def test_kernel_pass_equals_the_numpy_passes(compiled, d, batch):
     n, alpha, weight = 37, 0.3, 1.0 / 0.05
     x = np.random.default_rng(d).uniform(-1, 1, (*batch, n, d))
     p = np.empty((*batch, n, n))
+    p = np.full((*batch, n, n), np.nan)
     s, drift = laplacian.compiled_cucker_smale_drift(x, weight, alpha**2, p)
     want_p, want_s, want_drift = _numpy_pass(x, alpha, weight)
     assert s.shape == want_s.shape and drift.shape == want_drift.shape
+    lower = np.tril(np.ones((n, n), dtype=bool))
+    assert not np.isnan(p[..., lower]).any()  # the lower triangle and the diagonal written,
+    assert np.isnan(p[..., ~lower]).all()  # the upper one left
+    laplacian.UpperTriangle(p).complete()
     np.testing.assert_array_equal(p, np.swapaxes(p, -1, -2))  # exactly symmetric
     assert np.max(np.abs(p - want_p)) <= 1e-15 * np.max(want_p)
     assert np.max(np.abs(s - want_s)) <= 1e-14 * np.max(want_s)
@@ -51,10 +56,10 @@ def test_kernel_pass_equals_the_numpy_passes(compiled, d, batch):
 
 def test_a_member_does_not_depend_on_the_batch(compiled):
     x = np.random.default_rng(0).uniform(-1, 1, (5, 40, 2))
-    p = np.empty((5, 40, 40))
+    p = np.zeros((5, 40, 40))
     s, drift = laplacian.compiled_cucker_smale_drift(x, 3.0, 0.01, p)
     for i in range(5):
-        pi = np.empty((1, 40, 40))
+        pi = np.zeros((1, 40, 40))
         si, di = laplacian.compiled_cucker_smale_drift(x[i : i + 1], 3.0, 0.01, pi)
         np.testing.assert_array_equal(pi[0], p[i])
         np.testing.assert_array_equal(si[0], s[i])
@@ -101,8 +106,41 @@ def test_kernel_pass_equals_the_numpy_passes_on_any_swarm(n, d, paths, spread, a
     x = np.random.default_rng(seed).uniform(-spread, spread, (paths, n, d))
     p = np.empty((paths, n, n))
     s, drift = laplacian.compiled_cucker_smale_drift(x, weight, alpha**2, p)
+    laplacian.UpperTriangle(p).complete()
     want_p, want_s, want_drift = _numpy_pass(x, alpha, weight)
     assert np.max(np.abs(p - want_p)) <= 1e-15 * np.max(want_p)
     assert np.max(np.abs(s - want_s)) <= 1e-14 * np.max(want_s)
     scale = max(np.max(np.abs(want_drift)), np.max(want_s) * max(spread, 1e-300) / n)
     assert np.max(np.abs(drift - want_drift)) <= 1e-13 * scale
+
+
+def test_upper_triangle_is_filled_once_compiled_or_not(compiled):
+    """`UpperTriangle.complete` mirrors the lower triangle, compiled and with numpy alike, and
+    only the first time; the operator's `matrix` asks for it, `parts()` (the compiled Lanczos,
+    which reads the lower triangle) does not."""
+    x = np.random.default_rng(3).uniform(-1, 1, (2, 30, 1))
+    p = np.full((2, 30, 30), np.nan)
+    laplacian.compiled_cucker_smale_drift(x, 20.0, 0.01, p)
+    numpy_filled = p.copy()
+    upper = laplacian.UpperTriangle(numpy_filled)
+    before = laplacian.use_compiled_kernel(False)
+    try:
+        upper.complete()
+    finally:
+        laplacian.use_compiled_kernel(before)
+    compiled_filled = p.copy()
+    laplacian.UpperTriangle(compiled_filled).complete()
+    np.testing.assert_array_equal(compiled_filled, numpy_filled)
+    np.testing.assert_array_equal(compiled_filled, np.swapaxes(compiled_filled, -1, -2))
+    numpy_filled[0, 0, 1] = -1.0  # done: a second call writes nothing
+    upper.complete()
+    assert numpy_filled[0, 0, 1] == -1.0
+
+    model = SwarmModel(SwarmParams(n_agents=30, epsilon=0.05), linear_operator="dense")
+    _, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+    raw, _ = lin.matrix.parts()
+    assert not np.array_equal(raw, np.swapaxes(raw, -1, -2))  # the upper triangle unwritten
+    full = lin.matrix.matrix
+    np.testing.assert_array_equal(full, np.swapaxes(full, -1, -2))
+    want = model.frozen_linearization(x)  # the Array-API path: sums in another order
+    assert np.max(np.abs(lin.matrix.dense() - want)) <= 1e-14 * np.max(np.abs(want))

@@ -9,21 +9,23 @@ weight w (`SwarmParams.kernel="symmetric"`),
 
     P[b, k, l] = w / (alpha^2 + |x_k - x_l|^2),   s = P 1,   F = (P x - s * x) / N = L(x) x,
 
-one batch member at a time: the upper triangle of P row by row (N (N + 1) / 2 divisions
-instead of N^2: P is symmetric), mirrored below the diagonal, then s and P x as sums of P's rows
-(w += P[l, :] and w += x_l P[l, :], four rows per pass over w in the rows' order, which the
-compiler vectorizes without reassociating a sum; P symmetric, so these are the row sums).
-Each entry of P is the same arithmetic as `fill_cucker_smale` (x_l - x_k, squared, summed over
-the coordinates, + alpha^2, w / .), up to the compiler fusing a multiply and an add into one
-rounding; s and P x are sums in another order than numpy's product, so the results agree with
-the numpy path to round-off (tests/test_compiled_kernel.py: 1e-15 for P, 1e-13 for the drift,
-relative). A member's result does not depend on the rest of the batch (the native vector env
-relies on it). No `fastmath`, no threads.
+one batch member at a time: the lower triangle of P row by row (N (N + 1) / 2 divisions
+instead of N^2: P is symmetric), then s and P x by `lower_product`, which reads only that
+triangle. The upper triangle is left unwritten: the compiled Lanczos reads only the lower one,
+and an Euler-Maruyama step reads P not at all; `agent_envs.dynamics.laplacian.FrozenLaplacian`
+fills it (`mirror_lower`) the first time a consumer of the whole P (a numpy product, `dense()`)
+asks for it. Each entry of P is the same arithmetic as `fill_cucker_smale` (x_l - x_k,
+squared, summed over the coordinates, + alpha^2, w / .), and the same bits on both sides of the
+diagonal ((x_l - x_k)^2 = (x_k - x_l)^2 exactly); s and P x are sums in another order than
+numpy's product, so the results agree with the numpy path to round-off
+(tests/test_compiled_kernel.py: 1e-15 for P, 1e-13 for the drift, relative). A member's result
+does not depend on the rest of the batch (the native vector env relies on it). `fastmath` in
+`lower_product` only (its dots vectorize no other way); no threads.
 
-Measured by `benchmarks/bench_throughput.py` (part 2, N = 100, 20 paths, d = 1): 8.9 us per
-member against 12.6 us for numpy's four in-place passes and the product on one machine; on a
-slower one 12-15 us, of which the N (N + 1) / 2 divisions take 7.4 us, the mirror 2.1 us and
-the sums 2.2 us (2.9 us one row per pass).
+Measured by a microbenchmark at N = 100, 20 paths, d = 1: 9.2-9.4 us per member against
+13.7-13.9 us for the pass it replaced (the upper triangle, its mirror below the diagonal and s
+and P x as sums of P's whole rows, four rows per pass); the 5,050 divisions are about 7 us of
+it, the floor of every env step, Euler-Maruyama's included.
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
@@ -35,27 +37,91 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, fastmath={"contract", "reassoc"})
+def lower_product(p: np.ndarray, q: np.ndarray, w: np.ndarray, n: int) -> None:
+    """w = P q for a symmetric P (n, n) of which only the lower triangle (and the diagonal) is
+    read: four rows j..j+3 per pass, each entry P[j + r, i] (i < j) read once and used twice, in
+    w_i += q_{j+r} P[j+r, i] (four rows of axpys: the part above the diagonal, by symmetry) and
+    in the dot w_{j+r} += sum_i P[j+r, i] q_i (the part below it); the 4 x 4 blocks on the
+    diagonal read their lower halves for both; the last n % 4 rows one at a time.
+
+    Half of the 80 KB matrix (N = 100) is read: 0.9-1.0 us against 1.2-1.3 us for rows of
+    axpys over all of P. The dots are reductions, which the compiler vectorizes only when it
+    may reassociate their sums (`reassoc`, in this function only; without it 2-6 us). The order
+    of the sums is then the vectorizer's, fixed by the machine code (and so per machine): the
+    same inputs give the same w bit for bit in every call (the native vector env and its
+    single twins agree bit for bit), and w agrees with numpy's product to round-off
+    (tests/test_compiled_lanczos.py). Each caller compiles its own copy (the Lanczos of
+    `agent_envs.integrators.compiled_lanczos` for a read-only and for a writable P): their
+    equality bit for bit rests on the vectorizer treating them alike, which it does here and
+    which the tests of the fused step against the general path check. `contract` fuses each
+    multiply-add (one rounding instead of two)."""
+    for i in range(n):
+        w[i] = 0.0
+    top = n - n % 4
+    for j in range(0, top, 4):
+        q0 = q[j]
+        q1 = q[j + 1]
+        q2 = q[j + 2]
+        q3 = q[j + 3]
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        for i in range(j):
+            p0 = p[j, i]
+            p1 = p[j + 1, i]
+            p2 = p[j + 2, i]
+            p3 = p[j + 3, i]
+            w[i] += q0 * p0 + q1 * p1 + q2 * p2 + q3 * p3
+            qi = q[i]
+            a0 += p0 * qi
+            a1 += p1 * qi
+            a2 += p2 * qi
+            a3 += p3 * qi
+        for r in range(4):  # the block on the diagonal, from its lower half
+            acc = 0.0
+            for c in range(4):
+                if c <= r:
+                    acc += p[j + r, j + c] * q[j + c]
+                else:
+                    acc += p[j + c, j + r] * q[j + c]
+            w[j + r] += acc
+        w[j] += a0
+        w[j + 1] += a1
+        w[j + 2] += a2
+        w[j + 3] += a3
+    for j in range(top, n):  # the last n % 4 rows, one at a time
+        qj = q[j]
+        acc = 0.0
+        for i in range(j):
+            pv = p[j, i]
+            w[i] += qj * pv
+            acc += pv * q[i]
+        w[j] += acc + p[j, j] * qj
+
+
 @njit(cache=True)
-def _upper_row(
+def _lower_row(
     xt: np.ndarray, k: int, weight: float, alpha2: float, row: np.ndarray, n: int, d: int
 ) -> None:
-    """row[j] = w / (alpha^2 + |x_k - x_l|^2) for j >= k; xt (d, N) the coordinates."""
+    """row[j] = w / (alpha^2 + |x_l - x_k|^2) for j <= k; xt (d, N) the coordinates."""
     if d == 1:
         xk = xt[0, k]
-        for j in range(k, n):
+        for j in range(k + 1):
             diff = xt[0, j] - xk
             row[j] = weight / (diff * diff + alpha2)
         return
     xk = xt[0, k]
-    for j in range(k, n):
+    for j in range(k + 1):
         diff = xt[0, j] - xk
         row[j] = diff * diff
     for c in range(1, d):
         xk = xt[c, k]
-        for j in range(k, n):
+        for j in range(k + 1):
             diff = xt[c, j] - xk
             row[j] += diff * diff
-    for j in range(k, n):
+    for j in range(k + 1):
         row[j] = weight / (row[j] + alpha2)
 
 
@@ -68,11 +134,13 @@ def cucker_smale_drift(
     s: np.ndarray,
     drift: np.ndarray,
 ) -> None:
-    """P into `p` (B, N, N), s = P 1 into `s` (B, N) and L(x) x into `drift` (B, N, d), for x
-    (B, N, d) float64 (see the module docstring)."""
+    """The lower triangle of P (with its diagonal) into `p` (B, N, N), s = P 1 into `s` (B, N)
+    and L(x) x into `drift` (B, N, d), for x (B, N, d) float64 (see the module docstring). The
+    upper triangle of `p` is not written: `mirror_lower` fills it."""
     members, n, d = x.shape
     xt = np.empty((d, n))
     acc = np.empty((d, n))
+    ones = np.ones(n)
     for b in range(members):
         pb = p[b]
         sb = s[b]
@@ -80,42 +148,21 @@ def cucker_smale_drift(
             for c in range(d):
                 xt[c, j] = x[b, j, c]
         for k in range(n):
-            _upper_row(xt, k, weight, alpha2, pb[k], n, d)
-        for k in range(1, n):
-            for j in range(k):
-                pb[k, j] = pb[j, k]
-        for i in range(n):
-            sb[i] = 0.0
+            _lower_row(xt, k, weight, alpha2, pb[k], n, d)
+        lower_product(pb, ones, sb, n)
         for c in range(d):
-            for i in range(n):
-                acc[c, i] = 0.0
-        # four rows per pass over s and each acc[c]: the same sums in the same order as row by
-        # row (s_i = ((P_0i + P_1i) + P_2i) + ...), with a quarter of the passes
-        top = n - n % 4
-        for j in range(0, top, 4):
-            r0 = pb[j]
-            r1 = pb[j + 1]
-            r2 = pb[j + 2]
-            r3 = pb[j + 3]
-            for i in range(n):
-                sb[i] = sb[i] + r0[i] + r1[i] + r2[i] + r3[i]
-            for c in range(d):
-                x0 = xt[c, j]
-                x1 = xt[c, j + 1]
-                x2 = xt[c, j + 2]
-                x3 = xt[c, j + 3]
-                ac = acc[c]
-                for i in range(n):
-                    ac[i] = ac[i] + x0 * r0[i] + x1 * r1[i] + x2 * r2[i] + x3 * r3[i]
-        for j in range(top, n):
-            row = pb[j]
-            for i in range(n):
-                sb[i] += row[i]
-            for c in range(d):
-                xl = xt[c, j]
-                ac = acc[c]
-                for i in range(n):
-                    ac[i] += xl * row[i]
+            lower_product(pb, xt[c], acc[c], n)
         for i in range(n):
             for c in range(d):
                 drift[b, i, c] = (acc[c, i] - sb[i] * xt[c, i]) / n
+
+
+@njit(cache=True)
+def mirror_lower(p: np.ndarray) -> None:
+    """P's upper triangle from its lower one, in place, for p (B, N, N)."""
+    members, n, _ = p.shape
+    for b in range(members):
+        pb = p[b]
+        for k in range(1, n):
+            for j in range(k):
+                pb[j, k] = pb[k, j]

@@ -100,9 +100,10 @@ def use_compiled_kernel(enabled: bool) -> bool:
 def compiled_cucker_smale_drift(
     x: np.ndarray, weight: float, alpha2: float, p: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(s, L(x) x) with P written into `p` (..., N, N) by the compiled pass, for x (..., N, d)
-    and the symmetric kernel with scalar weight w (`load_compiled_kernel` must have answered
-    True)."""
+    """(s, L(x) x) with the lower triangle of P (and its diagonal) written into `p` (..., N, N)
+    by the compiled pass, for x (..., N, d) and the symmetric kernel with scalar weight w
+    (`load_compiled_kernel` must have answered True); `UpperTriangle` fills the rest when a
+    consumer of the whole P asks for it."""
     *batch, n, d = x.shape
     members = math.prod(batch)
     flat = readonly_view(np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d))
@@ -112,6 +113,32 @@ def compiled_cucker_smale_drift(
         flat, float(weight), float(alpha2), p.reshape(members, n, n), row_sums, drift
     )
     return row_sums.reshape(*batch, n), drift.reshape(*batch, n, d)
+
+
+class UpperTriangle:
+    """The upper triangle of a workspace's P that the compiled kernel pass left unwritten
+    (it writes the lower one, which is all that the compiled Lanczos and the drift read).
+
+    The operators of one evaluation share one instance; `complete` mirrors the lower triangle
+    into the upper one once (compiled, or numpy without numba), the first time a consumer of
+    the whole P (a numpy product, `FrozenLaplacian.dense`, `FrozenLaplacian.matrix`) asks.
+    """
+
+    def __init__(self, buffer: np.ndarray) -> None:
+        self._buffer = buffer  # the workspace's writable P, (..., N, N)
+        self.done = False
+
+    def complete(self) -> None:
+        if self.done:
+            return
+        p = self._buffer
+        n = p.shape[-1]
+        if load_compiled_kernel():
+            _compiled_kernel.mirror_lower(p.reshape(-1, n, n))
+        else:
+            upper = np.triu_indices(n, 1)
+            p[..., upper[0], upper[1]] = p[..., upper[1], upper[0]]
+        self.done = True
 
 
 class KernelWorkspace:
@@ -203,7 +230,8 @@ class FrozenLaplacian:
     """c L(x) = c (P - diag(s)) / N as an operator over a workspace's P (see module doc).
 
     Attributes:
-        matrix: P (..., N, N) (read-only view of the workspace buffer).
+        matrix: P (..., N, N) (read-only view of the workspace buffer; reading it first fills
+            an upper triangle the compiled kernel pass left unwritten, `UpperTriangle`).
         row_sums: s = P 1, (..., N).
         scale: the factor c.
         symmetric: whether P is symmetric (then so is L).
@@ -221,8 +249,10 @@ class FrozenLaplacian:
         peak: float | None,
         workspace: KernelWorkspace,
         generation: int,
+        upper: UpperTriangle | None = None,
     ) -> None:
-        self.matrix = matrix
+        self._matrix = matrix
+        self._upper = upper
         self.row_sums = row_sums
         self.scale = float(scale)
         self.symmetric = bool(symmetric)
@@ -233,6 +263,14 @@ class FrozenLaplacian:
         self._factor = self.scale / self.n
         self._weights = row_sums[..., :, None]  # (..., N, 1): s * V for V (..., N, k)
         self._row_weights = row_sums[..., None, :]  # (..., 1, N): s * W for rows W (..., k, N)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """P (..., N, N), read-only; whole (`UpperTriangle.complete` first where the compiled
+        kernel pass wrote only its lower triangle and P is still this operator's)."""
+        if self._upper is not None and not self._upper.done and self.current:
+            self._upper.complete()
+        return self._matrix
 
     @property
     def current(self) -> bool:
@@ -248,17 +286,18 @@ class FrozenLaplacian:
 
     @property
     def shape(self) -> tuple[int, ...]:
-        return tuple(self.matrix.shape)
+        return tuple(self._matrix.shape)
 
     @property
     def dtype(self) -> np.dtype:
-        return self.matrix.dtype
+        return self._matrix.dtype
 
     def parts(self) -> tuple[np.ndarray, np.ndarray]:
-        """(P, s): the kernel matrix (read-only) and its row sums, for a compiled phi-action;
-        `RuntimeError` once P was overwritten."""
+        """(P, s): the kernel matrix (read-only) and its row sums, for a compiled phi-action,
+        which reads only P's lower triangle and diagonal (the upper triangle may be unwritten:
+        `matrix` is the whole P); `RuntimeError` once P was overwritten."""
         self._check()
-        return self.matrix, self.row_sums
+        return self._matrix, self.row_sums
 
     def matvec(self, v: Any) -> np.ndarray:
         """c L V for V (..., N, k)."""
@@ -285,13 +324,14 @@ class FrozenLaplacian:
     def scaled(self, c: float) -> FrozenLaplacian:
         """c' c L sharing P and s."""
         return FrozenLaplacian(
-            self.matrix,
+            self._matrix,
             self.row_sums,
             scale=self.scale * float(c),
             symmetric=self.symmetric,
             peak=self.peak,
             workspace=self._workspace,
             generation=self._generation,
+            upper=self._upper,
         )
 
     def __mul__(self, c: float) -> FrozenLaplacian:
@@ -324,7 +364,7 @@ class FrozenLaplacian:
         (`phi_functions._spectrum_interval`)."""
         idx = np.arange(self.n)
         norms, widths = krylov_bounds(
-            self.row_sums, self.matrix[..., idx, idx], self.n, self.peak, self.symmetric
+            self.row_sums, self._matrix[..., idx, idx], self.n, self.peak, self.symmetric
         )
         c = abs(self.scale)
         low = None

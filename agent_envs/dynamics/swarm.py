@@ -39,6 +39,7 @@ from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
 from agent_envs.dynamics.laplacian import (
     FrozenLaplacian,
     KernelWorkspace,
+    UpperTriangle,
     compiled_cucker_smale_drift,
     fill_cucker_smale,
     krylov_bounds,
@@ -160,7 +161,8 @@ class SwarmModel:
         One kernel pass into the workspace's P, one product P [x | 1] = [P x | s], then
         F = (P x - s * x) / N; nothing of size (..., N, N) is allocated after the first call.
         With numba, for the symmetric kernel with a scalar weight, the compiled pass
-        (`agent_envs.dynamics.compiled_kernel`) writes P and returns s and F instead.
+        (`agent_envs.dynamics.compiled_kernel`) writes P's lower triangle and returns s and F
+        instead (the operator fills the upper triangle if a consumer of the whole P asks).
         """
         kernel = self.kernel
         ws = self._workspace
@@ -168,21 +170,25 @@ class SwarmModel:
         ws.generation += 1
         compiled = self.compiled_pass_parameters(x)
         if compiled is not None:
-            # the symmetric kernel with a scalar weight: P, s and L(x) x in one compiled pass
+            # the symmetric kernel with a scalar weight: P's lower triangle, s and L(x) x in one
+            # compiled pass; the upper triangle is filled if a consumer of the whole P asks
             row_sums, drift = compiled_cucker_smale_drift(x, *compiled, p)
-        else:
-            weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
-            fill_cucker_smale(x, kernel.alpha, weights, out=p, scratch=scratch)
-            d = x.shape[-1]
-            augmented[..., :d] = x
-            np.matmul(p, augmented, out=product)
-            row_sums = product[..., d].copy()
-            drift = product[..., :d] - row_sums[..., None] * x
-            drift /= self.n_agents
+            return self._workspace_operator(p, row_sums, UpperTriangle(p)), drift
+        weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
+        fill_cucker_smale(x, kernel.alpha, weights, out=p, scratch=scratch)
+        d = x.shape[-1]
+        augmented[..., :d] = x
+        np.matmul(p, augmented, out=product)
+        row_sums = product[..., d].copy()
+        drift = product[..., :d] - row_sums[..., None] * x
+        drift /= self.n_agents
         return self._workspace_operator(p, row_sums), drift
 
-    def _workspace_operator(self, p: np.ndarray, row_sums: np.ndarray) -> FrozenLaplacian:
-        """L(x) over the workspace's P (just written) and its row sums, at this generation."""
+    def _workspace_operator(
+        self, p: np.ndarray, row_sums: np.ndarray, upper: UpperTriangle | None = None
+    ) -> FrozenLaplacian:
+        """L(x) over the workspace's P (just written; `upper` where only its lower triangle
+        was) and its row sums, at this generation."""
         ws = self._workspace
         return FrozenLaplacian(
             readonly_view(p),
@@ -191,6 +197,7 @@ class SwarmModel:
             peak=self._peak,
             workspace=ws,
             generation=ws.generation,
+            upper=upper,
         )
 
     def compiled_pass_parameters(self, x: Any) -> tuple[float, float] | None:

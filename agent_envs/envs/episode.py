@@ -36,6 +36,7 @@ from gymnasium import spaces
 
 from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
+from agent_envs.dynamics.laplacian import UpperTriangle
 from agent_envs.dynamics.operators import LinearizationOperator, check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.interface import (
@@ -298,14 +299,15 @@ class _CachedLinearizationModel(SwarmModel):
         return (self._workspace.buffers(tuple(x.shape))[0], *compiled)
 
     def adopt_linearization(self, x_next: np.ndarray, row_sums: Any, drift: Any) -> None:
-        """Keep L(x_next), whose P the integrator wrote into the workspace, with its row sums
-        and drift L(x_next) x_next, as `_laplacian(x_next)` would have (x_next, the
-        integrator's fresh array, and the drift are made read-only)."""
+        """Keep L(x_next), whose P (its lower triangle: `UpperTriangle`) the integrator wrote
+        into the workspace, with its row sums and drift L(x_next) x_next, as
+        `_laplacian(x_next)` would have (x_next, the integrator's fresh array, and the drift
+        are made read-only)."""
         ws = self._workspace
         ws.generation += 1
         p = ws.buffers(tuple(x_next.shape))[0]
         *batch, n, _ = x_next.shape
-        operator = self._workspace_operator(p, row_sums.reshape(*batch, n))
+        operator = self._workspace_operator(p, row_sums.reshape(*batch, n), UpperTriangle(p))
         drift = drift.reshape(x_next.shape)
         x_next.flags.writeable = False
         drift.flags.writeable = False

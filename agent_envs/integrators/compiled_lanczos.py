@@ -26,13 +26,15 @@ squares replaces `math.hypot` in the rotations, whose entries are bounded by ||c
 Z phi(Lambda) Z^T e_1 is formed from the rotations once, at the accepted dimension.
 
 One member at a time keeps its 80 KB kernel matrix (N = 100) in cache for all its Lanczos
-products, and the product reads only P's lower triangle (`_product`: P symmetric, each entry
-used for its row and its column); the recurrence's scalings, projections and norms are fused
-into two passes over w (`_scale_dot`, `_axpy_dot`). A member's result does not depend on the
-rest of the batch (the native vector env relies on it). `fastmath` allows the contraction of a
-multiply and an add into one fused operation everywhere, and the reassociation of sums in
-`_product` only (its dots vectorize no other way; the order is the machine code's, the same
-in every call); no threads: the BLAS pools of the hot path are one thread too.
+products, and the product reads only P's lower triangle (`_product`, the kernel pass's
+`agent_envs.dynamics.compiled_kernel.lower_product`: P symmetric, each entry used for its row
+and its column; the kernel pass writes only that triangle); the recurrence's scalings,
+projections and norms are fused into two passes over w (`_scale_dot`, `_axpy_dot`). A
+member's result does not depend on the rest of the batch (the native vector env relies on
+it). `fastmath` allows the contraction of a multiply and an add into one fused operation
+everywhere, and the reassociation of sums in `_product` only (its dots vectorize no other
+way; the order is the machine code's, the same in every call); no threads: the BLAS pools of
+the hot path are one thread too.
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
@@ -46,6 +48,7 @@ import numpy as np
 from numba import njit
 
 from agent_envs.dynamics.compiled_kernel import cucker_smale_drift
+from agent_envs.dynamics.compiled_kernel import lower_product as _product
 
 #: Taylor terms of phi_p near 0 (as `phi_functions._TAYLOR_TERMS`)
 TAYLOR_TERMS = 16
@@ -128,70 +131,6 @@ def _axpy_dot(w: np.ndarray, coef: float, x: np.ndarray, y: np.ndarray, n: int) 
         w[i] += coef * x[i]
         s0 += w[i] * y[i]
     return (s0 + s1) + (s2 + s3)
-
-
-@njit(cache=True, fastmath={"contract", "reassoc"})
-def _product(p: np.ndarray, q: np.ndarray, w: np.ndarray, n: int) -> None:
-    """w = P q for a symmetric P (n, n), reading its lower triangle only (and the 4 x 4 blocks
-    on the diagonal): four rows j..j+3 per pass, each entry P[j + r, i] (i < j) read once and
-    used twice, in w_i += q_{j+r} P[j+r, i] (four rows of axpys: the part above the diagonal,
-    by symmetry) and in the dot w_{j+r} += sum_i P[j+r, i] q_i (the part below it).
-
-    Half of the 80 KB matrix (N = 100) is read, which is what bounds the full product (rows
-    of axpys over all of P read from L2: 1.2-1.3 us); the dots are reductions, which the
-    compiler vectorizes only when it may reassociate their sums (`reassoc`, this function
-    only; without it the pass took 2-6 us): 0.9-1.0 us, measured by
-    `benchmarks/bench_throughput.py` (part 2b). The order of the sums is then the
-    vectorizer's, fixed by the machine code (and so per machine): the same inputs give the
-    same w bit for bit in every call (the native vector env and its single twins agree bit for
-    bit), and w agrees with numpy's product to round-off (tests/test_compiled_lanczos.py).
-    `frozen_lanczos` (read-only P) and `frozen_advance` (the writable workspace buffer) each
-    compile their own copy; their equality bit for bit (the fused step against the general
-    path) rests on the vectorizer treating both alike, which it does here and which
-    tests/test_compiled_lanczos.py checks (passing a read-only view in `frozen_advance` too, for
-    one copy, made the fused call 1-2 us per member slower). `contract` fuses each
-    multiply-add (one rounding instead of two). A separate function: inlined into the
-    Lanczos loop, the compiler vectorized it worse."""
-    for i in range(n):
-        w[i] = 0.0
-    top = n - n % 4
-    for j in range(0, top, 4):
-        q0 = q[j]
-        q1 = q[j + 1]
-        q2 = q[j + 2]
-        q3 = q[j + 3]
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        a3 = 0.0
-        for i in range(j):
-            p0 = p[j, i]
-            p1 = p[j + 1, i]
-            p2 = p[j + 2, i]
-            p3 = p[j + 3, i]
-            w[i] += q0 * p0 + q1 * p1 + q2 * p2 + q3 * p3
-            qi = q[i]
-            a0 += p0 * qi
-            a1 += p1 * qi
-            a2 += p2 * qi
-            a3 += p3 * qi
-        for r in range(4):  # the block on the diagonal, both triangles
-            acc = 0.0
-            for c in range(4):
-                acc += p[j + r, j + c] * q[j + c]
-            w[j + r] += acc
-        w[j] += a0
-        w[j + 1] += a1
-        w[j + 2] += a2
-        w[j + 3] += a3
-    for j in range(top, n):  # the last n % 4 rows, one at a time
-        qj = q[j]
-        acc = 0.0
-        for i in range(j):
-            pv = p[j, i]
-            w[i] += qj * pv
-            acc += pv * q[i]
-        w[j] += acc + p[j, j] * qj
 
 
 @njit(cache=True)
@@ -504,10 +443,11 @@ def frozen_advance(
     operations in the same order), then, if the member converged, P(x_next) into p (over
     P(x), which this member no longer needs), s_next = P(x_next) 1 and L(x_next) x_next into
     drift_next (`agent_envs.dynamics.compiled_kernel.cucker_smale_drift`, the symmetric kernel
-    w / (alpha^2 + |x_k - x_l|^2)). The next pass writes the 80 KB of P that the member's
-    Lanczos products just read, while they are in cache. x, noise, x_next (B, N, k); s_next
-    (B, N); drift_next (B, N, k). A member that did not converge keeps P(x) (the caller then
-    takes the general path).
+    w / (alpha^2 + |x_k - x_l|^2)). The next pass writes the lower triangle of P that the
+    member's Lanczos products just read, while it is in cache (the upper triangle is left to
+    `agent_envs.dynamics.laplacian.FrozenLaplacian`, which fills it when asked for the whole
+    P). x, noise, x_next (B, N, k); s_next (B, N); drift_next (B, N, k). A member that did
+    not converge keeps P(x) (the caller then takes the general path).
     """
     converged = np.empty(p.shape[0], dtype=np.bool_)
     _members(
