@@ -144,3 +144,26 @@ def test_upper_triangle_is_filled_once_compiled_or_not(compiled):
     np.testing.assert_array_equal(full, np.swapaxes(full, -1, -2))
     want = model.frozen_linearization(x)  # the Array-API path: sums in another order
     assert np.max(np.abs(lin.matrix.dense() - want)) <= 1e-14 * np.max(np.abs(want))
+
+
+@pytest.mark.parametrize("integrator", ["serb", "erb", "em"])
+def test_env_steps_never_fill_the_upper_triangle(compiled, monkeypatch, integrator):
+    """The kernel pass leaves P's upper triangle unwritten so that a step does not pay for it:
+    an env step (the compiled Lanczos, the fused step, Euler-Maruyama) never asks for it."""
+    import gymnasium as gym
+
+    from agent_envs.envs import ENV_ID
+
+    filled = []
+    original = laplacian.UpperTriangle.complete
+
+    def complete(self):
+        filled.append(self.done)
+        original(self)
+
+    monkeypatch.setattr(laplacian.UpperTriangle, "complete", complete)
+    env = gym.make(ENV_ID, n_agents=100, n_steps=5, n_paths=3, integrator=integrator)
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(env.action_space.sample())
+    assert filled == []

@@ -1026,7 +1026,7 @@ def frozen_advance_applies(a: Any, rhs: Any, x: Any, noise: Any, method: str) ->
     if (
         rhs.shape != shape
         or noise.shape != shape
-        or shape[:-1] != a.matrix.shape[:-1]
+        or shape[:-1] != a.shape[:-1]
         or not a.current
         or not load_compiled()
     ):
