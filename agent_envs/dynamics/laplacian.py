@@ -24,6 +24,11 @@ batch member, both from quantities the drift already has (s, and p_max = w / alp
   in a few steps; `phi_functions` deflates the constant vector (L 1 = 0) and uses the width to
   decide from which Krylov dimension its a posteriori error estimate may be trusted.
 
+With numba the compiled pass writes only P's lower triangle (and its diagonal), which is all
+that the compiled Lanczos and the drift read; the operator's `UpperTriangle` fills the rest
+the first time a consumer of the whole P asks (`matrix`, `dense()`, `@`), so an
+Euler-Maruyama or compiled SERB step never pays for it.
+
 A `FrozenLaplacian` refers to the workspace it was built in: the model's next evaluation
 overwrites P, and using an operator built before that raises `RuntimeError` (never a silent stale
 product). The public `SwarmModel.frozen_linearization` still returns a fresh array.
@@ -82,6 +87,7 @@ def load_compiled_kernel() -> bool:
             _compiled_kernel.cucker_smale_drift(
                 x, 1.0, 1.0, np.empty((1, 2, 2)), np.empty((1, 2)), np.empty((1, 2, 1))
             )
+            _compiled_kernel.mirror_lower(np.zeros((1, 2, 2)))
     return _compiled_kernel is not False
 
 
