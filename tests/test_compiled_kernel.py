@@ -167,3 +167,31 @@ def test_env_steps_never_fill_the_upper_triangle(compiled, monkeypatch, integrat
     for _ in range(5):
         env.step(env.action_space.sample())
     assert filled == []
+
+
+def test_copies_and_pickles_carry_the_whole_matrix(compiled):
+    """A model or env copied (deepcopy, pickle) after the compiled pass wrote only P's lower
+    triangle: the copy's operator is the whole P, and a copied env steps like the original
+    (found in review: the copy of the operator's view of P kept the unwritten triangle)."""
+    import copy
+    import pickle
+
+    import gymnasium as gym
+
+    from agent_envs.envs import ENV_ID
+
+    model = SwarmModel(SwarmParams(n_agents=13, epsilon=0.05), linear_operator="dense")
+    x = np.random.default_rng(5).uniform(-1, 1, (3, 13, 1))
+    x.flags.writeable = False
+    want = model.frozen_linearization(x)
+    for clone in (copy.deepcopy, lambda m: pickle.loads(pickle.dumps(m))):
+        _, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+        copied = clone(lin)
+        assert np.max(np.abs(copied.matrix.dense() - want)) <= 1e-14 * np.max(np.abs(want))
+
+    env = gym.make(ENV_ID, n_agents=13, n_paths=2, integrator="erb", phi_method="eigh")
+    env.reset(seed=0)
+    action = np.zeros(env.action_space.shape, dtype=np.float32)
+    env.step(action)
+    twin = copy.deepcopy(env)
+    np.testing.assert_array_equal(env.step(action)[0], twin.step(action)[0])

@@ -270,6 +270,14 @@ class FrozenLaplacian:
         self._weights = row_sums[..., :, None]  # (..., N, 1): s * V for V (..., N, k)
         self._row_weights = row_sums[..., None, :]  # (..., 1, N): s * W for rows W (..., k, N)
 
+    def __getstate__(self) -> dict[str, Any]:
+        """For copy and pickle: the upper triangle filled first (a copy of the read-only view
+        of P and a copy of the workspace's buffer are two arrays, and only the buffer would be
+        filled later)."""
+        if self._upper is not None and not self._upper.done and self.current:
+            self._upper.complete()
+        return self.__dict__.copy()
+
     @property
     def matrix(self) -> np.ndarray:
         """P (..., N, N), read-only; whole (`UpperTriangle.complete` first where the compiled
