@@ -273,9 +273,8 @@ class FrozenLaplacian:
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: the upper triangle filled first (a copy of the read-only view
         of P and a copy of the workspace's buffer are two arrays, and only the buffer would be
-        filled later)."""
-        if self._upper is not None and not self._upper.done and self.current:
-            self._upper.complete()
+        filled later): reading `matrix` fills it."""
+        self.matrix  # noqa: B018  (the property's side effect is the point)
         return self.__dict__.copy()
 
     @property
