@@ -16,7 +16,9 @@ and the control (the stepping is functional: no in-place writes).
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -160,8 +162,31 @@ def uniform_positions(rng: np.random.Generator, n_agents: int, dim: int) -> np.n
 
 
 def brownian_increments(rng: np.random.Generator, shape: tuple[int, ...], dt: float):
-    """Increments dW ~ N(0, dt I) of the given shape."""
-    return np.sqrt(dt) * rng.standard_normal(shape)
+    """Increments dW ~ N(0, dt I) of the given shape: sqrt(dt) z for z = standard normals from
+    `rng`, scaled in place (one array, no temporary).
+
+    `fill_brownian_increments` gives the same bits for a batch whose rows each draw from their
+    own generator."""
+    increments = rng.standard_normal(shape)
+    increments *= math.sqrt(dt)
+    return increments
+
+
+def fill_brownian_increments(
+    rngs: Sequence[np.random.Generator], rows: Sequence[int], out: np.ndarray, dt: float
+) -> np.ndarray:
+    """`brownian_increments` of out[i].shape from rngs[k] into out[i], for i = rows[k], the
+    other rows of `out` (float64, C-contiguous, zeroed by the caller) left as they are; returns
+    `out`.
+
+    Each row's standard normals are drawn in place and the whole batch is scaled by sqrt(dt)
+    once: the same draws from each generator and the same product, so the same bits as
+    `brownian_increments(rngs[k], out[i].shape, dt)` (the native vector env's rows equal their
+    single twins', tests/test_vector_env.py), without one temporary and one product per row."""
+    for rng, row in zip(rngs, rows, strict=True):
+        rng.standard_normal(out=out[row])
+    out *= math.sqrt(dt)
+    return out
 
 
 def check_phi_method_fits_kernel(

@@ -229,3 +229,21 @@ def test_simulation_spec_checks_the_batch_size_against_the_model():
 
     with pytest.raises(ValueError, match="n_paths"):
         SimulationSpec(n_paths=10**6).for_params(SwarmParams(n_agents=1000))
+
+
+def test_batched_brownian_increments_equal_each_generators_own_bit_for_bit():
+    """`fill_brownian_increments` (the native vector env's draws: each row from its own
+    generator, scaled once) gives each row the bits `brownian_increments` gives that generator
+    alone, and leaves the other rows as they were; the scaling is sqrt(dt) z itself."""
+    from agent_envs.simulator import brownian_increments, fill_brownian_increments
+
+    dt, shape = 0.02, (3, 7, 2)
+    alone = [brownian_increments(np.random.default_rng(s), shape, dt) for s in (4, 5, 6)]
+    out = fill_brownian_increments(
+        [np.random.default_rng(s) for s in (4, 6)], [0, 2], np.zeros((3, *shape)), dt
+    )
+    np.testing.assert_array_equal(out[0], alone[0])
+    np.testing.assert_array_equal(out[2], alone[2])
+    np.testing.assert_array_equal(out[1], 0.0)
+    z = np.random.default_rng(4).standard_normal(shape)
+    np.testing.assert_array_equal(alone[0], np.sqrt(dt) * z)

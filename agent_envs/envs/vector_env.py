@@ -58,7 +58,7 @@ from agent_envs.envs.observation import (
 )
 from agent_envs.integrators import Integrator, make_integrator
 from agent_envs.integrators.phi_functions import auto_phi_method, load_compiled
-from agent_envs.simulator import brownian_increments
+from agent_envs.simulator import fill_brownian_increments
 from agent_envs.validation import check_seed, real_array
 
 #: Bytes of kernel matrices one block of envs holds at most (numpy passes over the whole batch:
@@ -536,9 +536,10 @@ class SwarmVectorEnv(VectorEnv):
         costs = mean_running_cost(x, controls, self._targets, self.config.params.gamma)
         # Each env draws from its own generator, as its single twin does; the batch then
         # moves to the device in one transfer.
-        dw = np.zeros((b, p, n, d))
-        for i in np.flatnonzero(stepping):
-            dw[i] = brownian_increments(self._rng(i), (p, n, d), self.dt)
+        rows = np.flatnonzero(stepping)
+        dw = fill_brownian_increments(
+            [self._rng(i) for i in rows], rows, np.zeros((b, p, n, d)), self.dt
+        )
         with arrays.hot_path_threads():  # BLAS on one thread, as the single env's step
             x_next, drift_next, diverged_on_device = self._advance(
                 x, controls, self._on_device(self.times[:, None, None, None]), self._on_device(dw)
