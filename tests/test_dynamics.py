@@ -262,6 +262,38 @@ def test_auto_goes_matrix_free_from_the_documented_sizes(dim, n_agents, n_paths,
     assert model.matrix_free(x) is matrix_free
 
 
+def test_matrix_free_answers_are_kept_per_shape_and_recomputed_when_the_budget_moves(
+    monkeypatch,
+):
+    """`matrix_free` keeps its answer per (type, shape, kind, budget): one shape over and one
+    under the dense budget in turn give their own answers, a repeated question is not
+    recomputed, and a budget patched later (as tests do) is seen."""
+    model = SwarmModel(SwarmParams(n_agents=400))
+    under = np.broadcast_to(np.zeros((1, 400, 1)), (500, 400, 1))
+    over = np.broadcast_to(np.zeros((1, 400, 1)), (600, 400, 1))
+    calls = []
+    compute = model._matrix_free
+    monkeypatch.setattr(model, "_matrix_free", lambda x, kind: calls.append(1) or compute(x, kind))
+    for _ in range(3):
+        assert model.matrix_free(under) is False
+        assert model.matrix_free(over) is True
+    assert len(calls) == 2
+    monkeypatch.setattr("agent_envs.dynamics.swarm.DENSE_MEMORY_BUDGET_BYTES", 1)
+    assert model.matrix_free(under) is True
+    assert len(calls) == 3
+
+
+def test_matrix_free_raises_every_time_it_must():
+    """An answer that raises (the matrix-free path needed but missing) is never kept: the
+    second question raises too."""
+    torch = pytest.importorskip("torch")
+    model = SwarmModel(SwarmParams(n_agents=10), "matrix_free")
+    x = torch.zeros((1, 10, 1), dtype=torch.float64)
+    for _ in range(2):
+        with pytest.raises(ValueError, match="numpy states"):
+            model.matrix_free(x)
+
+
 class _AnisotropicKernel:
     """p(x, y) = 1 / (1 + r^T A r), r = y - x, A not the identity: symmetric in (x, y) but
     not radial, so the exact Jacobian's blocks r (dp/dy)^T are not symmetric matrices."""

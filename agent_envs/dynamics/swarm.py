@@ -140,6 +140,7 @@ class SwarmModel:
         self.sigma = params.sigma
         self.linear_operator = check_linear_operator(linear_operator)
         self._workspace = KernelWorkspace()
+        self._matrix_free_answers: dict[tuple[Any, ...], bool] = {}
         kernel = self.kernel
         # p_max = w / alpha^2 = P_kk >= every P_kl: the symmetric Cucker-Smale kernel's peak
         self._peak: float | None = None
@@ -220,8 +221,24 @@ class SwarmModel:
         Raises ValueError where the matrix-free path is needed (forced, or the dense matrices
         over budget) but does not exist: torch states, the exact Jacobian for d > 1 or
         another kernel.
+
+        The answer depends only on x's type and shape, `kind` and the memory budget (the
+        model's parameters are fixed): it is kept per (type, shape, kind, budget); an env step
+        asks four or five times.
         """
-        n_paths = math.prod(x.shape[:-2])  # (np.prod of a tuple: 2 us, 4 calls per env step)
+        key = (type(x), tuple(x.shape), kind, DENSE_MEMORY_BUDGET_BYTES)
+        known = self._matrix_free_answers.get(key)
+        if known is None:
+            known = self._matrix_free(x, kind)
+            if len(self._matrix_free_answers) >= 8:  # a few shapes per model in practice
+                self._matrix_free_answers.clear()
+            self._matrix_free_answers[key] = known
+        return known
+
+    def _matrix_free(self, x: Any, kind: str) -> bool:
+        """`matrix_free` computed (it raises where the matrix-free path is needed but missing:
+        that is never kept)."""
+        n_paths = math.prod(x.shape[:-2])
         needed = dense_bytes(self.n_agents, self.dim, n_paths, kind)
         if self.linear_operator == "dense":
             return False
