@@ -235,6 +235,54 @@ def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     return lambda: rows @ p
 
 
+def compiled_share(step: Callable[[], None], calls: int, rounds: int) -> dict[str, float]:
+    """Seconds per call of `step` and the part of them spent inside the compiled calls (the
+    kernel pass, the compiled Lanczos and the fused step: what numba runs), medians over
+    `rounds` rounds of `calls` calls: the step's compute, as against its interpreter share.
+    Empty where the tree has no compiled calls (numba missing, or a tree before them)."""
+    from agent_envs.dynamics import laplacian
+    from agent_envs.integrators import phi_functions
+
+    targets = []
+    if getattr(laplacian, "load_compiled_kernel", lambda: False)():
+        targets.append((laplacian._compiled_kernel, ("cucker_smale_drift",)))
+    if getattr(phi_functions, "load_compiled", lambda: False)():
+        targets.append((phi_functions._compiled, ("frozen_advance", "frozen_lanczos")))
+    if not targets:
+        return {}
+    inside = [0.0]
+    originals = []
+    for module, names in targets:
+        for name in names:
+            fn = getattr(module, name, None)
+            if fn is None:
+                continue
+
+            def timed(*args: Any, _fn: Callable[..., Any] = fn) -> Any:
+                start = time.perf_counter()
+                try:
+                    return _fn(*args)
+                finally:
+                    inside[0] += time.perf_counter() - start
+
+            originals.append((module, name, fn))
+            setattr(module, name, timed)
+    totals, compiled = [], []
+    try:
+        step()
+        for _ in range(rounds):
+            inside[0] = 0.0
+            start = time.perf_counter()
+            for _ in range(calls):
+                step()
+            totals.append((time.perf_counter() - start) / calls)
+            compiled.append(inside[0] / calls)
+    finally:
+        for module, name, fn in originals:
+            setattr(module, name, fn)
+    return {"total": float(np.median(totals)), "compiled": float(np.median(compiled))}
+
+
 def krylov_products_per_step(step: Callable[[], None], steps: int = 100) -> float:
     """Mean number of Lanczos matrix products per call of `step` over `steps` calls, counted on
     the phi-function module's operator wrapper (the numpy Lanczos: the compiled one, which
@@ -278,6 +326,16 @@ def worker_ratios(rounds: int) -> dict[str, float]:
         single_env_stepper(env_kwargs("paper", "serb"))
     )
     out["krylov_products_1"] = krylov_products_per_step(bare_stepper("serb", 1))
+    # the compiled share of each env step, SERB and EM in alternating rounds
+    steppers = {k: single_env_stepper(env_kwargs("paper", k)) for k in ("serb", "em")}
+    shares: dict[str, list[dict[str, float]]] = {k: [] for k in steppers}
+    for _ in range(rounds):
+        for k, stepper in steppers.items():
+            shares[k].append(compiled_share(stepper, 100, 1))
+    for k, found in shares.items():
+        if found[0]:
+            for key in ("total", "compiled"):
+                out[f"{k}_{key}"] = float(np.median([f[key] for f in found]))
     return out
 
 
@@ -326,6 +384,10 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
             t = interleaved(fns, calls, rounds)
             for name, seconds in t.items():
                 out[f"{name}/B{b}/P{n_paths}"] = b / seconds
+            if "sync" in fns:  # the native step's compiled part, per env-step
+                share = compiled_share(fns["native"], calls, rounds)
+                if share:
+                    out[f"compiled/B{b}/P{n_paths}"] = share["compiled"] / b
     return out
 
 
@@ -788,6 +850,20 @@ def main() -> int:
             " ms; floor of SERB / EM = (EM step + products x pass) / EM step ="
             f" {fmt_pair(floors['after'], floors.get('before'), '.2f')}"
         )
+        bounds = {
+            k: (v["em_total"] + v["serb_compiled"] - v["em_compiled"]) / v["em_total"]
+            for k, v in res.items()
+            if "serb_compiled" in v
+        }
+        if "after" in bounds:
+            print(
+                "\nThe compiled calls (kernel pass, fused phi-action; measured inside the steps,"
+                f" alternating rounds): SERB {1e3 * a['serb_compiled']:.3f} of"
+                f" {1e3 * a['serb_total']:.3f} ms, EM {1e3 * a['em_compiled']:.3f} of"
+                f" {1e3 * a['em_total']:.3f} ms; SERB / EM with no interpreter time beyond EM's"
+                " = (EM step + SERB's compiled time - EM's) / EM step ="
+                f" {fmt_pair(bounds['after'], bounds.get('before'), '.2f')}"
+            )
         per_product = {
             k: (v["serb_bare_1"] - v["em_bare_1"]) / v["krylov_products_1"] for k, v in res.items()
         }
@@ -853,6 +929,14 @@ def main() -> int:
             f"\nSyncVectorEnv, B = {b}, 1 path: {fmt_pair(a[key_s], o and o[key_s])} env-steps/s;"
             f" native / Sync = {fmt_pair(a[key_n] / a[key_s], o and o[key_n] / o[key_s], '.2f')}"
         )
+        key_c = f"compiled/B{b}/P1"
+        if key_c in a:
+            print(
+                f"The native step's compiled calls: {1e6 * a[key_c]:.1f} us per env-step, against"
+                f" {1e6 / a[key_n]:.1f} us for the whole native step and {1e6 / a[key_s]:.1f} us"
+                " for Sync's; native / Sync with no interpreter time at all <="
+                f" {1 / (a[key_s] * a[key_c]):.2f}"
+            )
         print()
 
     if "ppo" not in args.skip:
