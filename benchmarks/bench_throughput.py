@@ -235,52 +235,63 @@ def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     return lambda: rows @ p
 
 
-def compiled_share(step: Callable[[], None], calls: int, rounds: int) -> dict[str, float]:
+def compiled_share(
+    step: Callable[[], None], calls: int, rounds: int, draws: bool = False
+) -> dict[str, float]:
     """Seconds per call of `step` and the part of them spent inside the compiled calls (the
     kernel pass, the compiled Lanczos and the fused step: what numba runs), medians over
     `rounds` rounds of `calls` calls: the step's compute, as against its interpreter share.
-    Empty where the tree has no compiled calls (numba missing, or a tree before them)."""
+    With `draws`, also the part inside the native vector env's Brownian draws (each env's own
+    generator, `fill_brownian_increments`). Empty where the tree has no compiled calls (numba
+    missing, or a tree before them)."""
+    import importlib
+
     from agent_envs.dynamics import laplacian
     from agent_envs.integrators import phi_functions
 
     targets = []
     if getattr(laplacian, "load_compiled_kernel", lambda: False)():
-        targets.append((laplacian._compiled_kernel, ("cucker_smale_drift",)))
+        targets.append(("compiled", laplacian._compiled_kernel, ("cucker_smale_drift",)))
     if getattr(phi_functions, "load_compiled", lambda: False)():
-        targets.append((phi_functions._compiled, ("frozen_advance", "frozen_lanczos")))
+        targets.append(("compiled", phi_functions._compiled, ("frozen_advance", "frozen_lanczos")))
     if not targets:
         return {}
-    inside = [0.0]
+    vector_env = importlib.import_module("agent_envs.envs.vector_env")
+    if draws and hasattr(vector_env, "fill_brownian_increments"):
+        targets.append(("draws", vector_env, ("fill_brownian_increments",)))
+    inside = {key: 0.0 for key, _, _ in targets}
     originals = []
-    for module, names in targets:
+    for key, module, names in targets:
         for name in names:
             fn = getattr(module, name, None)
             if fn is None:
                 continue
 
-            def timed(*args: Any, _fn: Callable[..., Any] = fn) -> Any:
+            def timed(*args: Any, _fn: Callable[..., Any] = fn, _key: str = key) -> Any:
                 start = time.perf_counter()
                 try:
                     return _fn(*args)
                 finally:
-                    inside[0] += time.perf_counter() - start
+                    inside[_key] += time.perf_counter() - start
 
             originals.append((module, name, fn))
             setattr(module, name, timed)
-    totals, compiled = [], []
+    found: dict[str, list[float]] = {"total": [], **{key: [] for key in inside}}
     try:
         step()
         for _ in range(rounds):
-            inside[0] = 0.0
+            for key in inside:
+                inside[key] = 0.0
             start = time.perf_counter()
             for _ in range(calls):
                 step()
-            totals.append((time.perf_counter() - start) / calls)
-            compiled.append(inside[0] / calls)
+            found["total"].append((time.perf_counter() - start) / calls)
+            for key, seconds in inside.items():
+                found[key].append(seconds / calls)
     finally:
         for module, name, fn in originals:
             setattr(module, name, fn)
-    return {"total": float(np.median(totals)), "compiled": float(np.median(compiled))}
+    return {key: float(np.median(values)) for key, values in found.items()}
 
 
 def krylov_products_per_step(step: Callable[[], None], steps: int = 100) -> float:
@@ -385,9 +396,11 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
             for name, seconds in t.items():
                 out[f"{name}/B{b}/P{n_paths}"] = b / seconds
             if "sync" in fns:  # the native step's compiled part, per env-step
-                share = compiled_share(fns["native"], calls, rounds)
+                share = compiled_share(fns["native"], calls, rounds, draws=True)
                 if share:
                     out[f"compiled/B{b}/P{n_paths}"] = share["compiled"] / b
+                    if "draws" in share:
+                        out[f"draws/B{b}/P{n_paths}"] = share["draws"] / b
     return out
 
 
@@ -937,6 +950,14 @@ def main() -> int:
                 " for Sync's; native / Sync with no interpreter time at all <="
                 f" {1 / (a[key_s] * a[key_c]):.2f}"
             )
+            key_d = f"draws/B{b}/P1"
+            if key_d in a:
+                print(
+                    f"Its Brownian draws (each env's own generator, as its single twin: the"
+                    f" bit-for-bit contract): {1e6 * a[key_d]:.1f} us per env-step; native / Sync"
+                    " with no interpreter time but them <="
+                    f" {1 / (a[key_s] * (a[key_c] + a[key_d])):.2f}"
+                )
         print()
 
     if "ppo" not in args.skip:
