@@ -16,7 +16,6 @@ and the control (the stepping is functional: no in-place writes).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -168,7 +167,7 @@ def brownian_increments(rng: np.random.Generator, shape: tuple[int, ...], dt: fl
     `fill_brownian_increments` gives the same bits for a batch whose rows each draw from their
     own generator."""
     increments = rng.standard_normal(shape)
-    increments *= math.sqrt(dt)
+    increments *= np.sqrt(dt)
     return increments
 
 
@@ -185,7 +184,7 @@ def fill_brownian_increments(
     single twins', tests/test_vector_env.py), without one temporary and one product per row."""
     for rng, row in zip(rngs, rows, strict=True):
         rng.standard_normal(out=out[row])
-    out *= math.sqrt(dt)
+    out *= np.sqrt(dt)
     return out
 
 

@@ -246,8 +246,11 @@ def compiled_share(
     missing, or a tree before them)."""
     import importlib
 
-    from agent_envs.dynamics import laplacian
-    from agent_envs.integrators import phi_functions
+    try:  # (trees before the workspaces have no laplacian module: nothing compiled)
+        from agent_envs.dynamics import laplacian
+        from agent_envs.integrators import phi_functions
+    except ImportError:
+        return {}
 
     targets = []
     if getattr(laplacian, "load_compiled_kernel", lambda: False)():
@@ -638,7 +641,14 @@ def worker_device(
     sync()
     setup = time.perf_counter() - start
     spent = {"draws": 0.0, "advance": 0.0}
-    draw, advance = vector_module.brownian_increments, env._advance
+    # the draws' function as the vector env calls it (`fill_brownian_increments`, one call per
+    # step; `brownian_increments` per env in trees before it)
+    draw_name = next(
+        name
+        for name in ("fill_brownian_increments", "brownian_increments")
+        if hasattr(vector_module, name)
+    )
+    draw, advance = getattr(vector_module, draw_name), env._advance
 
     def timed_draw(*args: Any) -> Any:
         t0 = time.perf_counter()
@@ -656,7 +666,7 @@ def worker_device(
         finally:
             spent["advance"] += time.perf_counter() - t0
 
-    vector_module.brownian_increments = timed_draw
+    setattr(vector_module, draw_name, timed_draw)
     env._advance = timed_advance
     actions = np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape)
     actions = actions.astype(np.float32)

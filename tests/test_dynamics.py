@@ -283,6 +283,22 @@ def test_matrix_free_answers_are_kept_per_shape_and_recomputed_when_the_budget_m
     assert len(calls) == 3
 
 
+def test_a_model_pickled_before_the_matrix_free_memo_still_steps():
+    """A model pickled by a version without the memo (its state lacks the attribute) unpickles
+    into one that answers `matrix_free` and steps; a current model round-trips with its memo."""
+    import pickle
+
+    model = SwarmModel(SwarmParams(n_agents=6))
+    x = np.random.default_rng(0).uniform(-1, 1, (2, 6, 1))
+    expected = model.interaction_drift(x)
+    old = pickle.loads(pickle.dumps(model))
+    del old.__dict__["_matrix_free_answers"]  # the state an older version pickled
+    revived = pickle.loads(pickle.dumps(old))
+    np.testing.assert_array_equal(revived.interaction_drift(x), expected)
+    again = pickle.loads(pickle.dumps(model))
+    assert again._matrix_free_answers == model._matrix_free_answers
+
+
 def test_matrix_free_raises_every_time_it_must():
     """An answer that raises (the matrix-free path needed but missing) is never kept: the
     second question raises too."""

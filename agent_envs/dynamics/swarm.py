@@ -148,6 +148,12 @@ class SwarmModel:
             self._peak = float(kernel.weights) / kernel.alpha**2
             load_compiled_kernel()  # its one-time load falls here, not in a step
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickling: a model pickled before `matrix_free` kept its answers gets an empty
+        memo of them."""
+        self.__dict__.update(state)
+        self.__dict__.setdefault("_matrix_free_answers", {})
+
     def _uses_workspace(self, x: Any) -> bool:
         """Whether x takes the workspace path: numpy, the Cucker-Smale kernel, dense."""
         return (

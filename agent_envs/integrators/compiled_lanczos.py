@@ -34,12 +34,13 @@ member's result does not depend on the rest of the batch (the native vector env 
 it). `fastmath` allows the contraction of a multiply and an add into one fused operation
 everywhere, and the reassociation of sums in `_product` only (its dots vectorize no other
 way; the order is the machine code's, the same in every call); no threads: the BLAS pools of
-the hot path are one thread too. `error_model="numpy"` everywhere: divisions, `math.sqrt` and
-`math.log` follow IEEE 754 instead of testing their arguments to raise Python's exceptions (every
-divisor here is guarded or positive, every root and logarithm taken of a non-negative or
-positive number), the same bits without the branches: 2-3 % less time per member in a
-microbenchmark, and the kernel pass this module calls vectorizes its divisions only so
-(`agent_envs.dynamics.compiled_kernel`).
+the hot path are one thread too. `error_model="numpy"` everywhere: a division follows IEEE 754
+instead of testing its divisor for zero to raise ZeroDivisionError (numba's error model covers
+`/`, `//` and `%`; `math.sqrt` and `math.log` test nothing either way). On finite data every
+divisor here is guarded or positive, so the bits are the same without the branches: 2-3 %
+less time per member in a microbenchmark, and the kernel pass this module calls vectorizes its
+divisions only so (`agent_envs.dynamics.compiled_kernel`). Non-finite data never reaches these
+calls from a step: the envs and `simulate` stop a path once its state or drift is not finite.
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
