@@ -33,7 +33,7 @@ tests/test_compiled_kernel.py). The divisors are alpha^2 + |x_k - x_l|^2 >= alph
 Measured by a microbenchmark at N = 100, 20 paths, d = 1: 9.2-9.4 us per member against
 13.7-13.9 us for the pass it replaced (the upper triangle, its mirror below the diagonal and s
 and P x as sums of P's whole rows, four rows per pass); with its divisions vectorized (the
-error model below) 6.6 against 9.9 us in another microbenchmark of the same pass. (The
+error model above) 6.6 against 9.9 us in another microbenchmark of the same pass. (The
 divisions were one at a time before, about 7 us of the 9.3: not a floor, as the notes of that
 time said, but numba's test of each divisor.)
 
