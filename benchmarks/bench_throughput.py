@@ -244,10 +244,9 @@ def compiled_share(
     With `draws`, also the part inside the native vector env's Brownian draws (each env's own
     generator, `fill_brownian_increments`). Empty where the tree has no compiled calls (numba
     missing, or a tree before them)."""
-    import importlib
-
     try:  # (trees before the workspaces have no laplacian module: nothing compiled)
         from agent_envs.dynamics import laplacian
+        from agent_envs.envs import vector_env
         from agent_envs.integrators import phi_functions
     except ImportError:
         return {}
@@ -259,7 +258,6 @@ def compiled_share(
         targets.append(("compiled", phi_functions._compiled, ("frozen_advance", "frozen_lanczos")))
     if not targets:
         return {}
-    vector_env = importlib.import_module("agent_envs.envs.vector_env")
     if draws and hasattr(vector_env, "fill_brownian_increments"):
         targets.append(("draws", vector_env, ("fill_brownian_increments",)))
     inside = {key: 0.0 for key, _, _ in targets}
@@ -340,8 +338,8 @@ def worker_ratios(rounds: int) -> dict[str, float]:
         single_env_stepper(env_kwargs("paper", "serb"))
     )
     out["krylov_products_1"] = krylov_products_per_step(bare_stepper("serb", 1))
-    # the compiled share of each env step, SERB and EM in alternating rounds
-    steppers = {k: single_env_stepper(env_kwargs("paper", k)) for k in ("serb", "em")}
+    # the compiled share of each env step, SERB and EM in alternating rounds (the envs above)
+    steppers = {"serb": fns["serb_env"], "em": fns["em_env"]}
     shares: dict[str, list[dict[str, float]]] = {k: [] for k in steppers}
     for _ in range(rounds):
         for k, stepper in steppers.items():
