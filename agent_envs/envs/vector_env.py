@@ -458,11 +458,12 @@ class SwarmVectorEnv(VectorEnv):
             "_running_cost": every.copy(),
         }
 
-    def _controls(self, actions: Any, stepping: Any) -> Any:
+    def _controls(self, actions: Any, stepping: Any, every: bool = False) -> Any:
         """u = max_control * clip(a, -1, 1) per env: (B, N, d) (rows not stepping ignored).
 
         `actions` may be a numpy array (or nested sequence) or a torch tensor; `stepping` is
-        the (B,) mask on the env's device.
+        the (B,) mask on the env's device, `every` whether it is all True (then no row is
+        masked: the same controls with two passes over the batch fewer).
         """
         b, xp = self.num_envs, self._xp
         n, d = self.config.params.n_agents, self.config.params.dim
@@ -485,10 +486,12 @@ class SwarmVectorEnv(VectorEnv):
                 f"{tuple(arr.shape)}"
             )
         arr = xp.reshape(arr, (b, rows, d))
-        if not bool(xp.all(xp.isfinite(arr[stepping]))):
+        if not bool(xp.all(xp.isfinite(arr if every else arr[stepping]))):
             raise ValueError("actions must be finite, got NaN or inf entries")
-        # rows that do not step get no control at all, so a NaN there never reaches the batch
-        arr = xp.where(stepping[:, None, None], arr, 0.0)
+        if not every:
+            # rows that do not step get no control at all, so a NaN there never reaches the
+            # batch
+            arr = xp.where(stepping[:, None, None], arr, 0.0)
         return controls_from_actions(arr, self.config.action_basis, self.config.max_control, n)
 
     # ------------------------------------------------------------------ API
@@ -529,17 +532,21 @@ class SwarmVectorEnv(VectorEnv):
         n, d = self.config.params.n_agents, self.config.params.dim
         resetting = self._autoreset.copy()
         stepping = ~resetting
+        every = not resetting.any()  # the common case: no env autoresets in this call
         stepping_on_device = self._on_device(stepping)
-        controls = self._controls(actions, stepping_on_device)
+        controls = self._controls(actions, stepping_on_device, every)
         x = self._positions
 
         costs = mean_running_cost(x, controls, self._targets, self.config.params.gamma)
         # Each env draws from its own generator, as its single twin does; the batch then
-        # moves to the device in one transfer.
+        # moves to the device in one transfer. (After the first reset every env has one.)
         rows = np.flatnonzero(stepping)
-        dw = fill_brownian_increments(
-            [self._rng(i) for i in rows], rows, np.zeros((b, p, n, d)), self.dt
+        rngs = (
+            self.np_randoms
+            if every and None not in self.np_randoms
+            else [self._rng(i) for i in rows]
         )
+        dw = fill_brownian_increments(rngs, rows, np.zeros((b, p, n, d)), self.dt)
         with arrays.hot_path_threads():  # BLAS on one thread, as the single env's step
             x_next, drift_next, diverged_on_device = self._advance(
                 x, controls, self._on_device(self.times[:, None, None, None]), self._on_device(dw)
@@ -562,14 +569,20 @@ class SwarmVectorEnv(VectorEnv):
 
         truncated = moved & (self.step_index >= self.config.n_steps)
         terminated = diverged.copy()
-        rewards = arrays.to_numpy(xp.where(stepping_on_device, -self.dt * costs, 0.0))
         observations = self._observations()
         info = self._state_info()
         info["diverged"] = diverged.copy()
-        # envs that autoreset in this call report their reset info: zero control and cost
-        control_rows = stepping_on_device[:, None, None]
-        info["control"] = arrays.to_numpy(xp.where(control_rows, controls, 0.0))
-        info["running_cost"] = arrays.to_numpy(xp.where(stepping_on_device, costs, 0.0))
+        if every:  # (controls and costs are this call's own arrays)
+            rewards = arrays.to_numpy(-self.dt * costs)
+            info["control"] = arrays.to_numpy(controls)
+            info["running_cost"] = arrays.to_numpy(costs)
+        else:
+            # envs that autoreset in this call: reward 0 and their reset info (zero control
+            # and cost)
+            rewards = arrays.to_numpy(xp.where(stepping_on_device, -self.dt * costs, 0.0))
+            control_rows = stepping_on_device[:, None, None]
+            info["control"] = arrays.to_numpy(xp.where(control_rows, controls, 0.0))
+            info["running_cost"] = arrays.to_numpy(xp.where(stepping_on_device, costs, 0.0))
 
         ended = terminated | truncated
         if self.autoreset_mode == AutoresetMode.SAME_STEP and np.any(ended):
