@@ -504,3 +504,44 @@ def test_product_reads_the_lower_triangle_and_equals_the_dense_product(compiled,
     again = np.full(n, np.nan)
     compiled._product(upper.copy(), q.copy(), again, n)
     np.testing.assert_array_equal(again, w)
+
+
+@pytest.mark.parametrize("n", [0, 1, 3, 4, 5, 17, 100])
+def test_recurrence_passes_equal_their_formulas(compiled, n):
+    """The recurrence's passes (`_dot`, `_axpy_dot`, `_scale_dot`: an element-wise update, then
+    a dot whose sum the compiler may reassociate) against numpy: the updated vector bit for bit
+    (the same IEEE operations element by element), the dots to round-off of the sum of |terms|;
+    n below, at and off the vector width."""
+    rng = np.random.default_rng(n)
+    a, b, s = rng.standard_normal(n), rng.standard_normal(n), rng.uniform(0.5, 2.0, n)
+    scale = lambda terms: 1e-14 * max(float(np.abs(terms).sum()), 1e-300)  # noqa: E731
+    assert abs(compiled._dot(a, b, n) - float(a @ b)) <= scale(a * b)
+    w = a.copy()
+    got = compiled._axpy_dot(w, -0.37, b, s, n)
+    want_w = a + (-0.37) * b
+    np.testing.assert_array_equal(w, want_w)
+    assert abs(got - float(want_w @ s)) <= scale(want_w * s)
+    w = a.copy()
+    norm2 = compiled._axpy_dot(w, 0.5, b, w, n)  # y = w itself: |w|^2 of the updated w
+    assert abs(norm2 - float(w @ w)) <= scale(w * w)
+    w = a.copy()
+    got = compiled._scale_dot(w, s, b, 0.25, n)
+    want_w = (a - s * b) * 0.25
+    np.testing.assert_array_equal(w, want_w)
+    assert abs(got - float(want_w @ b)) <= scale(want_w * b)
+
+
+def test_member_bounds_equal_their_formulas(compiled):
+    """`_member_bounds`, one pass: ||c L||_inf <= |c| (2 / n) max_i |s_i - P_ii| and the width
+    |c| 2 max(peak - min_i s_i / n, 0) of the interval holding spec(c L) on 1^perp (inf
+    without a peak), against those formulas in numpy, bit for bit."""
+    rng = np.random.default_rng(3)
+    n = 37
+    p = rng.uniform(0.1, 2.0, (n, n))
+    s = p.sum(axis=1)
+    c, peak = 0.03, 2.5
+    norm, width = compiled._member_bounds(p, s, n, c, peak)
+    assert norm == c * ((2.0 / n) * float(np.max(np.abs(s - np.diag(p)))))
+    assert width == c * (2.0 * max(float(np.max(peak - s / n)), 0.0))
+    assert compiled._member_bounds(p, s, n, c, -1.0) == (norm, np.inf)
+    assert compiled._member_bounds(p, s, n, c, 0.0)[1] == 0.0  # peak below every s_i / n
