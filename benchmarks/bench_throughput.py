@@ -602,6 +602,85 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
                               pf._NO_EXTRA, 0.0)  # fmt: skip
 
         out["member_us"] = 1e6 * interleaved({"call": call}, 200, 5)["call"] / members_all
+        out.update(_compiled_bounds(env, captured[min(2, len(captured) - 1)]))
+    return out
+
+
+def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
+    """What the compiled step runs against, per member: the kernel pass (`cucker_smale_drift`)
+    on the env's last state, its N (N + 1) / 2 divisions alone (`_lower_row`, the rows of P's
+    lower triangle without the products P 1, P x and the drift), and one QL check
+    (`_phi_of_tridiagonal`) of the T_m an early step's first member needs (`early`: a capture
+    of `worker_krylov`, m its oracle dimension): microseconds, and ns per QL rotation."""
+    from numba import njit
+
+    from agent_envs.dynamics import compiled_kernel as ck
+    from agent_envs.integrators import compiled_lanczos as cl
+
+    @njit
+    def kernel_passes(x: Any, w: float, a2: float, p: Any, s: Any, f: Any, reps: int) -> None:
+        for _ in range(reps):
+            ck.cucker_smale_drift(x, w, a2, p, s, f)
+
+    @njit
+    def division_passes(xt: Any, w: float, a2: float, p: Any, n: int, d: int, reps: int) -> None:
+        for _ in range(reps):
+            for k in range(n):
+                ck._lower_row(xt, k, w, a2, p[k], n, d)
+
+    @njit
+    def ql_checks(alphas: Any, betas: Any, m: int, fact: Any, reps: int) -> int:
+        out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
+        size = 2 * m * m + 8
+        rot_c, rot_s, phis = np.empty(size), np.empty(size), np.empty(m)
+        rot_at = np.empty(size, dtype=np.int64)
+        count = 0
+        for _ in range(reps):
+            count = cl._phi_of_tridiagonal(alphas, betas, m, 0, 1, fact, out, d, e, rows, rot_c,
+                                           rot_s, rot_at, phis)[2]  # fmt: skip
+        return count
+
+    model = env.episode.model
+    x = np.ascontiguousarray(env.episode.positions[:1])  # one member, (1, N, d)
+    _, n, d = x.shape
+    w, a2 = model.compiled_pass_parameters(x)
+    p, s, f = np.empty((1, n, n)), np.empty((1, n)), np.empty(x.shape)
+    xt = np.ascontiguousarray(x[0].T)
+    reps = 2000
+    kernel_passes(x, w, a2, p, s, f, 1)
+    division_passes(xt, w, a2, p[0], n, d, 1)
+
+    def timed(call: Callable[[], None]) -> float:
+        start = time.perf_counter()
+        call()
+        return 1e6 * (time.perf_counter() - start) / reps
+
+    found = interleaved(
+        {
+            "kernel": lambda: kernel_passes(x, w, a2, p, s, f, reps),
+            "divisions": lambda: division_passes(xt, w, a2, p[0], n, d, reps),
+        },
+        1,
+        5,
+    )
+    out = {"kernel_pass_us": 1e6 * found["kernel"] / reps,
+           "divisions_us": 1e6 * found["divisions"] / reps}  # fmt: skip
+    # an early step's T_m: the deflated Lanczos of its first member to its oracle dimension
+    dense, v = early[0][0], early[1][0, :, 0]
+    m = _oracle_dimension(dense, v, 1, 1e-10, True)
+    rest = v - v.mean()
+    basis, alphas, betas = [rest / np.linalg.norm(rest)], [], []
+    for j in range(m):
+        wv = dense @ basis[-1]
+        alphas.append(wv @ basis[-1])
+        wv = wv - alphas[-1] * basis[-1] - (betas[-1] * basis[-2] if j else 0.0)
+        betas.append(np.linalg.norm(wv))
+        basis.append(wv / betas[-1])
+    t_a, t_b = np.array(alphas).reshape(m, 1), np.array(betas).reshape(m, 1)
+    fact = cl._factorials(cl.TAYLOR_TERMS + 2)
+    rotations = ql_checks(t_a, t_b, m, fact, 1)
+    ql_us = timed(lambda: ql_checks(t_a, t_b, m, fact, reps))
+    out.update(ql_m=float(m), ql_rotations=float(rotations), ql_us=ql_us)
     return out
 
 
@@ -917,6 +996,15 @@ def main() -> int:
                 f"{k['product_us']:.2f} us; the compiled phi-action of a near-consensus step: "
                 f"{k['member_us']:.2f} us per member"
             )
+            if "kernel_pass_us" in k:
+                print(
+                    f"The compiled kernel pass of one member: {k['kernel_pass_us']:.2f} us, of"
+                    f" which its {100 * 101 // 2:,} divisions alone (the rows of P's lower"
+                    f" triangle) {k['divisions_us']:.2f} us. One QL check at an early step's"
+                    f" dimension (m = {k['ql_m']:.0f}): {k['ql_us']:.2f} us,"
+                    f" {k['ql_rotations']:.0f} rotations,"
+                    f" {1e3 * k['ql_us'] / max(k['ql_rotations'], 1):.1f} ns each"
+                )
             if "ratios" not in args.skip:
                 em = res["after"]["em_env"]
                 for label, dims in (("the oracle", k["oracle"]), ("the reached", k["reached"])):
