@@ -608,9 +608,8 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
 
 def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
     """What the compiled step runs against, per member: the kernel pass (`cucker_smale_drift`)
-    on the env's last state, its N (N + 1) / 2 divisions alone (the rows of P's lower triangle,
-    `_squared_distances` and w / (. + alpha^2), without the sums s = P 1, P x and the drift),
-    and one QL check
+    on the env's last state, its N (N + 1) / 2 divisions alone (`_lower_row`: the rows of P's
+    lower triangle, without the sums s = P 1, P x and the drift), and one QL check
     (`_phi_of_tridiagonal`) of the T_m an early step's first member needs (`early`: a capture
     of `worker_krylov`, m its oracle dimension): microseconds, and ns per QL rotation."""
     from numba import njit
@@ -623,14 +622,11 @@ def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
         for _ in range(reps):
             ck.cucker_smale_drift(x, w, a2, p, s, f)
 
-    @njit(error_model="numpy")
+    @njit
     def division_passes(xt: Any, w: float, a2: float, p: Any, n: int, d: int, reps: int) -> None:
         for _ in range(reps):
             for k in range(n):
-                row = p[k]
-                ck._squared_distances(xt, k, row, d)
-                for j in range(k + 1):
-                    row[j] = w / (row[j] + a2)
+                ck._lower_row(xt, k, w, a2, p[k], n, d)
 
     @njit
     def ql_checks(alphas: Any, betas: Any, m: int, fact: Any, reps: int) -> int:

@@ -10,15 +10,14 @@ weight w (`SwarmParams.kernel="symmetric"`),
     P[b, k, l] = w / (alpha^2 + |x_k - x_l|^2),   s = P 1,   F = (P x - s * x) / N = L(x) x,
 
 one batch member at a time: the lower triangle of P row by row (N (N + 1) / 2 divisions
-instead of N^2: P is symmetric), and with each row its shares of s and P x, while the row is
-in registers and L1: entry P_kj (j < k) adds to s_j and (P x)_j (the part above the diagonal,
-by symmetry: axpys over j) and to s_k and (P x)_k (the row's own sums). For d = 1 the row's
-divisions and its four multiply-adds per entry run in one loop (`_row_with_sums_1d`), where
-the multiply-adds take the slots the divisions leave free: 6.0-6.9 against 7.9-9.5 us per
-member for the rows followed by two passes of `lower_product` over the triangle (N = 100, a
-microbenchmark, the same run); for d > 1 the squared distances, then the divisions with s,
-then one pass per coordinate over the row (`_squared_distances`, `_divide_row_with_sums`,
-`_row_products`). The divisions alone are 4.1-4.3 us per member at N = 100 (part 2b of
+instead of N^2: P is symmetric). For d = 1 each row takes its shares of s and P x in the
+divisions' own loop (`_row_with_sums_1d`), while the row is in registers: entry P_kj (j < k)
+adds to s_j and (P x)_j (the part above the diagonal, by symmetry: axpys over j) and to s_k
+and (P x)_k (the row's own sums); its four multiply-adds take the slots the divider leaves
+free. 5.2-5.9 against 6.6-6.7 us per member (N = 100, 20 members, alternating in one process)
+for the rows followed by two passes of `lower_product` over the triangle, which d > 1 keeps
+(`_lower_row`, then s and P x by `lower_product`: fusing its d + 1 sums into the rows measured
+1.8x slower at d = 2). The divisions alone are 4.1-4.3 us per member at N = 100 (part 2b of
 benchmarks/bench_throughput.py): the divider's throughput, about two cycles a division.
 
 The upper triangle is left unwritten: the compiled Lanczos reads only the lower one, and an
@@ -30,11 +29,11 @@ bit, on both sides of the diagonal ((x_l - x_k)^2 = (x_k - x_l)^2 exactly); s an
 sums in another order than numpy's product, so they agree with the numpy path to round-off
 (tests/test_compiled_kernel.py: P bit for bit, s 1e-14, the drift 1e-13, relative). A
 member's result does not depend on the rest of the batch (the native vector env relies on
-it). `fastmath={"reassoc"}` in the functions that take the sums (their reductions over a row
-vectorize no other way; the order is then the machine code's, the same in every call) and in
-`lower_product`; the squared distances are computed without it (a reassociated
-alpha^2 + |x_k - x_l|^2 would change P's bits), and the divisions and the entry's other
-operations are single IEEE operations that reassociation does not touch. No threads.
+it). `fastmath={"reassoc"}` in `_row_with_sums_1d` and `lower_product`, whose reductions over
+a row vectorize no other way (the order is then the machine code's, the same in every call);
+an entry of P there is (x_j - x_k)^2 + alpha^2 and one division, operations reassociation does
+not touch, so P keeps its bits; `_lower_row`, which sums d > 1 squares, runs without it (a
+reassociated alpha^2 + |x_k - x_l|^2 would change them). No threads.
 
 `error_model="numpy"`: a division follows IEEE 754 (x / 0 is inf or nan) instead of numba's
 default Python model, which tests every divisor for zero to raise ZeroDivisionError, a branch
@@ -46,7 +45,7 @@ time or four at once). The divisors are alpha^2 + |x_k - x_l|^2 >= alpha^2 > 0 a
 History, measured by microbenchmarks at N = 100, d = 1: 13.7-13.9 us per member for the upper
 triangle, its mirror below the diagonal and s and P x as sums of P's whole rows; 9.2-9.4 us for
 the lower triangle and two passes of `lower_product`; 6.6 us with its divisions vectorized;
-the rows with their sums in one loop (above) about 20 % less again.
+5.2-5.9 us with the sums in the rows' loop (above).
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
@@ -123,9 +122,16 @@ def lower_product(p: np.ndarray, q: np.ndarray, w: np.ndarray, n: int) -> None:
 
 
 @njit(cache=True, error_model="numpy")
-def _squared_distances(xt: np.ndarray, k: int, row: np.ndarray, d: int) -> None:
-    """row[j] = |x_j - x_k|^2 for j <= k, xt (d, N) the coordinates: the squares summed
-    coordinate by coordinate, in order (no fast-math here: the same sums as numpy's)."""
+def _lower_row(
+    xt: np.ndarray, k: int, weight: float, alpha2: float, row: np.ndarray, n: int, d: int
+) -> None:
+    """row[j] = w / (alpha^2 + |x_l - x_k|^2) for j <= k; xt (d, N) the coordinates."""
+    if d == 1:
+        xk = xt[0, k]
+        for j in range(k + 1):
+            diff = xt[0, j] - xk
+            row[j] = weight / (diff * diff + alpha2)
+        return
     xk = xt[0, k]
     for j in range(k + 1):
         diff = xt[0, j] - xk
@@ -135,37 +141,8 @@ def _squared_distances(xt: np.ndarray, k: int, row: np.ndarray, d: int) -> None:
         for j in range(k + 1):
             diff = xt[c, j] - xk
             row[j] += diff * diff
-
-
-@njit(cache=True, fastmath={"reassoc"}, error_model="numpy")
-def _divide_row_with_sums(
-    row: np.ndarray, k: int, weight: float, alpha2: float, s: np.ndarray
-) -> None:
-    """row[j] = w / (row[j] + alpha^2) for j <= k (row held |x_j - x_k|^2): row k of P's lower
-    triangle; with its share of s = P 1 in the same loop: s[j] += P_kj for j < k (the part
-    above the diagonal, by symmetry) and s[k] += sum_{j < k} P_kj + P_kk."""
-    acc = 0.0
-    for j in range(k):
-        v = weight / (row[j] + alpha2)
-        row[j] = v
-        acc += v
-        s[j] += v
-    v = weight / (row[k] + alpha2)
-    row[k] = v
-    s[k] += acc + v
-
-
-@njit(cache=True, fastmath={"reassoc"}, error_model="numpy")
-def _row_products(row: np.ndarray, k: int, xc: np.ndarray, out: np.ndarray) -> None:
-    """Row k's share of out = P x_c (one coordinate): out[j] += P_kj x_ck for j < k and
-    out[k] += sum_{j < k} P_kj x_cj + P_kk x_ck."""
-    xk = xc[k]
-    acc = 0.0
-    for j in range(k):
-        v = row[j]
-        acc += v * xc[j]
-        out[j] += v * xk
-    out[k] += acc + row[k] * xk
+    for j in range(k + 1):
+        row[j] = weight / (row[j] + alpha2)
 
 
 @njit(cache=True, fastmath={"reassoc"}, error_model="numpy")
@@ -179,8 +156,10 @@ def _row_with_sums_1d(
     px: np.ndarray,
 ) -> None:
     """d = 1: row k of P's lower triangle, P_kj = w / ((x_j - x_k)^2 + alpha^2) (j <= k), with
-    its shares of s = P 1 and P x (as `_divide_row_with_sums` and `_row_products`) in one loop:
-    the sums' multiply-adds run beside the divisions, which bound the loop."""
+    its shares of s = P 1 and P x in the same loop: s_j += P_kj, (P x)_j += P_kj x_k for j < k
+    (the part above the diagonal, by symmetry) and s_k, (P x)_k += the row's own sums. The
+    multiply-adds run beside the divisions, which bound the loop. x, s and px are 1-d arrays
+    of their own (views of one 2-d scratch array ran this loop 1.5x slower)."""
     xk = x[k]
     acc_s = 0.0
     acc_x = 0.0
@@ -212,29 +191,38 @@ def cucker_smale_drift(
     and L(x) x into `drift` (B, N, d), for x (B, N, d) float64 (see the module docstring). The
     upper triangle of `p` is not written: `mirror_lower` fills it."""
     members, n, d = x.shape
+    if d == 1:
+        xs = np.empty(n)
+        px = np.empty(n)
+        for b in range(members):
+            pb = p[b]
+            sb = s[b]
+            for j in range(n):
+                xs[j] = x[b, j, 0]
+                sb[j] = 0.0
+                px[j] = 0.0
+            for k in range(n):
+                _row_with_sums_1d(xs, k, weight, alpha2, pb[k], sb, px)
+            for i in range(n):
+                drift[b, i, 0] = (px[i] - sb[i] * xs[i]) / n
+        return
     xt = np.empty((d, n))
-    px = np.empty((d, n))
+    acc = np.empty((d, n))
+    ones = np.ones(n)
     for b in range(members):
         pb = p[b]
         sb = s[b]
         for j in range(n):
-            sb[j] = 0.0
             for c in range(d):
                 xt[c, j] = x[b, j, c]
-                px[c, j] = 0.0
-        if d == 1:
-            for k in range(n):
-                _row_with_sums_1d(xt[0], k, weight, alpha2, pb[k], sb, px[0])
-        else:
-            for k in range(n):
-                row = pb[k]
-                _squared_distances(xt, k, row, d)
-                _divide_row_with_sums(row, k, weight, alpha2, sb)
-                for c in range(d):
-                    _row_products(row, k, xt[c], px[c])
+        for k in range(n):
+            _lower_row(xt, k, weight, alpha2, pb[k], n, d)
+        lower_product(pb, ones, sb, n)
+        for c in range(d):
+            lower_product(pb, xt[c], acc[c], n)
         for i in range(n):
             for c in range(d):
-                drift[b, i, c] = (px[c, i] - sb[i] * xt[c, i]) / n
+                drift[b, i, c] = (acc[c, i] - sb[i] * xt[c, i]) / n
 
 
 @njit(cache=True)

@@ -26,7 +26,7 @@ squares replaces `math.hypot` in the rotations, whose entries are bounded by ||c
 Z phi(Lambda) Z^T e_1 is formed from the rotations once, at the accepted dimension.
 
 One member at a time keeps its 80 KB kernel matrix (N = 100) in cache for all its Lanczos
-products, and the product reads only P's lower triangle (`_product`, the kernel pass's
+products, and the product reads only P's lower triangle (`_product`, the kernel pass's (for d > 1)
 `agent_envs.dynamics.compiled_kernel.lower_product`: P symmetric, each entry used for its row
 and its column; the kernel pass writes only that triangle); each of the recurrence's
 scalings and projections is an element-wise loop over w followed by a dot (`_scale_dot`,
