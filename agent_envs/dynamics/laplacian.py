@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from agent_envs import arrays
+
 #: batch shapes a `KernelWorkspace` keeps buffers for (the oldest is dropped beyond this)
 _MAX_SHAPES = 2
 #: set to "0" to keep the numpy kernel and Lanczos even where numba is installed
@@ -169,7 +171,10 @@ class KernelWorkspace:
             augmented = np.empty((*batch, n, d + 1))
             augmented[..., d] = 1.0
             scratch = np.empty((*batch, n, n)) if d > 1 else None
-            found = (np.empty((*batch, n, n)), augmented, np.empty((*batch, n, d + 1)), scratch)
+            # P aligned to a cache line: the compiled kernel pass and Lanczos read its rows
+            # with vector loads (`arrays.aligned_empty`)
+            p = arrays.aligned_empty((*batch, n, n))
+            found = (p, augmented, np.empty((*batch, n, d + 1)), scratch)
             if len(self._buffers) >= _MAX_SHAPES:
                 self._buffers.pop(next(iter(self._buffers)))
             self._buffers[shape] = found
