@@ -584,13 +584,20 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
                 product(p, q, w, n)
 
         (p, s), v_all, scale, peak = captured[-1][6:10]
-        p0, q, w = np.ascontiguousarray(p[0]), np.ones(p.shape[-1]), np.empty(p.shape[-1])
+        from agent_envs.arrays import aligned_empty
+
+        def aligned_copy(a: Any) -> Any:  # where the env's workspace keeps P: a cache line
+            out = aligned_empty(a.shape)
+            out[...] = a
+            return out
+
+        p0, q, w = aligned_copy(p[0]), np.ones(p.shape[-1]), np.empty(p.shape[-1])
         products(p0, q, w, p.shape[-1], 10)
         start = time.perf_counter()
         products(p0, q, w, p.shape[-1], 20000)
         out["product_us"] = 1e6 * (time.perf_counter() - start) / 20000
         members_all = p.shape[0]
-        p_all = np.ascontiguousarray(p).reshape(members_all, *p.shape[-2:])
+        p_all = aligned_copy(p).reshape(members_all, *p.shape[-2:])
         p_all.flags.writeable = False
         s_all = np.ascontiguousarray(s).reshape(members_all, -1)
         rhs = np.ascontiguousarray(v_all).reshape(members_all, *v_all.shape[-2:])
@@ -614,6 +621,7 @@ def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
     of `worker_krylov`, m its oracle dimension): microseconds, and ns per QL rotation."""
     from numba import njit
 
+    from agent_envs import arrays
     from agent_envs.dynamics import compiled_kernel as ck
     from agent_envs.integrators import compiled_lanczos as cl
 
@@ -644,7 +652,7 @@ def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
     x = np.ascontiguousarray(env.episode.positions[:1])  # one member, (1, N, d)
     _, n, d = x.shape
     w, a2 = model.compiled_pass_parameters(x)
-    p, s, f = np.empty((1, n, n)), np.empty((1, n)), np.empty(x.shape)
+    p, s, f = arrays.aligned_empty((1, n, n)), np.empty((1, n)), np.empty(x.shape)
     xt = np.ascontiguousarray(x[0].T)
     reps = 2000
     kernel_passes(x, w, a2, p, s, f, 1)
