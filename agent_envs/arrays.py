@@ -35,6 +35,7 @@ torch is imported lazily, only when a torch tensor is seen or a torch backend is
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -207,9 +208,7 @@ def aligned_empty(shape: tuple[int, ...], alignment: int = WORKSPACE_ALIGNMENT) 
     base offsets 0 to 4096, benchmarks/bench_throughput.py for the env)."""
     if alignment % 8:
         raise ValueError(f"alignment must be a multiple of 8 bytes, got {alignment}")
-    size = 1
-    for extent in shape:
-        size *= int(extent)
+    size = math.prod(shape)
     raw = np.empty(size + alignment // 8, dtype=np.float64)
     start = (-raw.ctypes.data % alignment) // 8
     return raw[start : start + size].reshape(shape)

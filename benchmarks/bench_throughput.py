@@ -459,6 +459,13 @@ def _oracle_dimension(a: np.ndarray, v: np.ndarray, order: int, rtol: float, def
     """The smallest Krylov dimension m whose Lanczos approximation of phi_order(A) v is within
     rtol of the dense eigh value (relative, 2-norm); A (n, n) symmetric, v (n,). With `deflate`
     the constant vector is taken out first, as the library does when it knows A 1 = 0."""
+    return _oracle_lanczos(a, v, order, rtol, deflate)[0]
+
+
+def _oracle_lanczos(
+    a: np.ndarray, v: np.ndarray, order: int, rtol: float, deflate: bool
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """(m, the diagonal (m,) and off-diagonal (m - 1,) of T_m) at `_oracle_dimension`'s m."""
     from math import factorial
 
     from agent_envs.integrators.phi_functions import phi_scalar
@@ -469,7 +476,7 @@ def _oracle_dimension(a: np.ndarray, v: np.ndarray, order: int, rtol: float, def
     rest = v - mean
     beta0 = np.linalg.norm(rest)
     if beta0 == 0.0:
-        return 1
+        return 1, np.zeros(1), np.zeros(0)
     basis, alphas, betas = [rest / beta0], [], []
     for m in range(1, a.shape[0] + 1):
         w = a @ basis[-1]
@@ -482,10 +489,10 @@ def _oracle_dimension(a: np.ndarray, v: np.ndarray, order: int, rtol: float, def
         approx = beta0 * np.array(basis).T @ (tz @ (phi_scalar(tl, order) * tz[0]))
         approx = approx + mean / factorial(order)
         if np.linalg.norm(approx - exact) <= rtol * np.linalg.norm(exact):
-            return m
+            return m, np.array(alphas), np.array(betas)
         betas.append(np.linalg.norm(w))
         basis.append(w / betas[-1])
-    return a.shape[0]
+    return a.shape[0], np.array(alphas), np.array(betas[: len(alphas) - 1])
 
 
 def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
@@ -674,17 +681,8 @@ def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
     out = {"kernel_pass_us": 1e6 * found["kernel"] / reps,
            "divisions_us": 1e6 * found["divisions"] / reps}  # fmt: skip
     # an early step's T_m: the deflated Lanczos of its first member to its oracle dimension
-    dense, v = early[0][0], early[1][0, :, 0]
-    m = _oracle_dimension(dense, v, 1, 1e-10, True)
-    rest = v - v.mean()
-    basis, alphas, betas = [rest / np.linalg.norm(rest)], [], []
-    for j in range(m):
-        wv = dense @ basis[-1]
-        alphas.append(wv @ basis[-1])
-        wv = wv - alphas[-1] * basis[-1] - (betas[-1] * basis[-2] if j else 0.0)
-        betas.append(np.linalg.norm(wv))
-        basis.append(wv / betas[-1])
-    t_a, t_b = np.array(alphas).reshape(m, 1), np.array(betas).reshape(m, 1)
+    m, alphas, betas = _oracle_lanczos(early[0][0], early[1][0, :, 0], 1, 1e-10, True)
+    t_a, t_b = alphas.reshape(m, 1), np.append(betas, 0.0).reshape(m, 1)  # (e[m - 1]: scratch)
     fact = cl._factorials(cl.TAYLOR_TERMS + 2)
     rotations = ql_checks(t_a, t_b, m, fact, 1)
     ql_us = timed(lambda: ql_checks(t_a, t_b, m, fact, reps))

@@ -26,9 +26,10 @@ squares replaces `math.hypot` in the rotations, whose entries are bounded by ||c
 Z phi(Lambda) Z^T e_1 is formed from the rotations once, at the accepted dimension.
 
 One member at a time keeps its 80 KB kernel matrix (N = 100) in cache for all its Lanczos
-products, and the product reads only P's lower triangle (`_product`, the kernel pass's (for d > 1)
-`agent_envs.dynamics.compiled_kernel.lower_product`: P symmetric, each entry used for its row
-and its column; the kernel pass writes only that triangle); each of the recurrence's
+products, and the product reads only P's lower triangle (`_product`:
+`agent_envs.dynamics.compiled_kernel.lower_product`, which the kernel pass uses too for d > 1;
+P symmetric, each entry used for its row and its column; the kernel pass writes only that
+triangle); each of the recurrence's
 scalings and projections is an element-wise loop over w followed by a dot (`_scale_dot`,
 `_axpy_dot`, `_dot`). A member's result does not depend on the rest of the batch (the native
 vector env relies on it). `fastmath` is on in two functions only, the product and `_dot`: it
