@@ -247,3 +247,99 @@ def test_batched_brownian_increments_equal_each_generators_own_bit_for_bit():
     np.testing.assert_array_equal(out[1], 0.0)
     z = np.random.default_rng(4).standard_normal(shape)
     np.testing.assert_array_equal(alone[0], np.sqrt(dt) * z)
+
+
+def _compiled_noise_or_skip():
+    pytest.importorskip("numba")
+    from agent_envs.simulator import load_compiled_noise
+
+    if not load_compiled_noise():
+        pytest.skip("compiled draws switched off (AGENT_ENVS_NUMBA=0)")
+
+
+@pytest.mark.parametrize("bit_generator", ["PCG64", "MT19937", "Philox", "SFC64", "PCG64DXSM"])
+def test_compiled_draws_are_numpys_bit_for_bit_and_advance_the_generator_alike(bit_generator):
+    """One compiled call over many generators (`GeneratorHandles`) gives each row numpy's own
+    normals from that generator, scaled by sqrt(dt) as numpy scales them, over enough draws to
+    take the ziggurat's rare branches (about 1 % of the draws: the wedges and the tail); each
+    generator's state then continues as numpy's would (the next numpy draw is the same)."""
+    _compiled_noise_or_skip()
+    from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
+
+    kind = getattr(np.random, bit_generator)
+    seeds, rows, dt = (11, 12, 13), [2, 0, 3], 0.05
+    rngs = [np.random.Generator(kind(s)) for s in seeds]
+    twins = [np.random.Generator(kind(s)) for s in seeds]
+    shape = (4, 250_000)  # a million normals with the empty row
+    out = fill_brownian_increments(rngs, rows, np.zeros(shape), dt, GeneratorHandles(rngs))
+    expected = np.zeros(shape)
+    for twin, row in zip(twins, rows, strict=True):
+        expected[row] = twin.standard_normal(shape[1])
+    expected *= np.sqrt(dt)
+    np.testing.assert_array_equal(out, expected)
+    assert np.all(out[1] == 0.0)
+    for rng, twin in zip(rngs, twins, strict=True):
+        assert rng.standard_normal() == twin.standard_normal()
+        assert rng.integers(1 << 62) == twin.integers(1 << 62)
+
+
+def test_compiled_draws_take_the_tail_of_the_ziggurat_as_numpy():
+    """Normals beyond the ziggurat's last rectangle (|z| > 3.654, drawn by the tail branch)
+    are numpy's too: 4e6 draws hold about a thousand of them."""
+    _compiled_noise_or_skip()
+    from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
+
+    rngs = [np.random.default_rng(99)]
+    out = fill_brownian_increments(rngs, [0], np.zeros((1, 4_000_000)), 1.0, GeneratorHandles(rngs))
+    expected = np.random.default_rng(99).standard_normal(4_000_000)
+    assert np.sum(np.abs(expected) > 3.6541528853610088) > 100
+    np.testing.assert_array_equal(out[0], expected)
+
+
+def test_generator_handles_check_their_generators_and_survive_copies():
+    """Handles are used only with their own generators (else ValueError); a copy (deepcopy,
+    pickle) takes this process's addresses again, and draws the copied generators' numbers."""
+    _compiled_noise_or_skip()
+    import copy
+    import pickle
+
+    from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
+
+    rngs = [np.random.default_rng(s) for s in (1, 2)]
+    handles = GeneratorHandles(rngs)
+    assert handles.holds(rngs) and not handles.holds(rngs[::-1])
+    with pytest.raises(ValueError, match="handles"):
+        fill_brownian_increments(rngs[::-1], [0, 1], np.zeros((2, 5)), 1.0, handles)
+    with pytest.raises(ValueError, match="rows"):
+        fill_brownian_increments(rngs, [0], np.zeros((2, 5)), 1.0, handles)
+    with pytest.raises(TypeError, match="Generator"):
+        GeneratorHandles([np.random.RandomState(0)])
+    for clone in (copy.deepcopy, lambda h: pickle.loads(pickle.dumps(h))):
+        twin = clone(handles)
+        assert twin.holds(twin.rngs) and not twin.holds(rngs)
+        assert not np.array_equal(twin.states, handles.states)
+        out = fill_brownian_increments(twin.rngs, [1, 0], np.zeros((2, 5)), 1.0, twin)
+        expected = [np.random.default_rng(s).standard_normal(5) for s in (2, 1)]
+        np.testing.assert_array_equal(out, np.stack(expected))
+
+
+def test_draws_without_the_compiled_call_are_the_same_bits():
+    """The compiled draws switched off, the same handles give the same bits through numpy's
+    one call per generator."""
+    _compiled_noise_or_skip()
+    from agent_envs.simulator import (
+        GeneratorHandles,
+        fill_brownian_increments,
+        use_compiled_noise,
+    )
+
+    def draw(out):
+        rngs = [np.random.default_rng(s) for s in (7, 8)]
+        return fill_brownian_increments(rngs, [1, 0], out, 0.3, GeneratorHandles(rngs))
+
+    fast = draw(np.zeros((2, 40)))
+    before = use_compiled_noise(False)
+    try:
+        np.testing.assert_array_equal(draw(np.zeros((2, 40))), fast)
+    finally:
+        use_compiled_noise(before)

@@ -142,6 +142,24 @@ def test_native_env_in_blocks_matches_sync_vector_env(monkeypatch, kwargs):
     assert truncated >= 6
 
 
+def test_steps_after_a_seeded_reset_draw_from_the_new_generators():
+    """A seeded reset replaces the envs' generators; the next steps' draws (one compiled call
+    over all of them, with numba) come from the new ones: the native env still equals Sync,
+    step for step, and its generator handles follow the generators."""
+    kwargs = {"n_agents": 20, "n_steps": 30}
+    venv, senv = native(3, **kwargs), sync(3, **kwargs)
+    a = np.full((3, 20), 0.25, dtype=np.float32)
+    for seed in (5, 17, [3, 1, 4]):
+        for env in (venv, senv):
+            env.reset(seed=seed)
+        for _ in range(4):
+            got, want = venv.step(a), senv.step(a)
+            for g, w in zip(got[:4], want[:4], strict=True):
+                np.testing.assert_array_equal(g, w)
+        handles = venv.unwrapped._handles
+        assert handles is None or handles.holds(venv.unwrapped.np_randoms)
+
+
 def test_member_by_member_steps_take_one_block(monkeypatch):
     """With numba's kernel pass and Lanczos every pass runs one system at a time, so the envs
     are not split into blocks (which only add Python per block there); without numba, or for

@@ -58,7 +58,7 @@ from agent_envs.envs.observation import (
 )
 from agent_envs.integrators import Integrator, make_integrator
 from agent_envs.integrators.phi_functions import auto_phi_method, load_compiled
-from agent_envs.simulator import fill_brownian_increments
+from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
 from agent_envs.validation import check_seed, real_array
 
 #: Bytes of kernel matrices one block of envs holds at most (numpy passes over the whole batch:
@@ -259,6 +259,7 @@ class SwarmVectorEnv(VectorEnv):
 
         b, p = self.num_envs, self.config.n_paths
         self.np_randoms: list[np.random.Generator | None] = [None] * b
+        self._handles: GeneratorHandles | None = None
         self._positions = self._on_device(np.zeros((b, p, n, d)))
         self._mean_drift = self._on_device(np.zeros((b, n, d)))
         self._targets = self._on_device(np.broadcast_to(params.target_vector, (b, d)).copy())
@@ -321,6 +322,14 @@ class SwarmVectorEnv(VectorEnv):
             rng, _ = seeding.np_random()
             self.np_randoms[i] = rng
         return rng
+
+    def _generator_handles(self) -> GeneratorHandles:
+        """`GeneratorHandles` of the envs' generators (`np_randoms`, all set), built again
+        when one of them was replaced (a seeded reset): all draws of a step in one compiled
+        call (`fill_brownian_increments`)."""
+        if self._handles is None or not self._handles.holds(self.np_randoms):
+            self._handles = GeneratorHandles(self.np_randoms)
+        return self._handles
 
     def _on_device(self, a: np.ndarray) -> Any:
         """A host numpy array in the env's array library, on its device (numpy: itself)."""
@@ -541,12 +550,13 @@ class SwarmVectorEnv(VectorEnv):
         # Each env draws from its own generator, as its single twin does; the batch then
         # moves to the device in one transfer. (After the first reset every env has one.)
         rows = np.flatnonzero(stepping)
-        rngs = (
-            self.np_randoms
-            if every and None not in self.np_randoms
-            else [self._rng(i) for i in rows]
-        )
-        dw = fill_brownian_increments(rngs, rows, np.zeros((b, p, n, d)), self.dt)
+        handles = None
+        if every and None not in self.np_randoms:
+            rngs = self.np_randoms
+            handles = self._generator_handles()
+        else:
+            rngs = [self._rng(i) for i in rows]
+        dw = fill_brownian_increments(rngs, rows, np.zeros((b, p, n, d)), self.dt, handles)
         with arrays.hot_path_threads():  # BLAS on one thread, as the single env's step
             x_next, drift_next, diverged_on_device = self._advance(
                 x, controls, self._on_device(self.times[:, None, None, None]), self._on_device(dw)
