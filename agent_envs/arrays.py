@@ -214,6 +214,28 @@ def aligned_empty(shape: tuple[int, ...], alignment: int = WORKSPACE_ALIGNMENT) 
     return raw[start : start + size].reshape(shape)
 
 
+def sum_axis(a: Any, axis: int) -> Any:
+    """xp.sum(a, axis=axis), the same values bit for bit, for numpy arrays and torch tensors.
+
+    An axis of length 1 (d = 1, one path) is taken as a + 0.0 with the axis dropped (numpy's
+    reduction adds the one entry to its identity: -0.0 becomes +0.0, as here): an element-wise
+    pass instead of a reduction that pays its loop overhead per output element (numpy: about
+    4.5 ns per element of a (256, 1, 100, 1) array, against 0.3 ns)."""
+    xp = namespace(a)
+    if a.shape[axis] == 1:
+        return xp.squeeze(a, axis=axis) + 0.0
+    return xp.sum(a, axis=axis)
+
+
+def mean_axis(a: Any, axis: int) -> Any:
+    """xp.mean(a, axis=axis), the same values bit for bit (the sum over one entry divided by 1
+    is `sum_axis`'s a + 0.0), for numpy arrays and torch tensors."""
+    xp = namespace(a)
+    if a.shape[axis] == 1:
+        return xp.squeeze(a, axis=axis) + 0.0
+    return xp.mean(a, axis=axis)
+
+
 def zeros(shape: tuple[int, ...], like: Any) -> Any:
     """Zeros of `shape` in the library, device and dtype of `like`."""
     if is_torch(like):

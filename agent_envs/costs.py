@@ -30,10 +30,9 @@ def running_cost(x: Any, u: Any, target: Any, gamma: float) -> Any:
 
 def agent_running_cost(x: Any, u: Any, target: Any, gamma: float) -> Any:
     """Per-agent term |x_k - xbar|^2 + gamma |u_k|^2: shape (..., N)."""
-    xp = arrays.namespace(x, u)
-    cost = xp.sum((x - _target_like(target, x)) ** 2, axis=-1)
+    cost = arrays.sum_axis((x - _target_like(target, x)) ** 2, -1)
     if u is not None:
-        cost = cost + gamma * xp.sum(u * u, axis=-1)
+        cost = cost + gamma * arrays.sum_axis(u * u, -1)
     return cost
 
 

@@ -320,8 +320,9 @@ def diverged_paths(x: Any, threshold: float = DEFAULT_DIVERGENCE_THRESHOLD) -> A
     In the library of x (a bool array of the leading shape).
     """
     xp = arrays.namespace(x)
-    bad = ~xp.isfinite(x) | (xp.abs(x) > threshold)
-    return xp.any(bad, axis=(-2, -1))
+    # |x| <= threshold is False for NaN and inf (and beyond the threshold): one comparison for
+    # both checks, three passes over x fewer than isfinite and > (the same flags)
+    return ~xp.all(xp.abs(x) <= threshold, axis=(-2, -1))
 
 
 def _control_at(control: ControlSpec, n: int, t: float, x: Any, name: str) -> Any:

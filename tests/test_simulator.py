@@ -343,3 +343,27 @@ def test_draws_without_the_compiled_call_are_the_same_bits():
         np.testing.assert_array_equal(draw(np.zeros((2, 40))), fast)
     finally:
         use_compiled_noise(before)
+
+
+@pytest.mark.parametrize("torch_too", [False, True])
+def test_diverged_paths_flags_non_finite_and_beyond_threshold(torch_too):
+    """A path diverged when some coordinate is NaN, +-inf or |x| > threshold (exactly at the
+    threshold it has not), per leading index; numpy and torch alike."""
+    from agent_envs.simulator import diverged_paths
+
+    x = np.zeros((7, 3, 2))
+    x[1, 0, 1] = np.nan
+    x[2, 2, 0] = np.inf
+    x[3, 1, 1] = -np.inf
+    x[4, 0, 0] = 10.0  # at the threshold
+    x[5, 0, 0] = -np.nextafter(10.0, 11.0)  # just beyond it
+    x[6] = 9.9
+    want = [False, True, True, True, False, True, False]
+    if torch_too:
+        torch = pytest.importorskip("torch")
+        got = diverged_paths(torch.as_tensor(x), 10.0).numpy()
+    else:
+        got = diverged_paths(x, 10.0)
+    np.testing.assert_array_equal(got, want)
+    batched = diverged_paths(np.stack([x, x[::-1]]), 10.0)
+    np.testing.assert_array_equal(np.asarray(batched), [want, want[::-1]])

@@ -375,9 +375,8 @@ def mean_interaction_drift(model: SwarmModel, x: Any) -> Any:
     """
     if isinstance(x, np.ndarray):
         x.flags.writeable = False
-    xp = arrays.namespace(x)
     with _quiet_overflow(x):
-        return xp.mean(model.interaction_drift(x), axis=-3)
+        return arrays.mean_axis(model.interaction_drift(x), -3)
 
 
 def mean_running_cost(x: Any, control: Any, target: Any, gamma: float) -> Any:
@@ -386,9 +385,8 @@ def mean_running_cost(x: Any, control: Any, target: Any, gamma: float) -> Any:
     x (..., P, N, d), control (..., N, d) (the same for every path), target (..., d);
     returns shape (...). Batched over leading (env) axes; numpy arrays or torch tensors.
     """
-    xp = arrays.namespace(x)
     per_path = running_cost(x, control[..., None, :, :], target[..., None, None, :], gamma)
-    return xp.mean(per_path, axis=-1)
+    return arrays.mean_axis(per_path, -1)
 
 
 def advance_paths(

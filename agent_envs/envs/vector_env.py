@@ -347,7 +347,7 @@ class SwarmVectorEnv(VectorEnv):
 
     def _observations(self) -> Any:
         return global_observation(
-            self._xp.mean(self._positions, axis=-3),
+            arrays.mean_axis(self._positions, -3),
             self._mean_drift,
             self._targets,
             self.step_index / self.config.n_steps,
