@@ -219,8 +219,9 @@ def sum_axis(a: Any, axis: int) -> Any:
 
     An axis of length 1 (d = 1, one path) is taken as a + 0.0 with the axis dropped (numpy's
     reduction adds the one entry to its identity: -0.0 becomes +0.0, as here): an element-wise
-    pass instead of a reduction that pays its loop overhead per output element (numpy: about
-    4.5 ns per element of a (256, 1, 100, 1) array, against 0.3 ns)."""
+    pass instead of a reduction that pays its loop overhead per output element (on a (256, 1,
+    100, 1) array: 24 us for numpy's sum over the last axis, 48 us for its mean over the
+    paths, 13 us as a + 0.0)."""
     xp = namespace(a)
     if a.shape[axis] == 1:
         return xp.squeeze(a, axis=axis) + 0.0
