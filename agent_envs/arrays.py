@@ -214,8 +214,15 @@ def aligned_empty(shape: tuple[int, ...], alignment: int = WORKSPACE_ALIGNMENT) 
     return raw[start : start + size].reshape(shape)
 
 
+def _real_floating(a: Any) -> bool:
+    if is_torch(a):
+        return bool(a.is_floating_point())
+    return getattr(a, "dtype", None) is not None and a.dtype.kind == "f"
+
+
 def sum_axis(a: Any, axis: int) -> Any:
-    """xp.sum(a, axis=axis), the same values bit for bit, for numpy arrays and torch tensors.
+    """xp.sum(a, axis=axis), the same values bit for bit and the same dtype, for numpy arrays
+    and torch tensors (real floating ones take the path below; others xp.sum itself).
 
     An axis of length 1 (d = 1, one path) is taken as a + 0.0 with the axis dropped (numpy's
     reduction adds the one entry to its identity: -0.0 becomes +0.0, as here): an element-wise
@@ -223,18 +230,26 @@ def sum_axis(a: Any, axis: int) -> Any:
     100, 1) array: 24 us for numpy's sum over the last axis, 48 us for its mean over the
     paths, 13 us as a + 0.0)."""
     xp = namespace(a)
-    if a.shape[axis] == 1:
-        return xp.squeeze(a, axis=axis) + 0.0
+    if a.shape[axis] == 1 and _real_floating(a):
+        return _plus_zero(xp.squeeze(a, axis=axis))
     return xp.sum(a, axis=axis)
 
 
 def mean_axis(a: Any, axis: int) -> Any:
-    """xp.mean(a, axis=axis), the same values bit for bit (the sum over one entry divided by 1
-    is `sum_axis`'s a + 0.0), for numpy arrays and torch tensors."""
+    """xp.mean(a, axis=axis), the same values bit for bit and the same dtype (the sum over one
+    entry divided by 1 is `sum_axis`'s a + 0.0), for numpy arrays and torch tensors (real
+    floating ones; others xp.mean itself)."""
     xp = namespace(a)
-    if a.shape[axis] == 1:
-        return xp.squeeze(a, axis=axis) + 0.0
+    if a.shape[axis] == 1 and _real_floating(a):
+        return _plus_zero(xp.squeeze(a, axis=axis))
     return xp.mean(a, axis=axis)
+
+
+def _plus_zero(a: Any) -> Any:
+    """a + 0 in a's own dtype, a new array (numpy 1.x would promote a 0-d float32 + 0.0)."""
+    if isinstance(a, np.ndarray):
+        return np.add(a, 0.0, dtype=a.dtype)
+    return a + 0.0
 
 
 def zeros(shape: tuple[int, ...], like: Any) -> Any:

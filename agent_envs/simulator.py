@@ -17,7 +17,9 @@ and the control (the stepping is functional: no in-place writes).
 from __future__ import annotations
 
 import ctypes
+import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -180,31 +182,58 @@ _compiled_noise: Any = None
 
 def load_compiled_noise() -> bool:
     """Whether `fill_brownian_increments` draws a batch in one compiled call
-    (`agent_envs.compiled_noise`, needs numba); loads it on the first call and checks there,
-    on two fixed-seed generators, that its normals and the generators' states after them are
-    numpy's bit for bit (False where they are not: the compiled draws are then never used)."""
+    (`agent_envs.compiled_noise`, needs numba); loads it on the first call (the native vector
+    env calls this when it is made, not in a step) and checks there, on two fixed-seed
+    generators, that its normals and the generators' states after them are numpy's bit for
+    bit. False where numba is missing or switched off (``AGENT_ENVS_NUMBA=0``), and, with a
+    warning, where the check fails or the module does not compile: the compiled draws are then
+    never used."""
     global _compiled_noise
     if _compiled_noise is None:
         module = import_compiled("agent_envs.compiled_noise")
         if module is not False:
-            rngs = [np.random.default_rng(seed) for seed in (0, 1)]
-            twins = [np.random.default_rng(seed) for seed in (0, 1)]
-            out = np.zeros((3, 4096))
-            handles = GeneratorHandles(rngs)
-            module.fill_standard_normal(
-                handles.states, handles.next_uint64, handles.next_double,
-                np.array([1, 0]), np.array([2, 0]), out, 1.0,
-            )  # fmt: skip
-            expected = np.stack(
-                [twins[0].standard_normal(4096), np.zeros(4096), twins[1].standard_normal(4096)]
-            )
-            same_states = all(
-                a.standard_normal() == b.standard_normal() for a, b in zip(rngs, twins, strict=True)
-            )
-            if not (np.array_equal(out, expected) and same_states):
+            try:
+                same = _draws_equal_numpys(module)
+            except Exception as exc:  # a numba or llvmlite that cannot build it: numpy's calls
+                warnings.warn(
+                    f"agent_envs.compiled_noise did not load ({type(exc).__name__}: {exc}); "
+                    "the native vector env draws with one numpy call per env",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+                same = None
+            if same is False:
+                warnings.warn(
+                    "agent_envs.compiled_noise draws differ from numpy's on this install; the "
+                    "native vector env draws with one numpy call per env",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+            if not same:
                 module = False
         _compiled_noise = module
     return _compiled_noise is not False
+
+
+def _draws_equal_numpys(module: Any) -> bool:
+    """Whether `module.fill_standard_normal` gives numpy's normals and leaves the generators'
+    states as numpy's calls leave them (two fixed-seed generators, 4096 draws each: about 50
+    through the ziggurat's wedges)."""
+    rngs = [np.random.default_rng(seed) for seed in (0, 1)]
+    twins = [np.random.default_rng(seed) for seed in (0, 1)]
+    out = np.zeros((3, 4096))
+    handles = GeneratorHandles(rngs)
+    module.fill_standard_normal(
+        handles.states, handles.next_uint64, handles.next_double,
+        np.array([1, 0]), np.array([2, 0]), out, 1.0,
+    )  # fmt: skip
+    expected = np.stack(
+        [twins[0].standard_normal(4096), np.zeros(4096), twins[1].standard_normal(4096)]
+    )
+    same_states = all(
+        a.bit_generator.state == b.bit_generator.state for a, b in zip(rngs, twins, strict=True)
+    )
+    return bool(np.array_equal(out, expected) and same_states)
 
 
 def use_compiled_noise(enabled: bool) -> bool:
@@ -222,32 +251,48 @@ def _function_address(function: Any) -> int:
     return int(ctypes.cast(function, ctypes.c_void_p).value or 0)
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
 class GeneratorHandles:
     """The C handles of numpy generators, for `fill_brownian_increments`'s compiled draws: per
     generator, the address of its bit generator's state and of its ``next_uint64`` and
-    ``next_double`` functions (numpy's `BitGenerator.ctypes`), as (G,) uintp arrays.
+    ``next_double`` functions (numpy's `BitGenerator.ctypes`), as read-only (G,) uintp arrays.
 
-    It keeps the generators themselves (`rngs`), so the addresses stay valid as long as it
-    lives; `fill_brownian_increments` uses it only for the same generators in the same order
-    (a generator replaced, e.g. by a seeded reset, needs new handles). Building one costs
-    about 2 us per generator (the native vector env builds them when its generators change)."""
+    It keeps the generators themselves (`rngs`, a tuple fixed at construction), so the
+    addresses stay valid as long as it lives; `fill_brownian_increments` uses it only for the
+    same generators in the same order (a generator replaced, e.g. by a seeded reset, needs new
+    handles; the native vector env builds them again then). A copy (pickle, deepcopy) takes
+    this process's addresses anew. numpy holds a bit generator's lock while it draws; the
+    compiled draws do not, so the generators must not be used from another thread during
+    `fill_brownian_increments`. Building handles costs about 2 us per generator."""
+
+    __slots__ = ("next_double", "next_uint64", "rngs", "sources", "states")
 
     def __init__(self, rngs: Sequence[np.random.Generator]) -> None:
-        self.rngs = list(rngs)
-        for rng in self.rngs:
+        rngs = tuple(rngs)
+        for rng in rngs:
             if not isinstance(rng, np.random.Generator):
                 raise TypeError(
                     f"rngs must be numpy.random.Generator objects, got {type(rng).__name__}"
                 )
-        handles = [rng.bit_generator.ctypes for rng in self.rngs]
-        self.states = np.array([h.state_address for h in handles], dtype=np.uintp)
-        self.next_uint64 = np.array(
-            [_function_address(h.next_uint64) for h in handles], dtype=np.uintp
+        handles = [rng.bit_generator.ctypes for rng in rngs]
+        self.rngs: tuple[np.random.Generator, ...] = rngs
+        self.states = _read_only(np.array([h.state_address for h in handles], dtype=np.uintp))
+        self.next_uint64 = _read_only(
+            np.array([_function_address(h.next_uint64) for h in handles], dtype=np.uintp)
         )
-        self.next_double = np.array(
-            [_function_address(h.next_double) for h in handles], dtype=np.uintp
+        self.next_double = _read_only(
+            np.array([_function_address(h.next_double) for h in handles], dtype=np.uintp)
         )
-        self.sources = np.arange(len(self.rngs))
+        self.sources = _read_only(np.arange(len(rngs)))
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if hasattr(self, name):  # (each attribute is set once, in __init__)
+            raise AttributeError(f"GeneratorHandles.{name} cannot be changed; build new handles")
+        object.__setattr__(self, name, value)
 
     def __reduce__(self) -> tuple[Any, ...]:
         # the addresses belong to this process: a copy (pickle, deepcopy) takes new ones
@@ -255,7 +300,7 @@ class GeneratorHandles:
 
     def holds(self, rngs: Sequence[np.random.Generator]) -> bool:
         """Whether these handles are for exactly `rngs` (the same objects, in order)."""
-        return self.rngs == list(rngs)
+        return self.rngs == tuple(rngs)
 
 
 def fill_brownian_increments(
@@ -273,20 +318,26 @@ def fill_brownian_increments(
     each generator and the same product, so the same bits as
     `brownian_increments(rngs[k], out[i].shape, dt)` (the native vector env's rows equal their
     single twins', tests/test_vector_env.py), without one temporary and one product per row.
-    With `handles` (`GeneratorHandles` of `rngs`) and numba, the whole batch is one compiled
-    call (`agent_envs.compiled_noise`: numpy's algorithm on the same bit generators, the same
-    bits; 0.5 against 2.1 us per generator for 100 normals), else one numpy call per row."""
-    compiled = out.dtype == np.float64 and out.flags.c_contiguous
-    if handles is not None and compiled and load_compiled_noise():
+    With `handles` (`GeneratorHandles` of `rngs`, else ValueError) and numba, the whole batch
+    is one compiled call (`agent_envs.compiled_noise`: numpy's algorithm on the same bit
+    generators, the same bits; 0.5 against 2.1 us per generator for 100 normals; the
+    generators must not be used from another thread meanwhile), else one numpy call per row.
+    A row outside `out` raises IndexError either way."""
+    if handles is not None:
         if not handles.holds(rngs):
             raise ValueError("handles must be the GeneratorHandles of these rngs, in order")
         if len(rows) != len(handles.rngs):
             raise ValueError(f"rows must have one entry per generator, got {len(rows)}")
-        _compiled_noise.fill_standard_normal(
-            handles.states, handles.next_uint64, handles.next_double, handles.sources,
-            np.asarray(rows, dtype=np.int64), out.reshape(out.shape[0], -1), float(np.sqrt(dt)),
-        )  # fmt: skip
-        return out
+        if out.dtype == np.float64 and out.flags.c_contiguous and load_compiled_noise():
+            index = np.asarray(rows, dtype=np.int64).reshape(-1)
+            size = out.shape[0]
+            if index.size and not (index.min() >= -size and index.max() < size):
+                raise IndexError(f"rows must index the {size} rows of out, got {rows!r}")
+            _compiled_noise.fill_standard_normal(
+                handles.states, handles.next_uint64, handles.next_double, handles.sources,
+                index % size if size else index, out.reshape(size, -1), float(np.sqrt(dt)),
+            )  # fmt: skip
+            return out
     for rng, row in zip(rngs, rows, strict=True):
         rng.standard_normal(out=out[row])
     out *= np.sqrt(dt)
@@ -320,9 +371,12 @@ def diverged_paths(x: Any, threshold: float = DEFAULT_DIVERGENCE_THRESHOLD) -> A
     In the library of x (a bool array of the leading shape).
     """
     xp = arrays.namespace(x)
-    # |x| <= threshold is False for NaN and inf (and beyond the threshold): one comparison for
-    # both checks, three passes over x fewer than isfinite and > (the same flags)
-    return ~xp.all(xp.abs(x) <= threshold, axis=(-2, -1))
+    if math.isfinite(threshold):
+        # |x| <= threshold is False for NaN and inf (and beyond the threshold): one comparison
+        # for both checks, three passes over x fewer than isfinite and >, the same flags
+        return ~xp.all(xp.abs(x) <= threshold, axis=(-2, -1))
+    bad = ~xp.isfinite(x) | (xp.abs(x) > threshold)
+    return xp.any(bad, axis=(-2, -1))
 
 
 def _control_at(control: ControlSpec, n: int, t: float, x: Any, name: str) -> Any:

@@ -232,15 +232,20 @@ def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     """One Lanczos dimension's products at the paper setting, as the env's step takes them:
     the compiled symmetric product (`lower_product`, P's lower triangle) of each of the
     `n_paths` members' P, on a cache-line-aligned workspace (`aligned_empty`), the members in
-    one compiled loop; where numba or those functions are missing (trees before them), one
-    numpy product rows (n_paths, 1, n) @ P (n_paths, n, n)."""
+    one compiled loop; where numba is missing or switched off, or those functions are (trees
+    before them), one numpy product rows (n_paths, 1, n) @ P (n_paths, n, n), as the steps."""
     p_full = np.random.default_rng(0).uniform(size=(n_paths, n, n))
     try:
         from numba import njit
 
         from agent_envs.arrays import aligned_empty
         from agent_envs.dynamics.compiled_kernel import lower_product
+        from agent_envs.dynamics.laplacian import load_compiled_kernel
+
+        compiled = load_compiled_kernel()  # (False with AGENT_ENVS_NUMBA=0: numpy's steps)
     except ImportError:
+        compiled = False
+    if not compiled:
         rows = np.ones((n_paths, 1, n))
         return lambda: rows @ p_full
 

@@ -43,10 +43,32 @@ def test_reductions_over_one_entry_return_new_arrays():
     assert arrays.sum_axis(np.ones((2, 1, 3), np.float32), 1).dtype == np.float32
 
 
-def test_reductions_on_torch_equal_torchs_own():
-    torch = pytest.importorskip("torch")
-    a = torch.tensor([[[-0.0], [2.5], [float("nan")]]], dtype=torch.float64)
+@pytest.mark.parametrize("dtype", [np.float32, np.int64, np.uint8, np.bool_])
+def test_reductions_of_other_dtypes_are_numpys_own(dtype):
+    """float32 keeps its dtype on the element-wise path; integers and booleans take numpy's
+    reduction itself (their sums are integers, exact beyond 2^53)."""
+    a = np.array([[[-0.0], [2.5], [7.0]]]).astype(dtype)
+    if dtype is np.int64:
+        a[0, 1, 0] = 2**53 + 1
     for axis in (-1, 0, 1):
-        assert torch.equal(arrays.sum_axis(a, axis).isnan(), a.sum(dim=axis).isnan())
-        torch.testing.assert_close(arrays.sum_axis(a, axis), a.sum(dim=axis), equal_nan=True)
-        torch.testing.assert_close(arrays.mean_axis(a, axis), a.mean(dim=axis), equal_nan=True)
+        for mine, theirs in ((arrays.sum_axis, np.sum), (arrays.mean_axis, np.mean)):
+            got, want = np.asarray(mine(a, axis)), np.asarray(theirs(a, axis=axis))
+            assert got.dtype == want.dtype
+            if got.dtype.kind == "f":
+                _same_bits(got.astype(np.float64), want.astype(np.float64))
+            else:
+                np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_reductions_on_torch_equal_torchs_own_bit_for_bit(dtype):
+    torch = pytest.importorskip("torch")
+    as_int = {"float64": torch.int64, "float32": torch.int32}[dtype]
+    a = torch.tensor([[[-0.0], [2.5], [float("nan")]]], dtype=getattr(torch, dtype))
+    for axis in (-1, 0, 1):
+        for mine, theirs in ((arrays.sum_axis, torch.sum), (arrays.mean_axis, torch.mean)):
+            got, want = mine(a, axis), theirs(a, dim=axis)
+            assert got.dtype == want.dtype
+            assert torch.equal(got.view(as_int), want.view(as_int))  # signed zeros, NaN bits
+    ints = torch.tensor([[3], [4]])
+    assert torch.equal(arrays.sum_axis(ints, -1), ints.sum(dim=-1))

@@ -249,6 +249,15 @@ def test_batched_brownian_increments_equal_each_generators_own_bit_for_bit():
     np.testing.assert_array_equal(alone[0], np.sqrt(dt) * z)
 
 
+def _same_state(a, b) -> bool:
+    """Bit generator states (dicts of ints, strings and arrays) equal entry by entry."""
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same_state(a[k], b[k]) for k in a)
+    if isinstance(a, np.ndarray):
+        return np.array_equal(a, b)
+    return a == b
+
+
 def _compiled_noise_or_skip():
     pytest.importorskip("numba")
     from agent_envs.simulator import load_compiled_noise
@@ -279,8 +288,8 @@ def test_compiled_draws_are_numpys_bit_for_bit_and_advance_the_generator_alike(b
     np.testing.assert_array_equal(out, expected)
     assert np.all(out[1] == 0.0)
     for rng, twin in zip(rngs, twins, strict=True):
+        assert _same_state(rng.bit_generator.state, twin.bit_generator.state)
         assert rng.standard_normal() == twin.standard_normal()
-        assert rng.integers(1 << 62) == twin.integers(1 << 62)
 
 
 def test_compiled_draws_take_the_tail_of_the_ziggurat_as_numpy():
@@ -314,6 +323,20 @@ def test_generator_handles_check_their_generators_and_survive_copies():
         fill_brownian_increments(rngs, [0], np.zeros((2, 5)), 1.0, handles)
     with pytest.raises(TypeError, match="Generator"):
         GeneratorHandles([np.random.RandomState(0)])
+    with pytest.raises(AttributeError, match="cannot be changed"):
+        handles.rngs = tuple(rngs[::-1])
+    with pytest.raises(ValueError, match="read-only"):
+        handles.states[0] = 0
+    others = [np.random.default_rng(s) for s in (1, 2)]
+    other_handles = GeneratorHandles(others)
+    for bad in ([2, 0], [0, -3]):  # outside the 2 rows of out: never a write past it
+        base = np.zeros((4, 5))
+        with pytest.raises(IndexError, match="rows"):
+            fill_brownian_increments(others, bad, base[:2], 1.0, other_handles)
+        assert not base.any()
+    negative = fill_brownian_increments(others, [-1, 0], np.zeros((2, 5)), 1.0, other_handles)
+    expected = [np.random.default_rng(s).standard_normal(5) for s in (2, 1)]
+    np.testing.assert_array_equal(negative, np.stack(expected))
     for clone in (copy.deepcopy, lambda h: pickle.loads(pickle.dumps(h))):
         twin = clone(handles)
         assert twin.holds(twin.rngs) and not twin.holds(rngs)
@@ -341,8 +364,35 @@ def test_draws_without_the_compiled_call_are_the_same_bits():
     before = use_compiled_noise(False)
     try:
         np.testing.assert_array_equal(draw(np.zeros((2, 40))), fast)
+        rngs = [np.random.default_rng(1)]
+        with pytest.raises(ValueError, match="handles"):  # checked with or without numba
+            fill_brownian_increments(rngs, [0], np.zeros((1, 3)), 1.0, GeneratorHandles([]))
     finally:
         use_compiled_noise(before)
+
+
+def test_compiled_draws_that_differ_from_numpys_are_switched_off(monkeypatch):
+    """The load-time check: a module whose draws differ from numpy's (or that fails to build)
+    is never used, with a RuntimeWarning, and the draws are numpy's calls."""
+    _compiled_noise_or_skip()
+    from agent_envs import simulator
+
+    def failing(module):
+        raise RuntimeError("no codegen")
+
+    for check, message in ((lambda module: False, "differ"), (failing, "did not load")):
+        monkeypatch.setattr(simulator, "_draws_equal_numpys", check)
+        monkeypatch.setattr(simulator, "_compiled_noise", None)
+        with pytest.warns(RuntimeWarning, match=message):
+            assert simulator.load_compiled_noise() is False
+        rngs = [np.random.default_rng(3)]
+        out = simulator.fill_brownian_increments(
+            rngs, [0], np.zeros((1, 6)), 1.0, simulator.GeneratorHandles(rngs)
+        )
+        np.testing.assert_array_equal(out[0], np.random.default_rng(3).standard_normal(6))
+    monkeypatch.undo()
+    simulator.use_compiled_noise(True)
+    assert simulator.load_compiled_noise()
 
 
 @pytest.mark.parametrize("torch_too", [False, True])
@@ -367,3 +417,7 @@ def test_diverged_paths_flags_non_finite_and_beyond_threshold(torch_too):
     np.testing.assert_array_equal(got, want)
     batched = diverged_paths(np.stack([x, x[::-1]]), 10.0)
     np.testing.assert_array_equal(np.asarray(batched), [want, want[::-1]])
+    # an infinite threshold: only non-finite coordinates diverge
+    np.testing.assert_array_equal(
+        np.asarray(diverged_paths(x, np.inf)), [False, True, True, True, False, False, False]
+    )

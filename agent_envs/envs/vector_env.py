@@ -58,7 +58,11 @@ from agent_envs.envs.observation import (
 )
 from agent_envs.integrators import Integrator, make_integrator
 from agent_envs.integrators.phi_functions import auto_phi_method, load_compiled
-from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
+from agent_envs.simulator import (
+    GeneratorHandles,
+    fill_brownian_increments,
+    load_compiled_noise,
+)
 from agent_envs.validation import check_seed, real_array
 
 #: Bytes of kernel matrices one block of envs holds at most (numpy passes over the whole batch:
@@ -244,6 +248,7 @@ class SwarmVectorEnv(VectorEnv):
         self._block_views: list[Any] = []
         self._block_views_of: Any = None
         arrays.prepare_hot_path()
+        load_compiled_noise()  # (numba's load when the env is made, not in its first step)
         self.dt = self.config.dt
         rows = action_rows(self.config.action_basis, n)
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(rows * d,), dtype=np.float32)
