@@ -36,6 +36,11 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
    Brownian draws and of the integrator's batched step, the device memory peak; against the
    numpy native env on this host's CPU at B <= `--device-cpu-envs` (this tree only).
 
+6. Where a step's time goes, call by call (this tree only): `time.perf_counter` around the
+   env step's calls (the compiled calls charged to the call they ran in), the paper single env
+   with SERB and with EM (20 episodes each, alternating) and the native vector env at B = 64,
+   1 path; SERB's compiled call at an episode's first three steps against later ones.
+
 `--baseline-python PATH` runs parts 1, 3 and 4 (and 2) again with another interpreter, e.g. a
 virtual environment with an older checkout of the project installed, and prints both (the
 "before" column): the workers only use public APIs that existed before the workspaces. For the
@@ -809,6 +814,136 @@ def worker_device(
     return out
 
 
+class _CallTimes:
+    """Inclusive seconds per wrapped call, and the compiled calls' seconds charged to the
+    innermost wrapped call they ran in (`compiled in <key>`): a stack of the open calls."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self.stack: list[str] = []
+        self.undo: list[tuple[Any, str, Any]] = []
+
+    def wrap(self, owner: Any, name: str, key: str, compiled: bool = False) -> None:
+        fn = getattr(owner, name, None)
+        if fn is None:
+            return
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            self.stack.append(key)
+            start = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent = time.perf_counter() - start
+                self.stack.pop()
+                self.seconds[key] = self.seconds.get(key, 0.0) + spent
+                if compiled and self.stack:
+                    inner = f"compiled in {self.stack[-1]}"
+                    self.seconds[inner] = self.seconds.get(inner, 0.0) + spent
+
+        self.undo.append((owner, name, fn))
+        setattr(owner, name, timed)
+
+    def restore(self) -> None:
+        for owner, name, fn in reversed(self.undo):
+            setattr(owner, name, fn)
+        self.undo.clear()
+
+
+def _wrap_compiled(times: _CallTimes) -> None:
+    from agent_envs.dynamics import laplacian
+    from agent_envs.integrators import phi_functions
+
+    if laplacian.load_compiled_kernel():
+        times.wrap(laplacian._compiled_kernel, "cucker_smale_drift", "compiled", compiled=True)
+    if phi_functions.load_compiled():
+        times.wrap(phi_functions._compiled, "frozen_advance", "compiled", compiled=True)
+
+
+def worker_accounting(episodes: int = 20, batch: int = 64, batch_steps: int = 300) -> dict:
+    """Where an env step's time goes, call by call (this tree; `time.perf_counter` around each
+    call, about 0.3 us each): the paper single env, SERB and EM episodes alternating, per step,
+    and the compiled call of SERB's steps 0-2 against steps >= 10; the native vector env at
+    B = `batch`, 1 path, SERB, per batch step. Microseconds."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401
+    from agent_envs.envs import ENV_ID, episode, vector_env
+
+    out: dict[str, float] = {}
+    envs, actions = {}, {}
+    for integrator in ("serb", "em"):
+        env = gym.make(ENV_ID, **env_kwargs("paper", integrator)).unwrapped
+        envs[integrator] = env
+        actions[integrator] = (
+            np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape).astype(np.float32)
+        )
+    timers = {k: _CallTimes() for k in envs}
+    per_step = {k: np.zeros((episodes, 50)) for k in envs}
+    totals = dict.fromkeys(envs, 0.0)
+    for ep in range(episodes + 2):
+        for integrator, env in envs.items():
+            times = timers[integrator]
+            model, stepper = env.episode.model, env.episode.integrator
+            times.wrap(episode, "advance_paths", "advance_paths")
+            times.wrap(stepper, "step", "integrator step")
+            times.wrap(episode, "diverged_paths", "diverged_paths")
+            times.wrap(episode, "mean_interaction_drift", "mean drift")
+            for name in ("drift_and_linearization", "adopt_linearization", "drift"):
+                times.wrap(model, name, name)
+            _wrap_compiled(times)
+            before_reset = dict(times.seconds)
+            env.reset(seed=ep)
+            times.seconds = before_reset  # (only the steps' calls count)
+            for k in range(env.config.n_steps):
+                before = dict(times.seconds) if ep >= 2 else None
+                start = time.perf_counter()
+                env.step(actions[integrator])
+                spent = time.perf_counter() - start
+                if before is None:
+                    continue
+                totals[integrator] += spent
+                compiled = times.seconds.get("compiled", 0.0) - before.get("compiled", 0.0)
+                per_step[integrator][ep - 2, k] = compiled
+            times.restore()
+            if ep < 2:
+                times.seconds.clear()
+    for integrator, times in timers.items():
+        n = episodes * 50
+        out[f"{integrator}/total"] = 1e6 * totals[integrator] / n
+        for key, value in times.seconds.items():
+            out[f"{integrator}/{key}"] = 1e6 * value / n
+        m = per_step[integrator]
+        out[f"{integrator}/compiled steps 0-2"] = 1e6 * float(np.median(m[:, :3]))
+        out[f"{integrator}/compiled steps 10-49"] = 1e6 * float(np.median(m[:, 10:]))
+
+    kwargs = env_kwargs("paper", "serb", n_paths=1)
+    native = gym.make_vec(
+        ENV_ID, num_envs=batch, vectorization_mode="vector_entry_point", **kwargs
+    ).unwrapped
+    native.reset(seed=0)
+    acts = np.random.default_rng(1).uniform(-0.5, 0.5, (batch, 100)).astype(np.float32)
+    for _ in range(100):
+        native.step(acts)
+    times = _CallTimes()
+    for name, key in (("_controls", "actions and controls"), ("_observations", "observation"),
+                      ("_state_info", "info arrays"), ("_advance", "advance")):  # fmt: skip
+        times.wrap(native, name, key)
+    times.wrap(vector_env, "mean_running_cost", "running cost")
+    times.wrap(vector_env, "fill_brownian_increments", "draws")
+    times.wrap(episode, "diverged_paths", "diverged_paths")
+    times.wrap(episode, "mean_interaction_drift", "mean drift")
+    _wrap_compiled(times)
+    start = time.perf_counter()
+    for _ in range(batch_steps):
+        native.step(acts)
+    out["native/total"] = 1e6 * (time.perf_counter() - start) / batch_steps
+    times.restore()
+    for key, value in times.seconds.items():
+        out[f"native/{key}"] = 1e6 * value / batch_steps
+    return out
+
+
 WORKERS = {
     "cold": worker_cold,
     "ratios": worker_ratios,
@@ -816,6 +951,7 @@ WORKERS = {
     "vector": worker_vector,
     "ppo": worker_ppo,
     "device": worker_device,
+    "accounting": worker_accounting,
 }
 
 
@@ -1106,6 +1242,41 @@ def main() -> int:
         )
         if b:
             print(f"\nPPO after / before: {a['steps_per_s'] / b['steps_per_s']:.2f}x")
+        print()
+
+    if "accounting" not in args.skip:
+        acc = run_worker(sys.executable, "accounting")
+        print("## 6. Where a step's time goes, call by call (this tree)\n")
+        print("Paper single env, SERB and EM episodes alternating, microseconds per env step")
+        print("(inclusive: a call's time contains the calls inside it):\n")
+        print("| call | SERB | EM |")
+        print("|---|---|---|")
+        keys = ("total", "advance_paths", "integrator step", "compiled in integrator step",
+                "mean drift", "compiled in mean drift", "diverged_paths",
+                "drift_and_linearization", "adopt_linearization", "drift")  # fmt: skip
+        for key in keys:
+            cells = [acc.get(f"{k}/{key}") for k in ("serb", "em")]
+            if any(c is not None for c in cells):
+                shown = " | ".join("" if c is None else f"{c:.1f}" for c in cells)
+                print(f"| {key} | {shown} |")
+        if "serb/compiled" in acc:
+            python = {k: acc[f"{k}/total"] - acc[f"{k}/compiled"] for k in ("serb", "em")}
+            print(
+                f"\nCompiled: SERB {acc['serb/compiled']:.0f}, EM {acc['em/compiled']:.0f} us per"
+                f" step ({(acc['serb/compiled'] - acc['em/compiled']) / 20:.1f} us more per"
+                f" member); SERB's whole compiled call {acc['serb/compiled steps 0-2']:.0f} us at"
+                f" an episode's steps 0-2 against {acc['serb/compiled steps 10-49']:.0f} at steps"
+                f" 10-49 (medians). Interpreter and numpy: SERB {python['serb']:.0f}, EM"
+                f" {python['em']:.0f} us per step."
+            )
+        print("\nNative vector env, B = 64, 1 path, SERB, microseconds per batch step:\n")
+        print("| call | us |")
+        print("|---|---|")
+        for key in ("total", "advance", "compiled in advance", "diverged_paths", "mean drift",
+                    "draws", "actions and controls", "running cost", "observation",
+                    "info arrays"):  # fmt: skip
+            if f"native/{key}" in acc:
+                print(f"| {key} | {acc[f'native/{key}']:.1f} |")
         print()
 
     if args.device and "device" not in args.skip:
