@@ -229,27 +229,24 @@ def sum_axis(a: Any, axis: int) -> Any:
     pass instead of a reduction that pays its loop overhead per output element (on a (256, 1,
     100, 1) array: 24 us for numpy's sum over the last axis, 48 us for its mean over the
     paths, 13 us as a + 0.0)."""
-    xp = namespace(a)
-    if a.shape[axis] == 1 and _real_floating(a):
-        return _plus_zero(xp.squeeze(a, axis=axis))
-    return xp.sum(a, axis=axis)
+    return _reduce_axis(a, axis, "sum")
 
 
 def mean_axis(a: Any, axis: int) -> Any:
     """xp.mean(a, axis=axis), the same values bit for bit and the same dtype (the sum over one
     entry divided by 1 is `sum_axis`'s a + 0.0), for numpy arrays and torch tensors (real
     floating ones; others xp.mean itself)."""
+    return _reduce_axis(a, axis, "mean")
+
+
+def _reduce_axis(a: Any, axis: int, reduction: str) -> Any:
+    """xp.sum or xp.mean (`reduction`) over `axis`; over one entry of a real floating array,
+    that entry + 0 in a's own dtype, a new array (numpy 1.x would promote a 0-d float32 + 0.0)."""
     xp = namespace(a)
     if a.shape[axis] == 1 and _real_floating(a):
-        return _plus_zero(xp.squeeze(a, axis=axis))
-    return xp.mean(a, axis=axis)
-
-
-def _plus_zero(a: Any) -> Any:
-    """a + 0 in a's own dtype, a new array (numpy 1.x would promote a 0-d float32 + 0.0)."""
-    if isinstance(a, np.ndarray):
-        return np.add(a, 0.0, dtype=a.dtype)
-    return a + 0.0
+        one = xp.squeeze(a, axis=axis)
+        return np.add(one, 0.0, dtype=one.dtype) if isinstance(one, np.ndarray) else one + 0.0
+    return getattr(xp, reduction)(a, axis=axis)
 
 
 def zeros(shape: tuple[int, ...], like: Any) -> Any:

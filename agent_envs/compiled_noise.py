@@ -17,10 +17,11 @@ the same order, with numpy's tables (as numba's port of that function has them,
 states advance exactly as numpy's calls would advance them: a later numpy draw from the same
 generator continues the same stream. `agent_envs.simulator.load_compiled_noise` checks this
 against numpy when it loads the module (a mismatch, say from another numba's tables, switches
-the compiled draws off), and tests/test_simulator.py checks it on a million draws.
+the compiled draws off with a warning), and tests/test_simulator.py checks it on a million
+draws.
 
-numpy's Generator methods hold the bit generator's lock while they draw; these calls do not
-(the envs step on one thread; two threads must not step one env at once anyway).
+numpy's Generator methods hold the bit generator's lock while they draw; these calls do not,
+so the generators must not be used from another thread during a call (`GeneratorHandles`).
 """
 
 from __future__ import annotations

@@ -502,8 +502,9 @@ class SwarmEpisode:
 
     @property
     def mean_positions(self) -> np.ndarray:
-        """E x over the paths: (N, d), a new array."""
-        return self._require_state().mean(axis=0)
+        """E x over the paths: (N, d), a new array (`arrays.mean_axis`, as the native vector
+        env's observation: the same bits)."""
+        return arrays.mean_axis(self._require_state(), 0)
 
     @property
     def mean_interaction_drift(self) -> np.ndarray:
