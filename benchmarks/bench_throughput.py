@@ -266,6 +266,61 @@ def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     return lambda: over_members(p, q, w, n)
 
 
+class _CallTimes:
+    """Inclusive seconds per wrapped call, and the compiled calls' seconds charged to the
+    innermost wrapped call they ran in (`compiled in <key>`): a stack of the open calls."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self.stack: list[str] = []
+        self.undo: list[tuple[Any, str, Any]] = []
+        self.keys: list[str] = []  # (of the calls wrapped, in order)
+
+    def wrap(self, owner: Any, name: str, key: str, compiled: bool = False) -> None:
+        fn = getattr(owner, name, None)
+        if fn is None:
+            return
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            self.stack.append(key)
+            start = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent = time.perf_counter() - start
+                self.stack.pop()
+                self.seconds[key] = self.seconds.get(key, 0.0) + spent
+                if compiled and self.stack:
+                    inner = f"compiled in {self.stack[-1]}"
+                    self.seconds[inner] = self.seconds.get(inner, 0.0) + spent
+
+        self.undo.append((owner, name, fn))
+        if key not in self.keys:
+            self.keys.append(key)
+        setattr(owner, name, timed)
+
+    def restore(self) -> None:
+        for owner, name, fn in reversed(self.undo):
+            setattr(owner, name, fn)
+        self.undo.clear()
+
+
+def _wrap_compiled(times: _CallTimes) -> None:
+    """Time the compiled calls under the key "compiled": the kernel pass, the compiled Lanczos
+    and the fused step (what numba runs); nothing in a tree without them (numba missing or
+    switched off, or a tree before them: the workers also run older checkouts)."""
+    try:  # (trees before the workspaces have no laplacian module: nothing compiled)
+        from agent_envs.dynamics import laplacian
+        from agent_envs.integrators import phi_functions
+    except ImportError:
+        return
+    if getattr(laplacian, "load_compiled_kernel", lambda: False)():
+        times.wrap(laplacian._compiled_kernel, "cucker_smale_drift", "compiled", compiled=True)
+    if getattr(phi_functions, "load_compiled", lambda: False)():
+        for name in ("frozen_advance", "frozen_lanczos"):
+            times.wrap(phi_functions._compiled, name, "compiled", compiled=True)
+
+
 def compiled_share(
     step: Callable[[], None], calls: int, rounds: int, draws: bool = False
 ) -> dict[str, float]:
@@ -275,54 +330,27 @@ def compiled_share(
     With `draws`, also the part inside the native vector env's Brownian draws (each env's own
     generator, `fill_brownian_increments`). Empty where the tree has no compiled calls (numba
     missing, or a tree before them)."""
-    try:  # (trees before the workspaces have no laplacian module: nothing compiled)
-        from agent_envs.dynamics import laplacian
+    times = _CallTimes()
+    _wrap_compiled(times)
+    if not times.keys:
+        return {}
+    if draws:
         from agent_envs.envs import vector_env
-        from agent_envs.integrators import phi_functions
-    except ImportError:
-        return {}
 
-    targets = []
-    if getattr(laplacian, "load_compiled_kernel", lambda: False)():
-        targets.append(("compiled", laplacian._compiled_kernel, ("cucker_smale_drift",)))
-    if getattr(phi_functions, "load_compiled", lambda: False)():
-        targets.append(("compiled", phi_functions._compiled, ("frozen_advance", "frozen_lanczos")))
-    if not targets:
-        return {}
-    if draws and hasattr(vector_env, "fill_brownian_increments"):
-        targets.append(("draws", vector_env, ("fill_brownian_increments",)))
-    inside = {key: 0.0 for key, _, _ in targets}
-    originals = []
-    for key, module, names in targets:
-        for name in names:
-            fn = getattr(module, name, None)
-            if fn is None:
-                continue
-
-            def timed(*args: Any, _fn: Callable[..., Any] = fn, _key: str = key) -> Any:
-                start = time.perf_counter()
-                try:
-                    return _fn(*args)
-                finally:
-                    inside[_key] += time.perf_counter() - start
-
-            originals.append((module, name, fn))
-            setattr(module, name, timed)
-    found: dict[str, list[float]] = {"total": [], **{key: [] for key in inside}}
+        times.wrap(vector_env, "fill_brownian_increments", "draws")
+    found: dict[str, list[float]] = {"total": [], **{key: [] for key in times.keys}}
     try:
         step()
         for _ in range(rounds):
-            for key in inside:
-                inside[key] = 0.0
+            times.seconds = {}
             start = time.perf_counter()
             for _ in range(calls):
                 step()
             found["total"].append((time.perf_counter() - start) / calls)
-            for key, seconds in inside.items():
-                found[key].append(seconds / calls)
+            for key in times.keys:
+                found[key].append(times.seconds.get(key, 0.0) / calls)
     finally:
-        for module, name, fn in originals:
-            setattr(module, name, fn)
+        times.restore()
     return {key: float(np.median(values)) for key, values in found.items()}
 
 
@@ -812,52 +840,6 @@ def worker_device(
 
         out["peak_gib"] = torch.cuda.max_memory_allocated(device) / 2**30
     return out
-
-
-class _CallTimes:
-    """Inclusive seconds per wrapped call, and the compiled calls' seconds charged to the
-    innermost wrapped call they ran in (`compiled in <key>`): a stack of the open calls."""
-
-    def __init__(self) -> None:
-        self.seconds: dict[str, float] = {}
-        self.stack: list[str] = []
-        self.undo: list[tuple[Any, str, Any]] = []
-
-    def wrap(self, owner: Any, name: str, key: str, compiled: bool = False) -> None:
-        fn = getattr(owner, name, None)
-        if fn is None:
-            return
-
-        def timed(*args: Any, **kwargs: Any) -> Any:
-            self.stack.append(key)
-            start = time.perf_counter()
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                spent = time.perf_counter() - start
-                self.stack.pop()
-                self.seconds[key] = self.seconds.get(key, 0.0) + spent
-                if compiled and self.stack:
-                    inner = f"compiled in {self.stack[-1]}"
-                    self.seconds[inner] = self.seconds.get(inner, 0.0) + spent
-
-        self.undo.append((owner, name, fn))
-        setattr(owner, name, timed)
-
-    def restore(self) -> None:
-        for owner, name, fn in reversed(self.undo):
-            setattr(owner, name, fn)
-        self.undo.clear()
-
-
-def _wrap_compiled(times: _CallTimes) -> None:
-    from agent_envs.dynamics import laplacian
-    from agent_envs.integrators import phi_functions
-
-    if laplacian.load_compiled_kernel():
-        times.wrap(laplacian._compiled_kernel, "cucker_smale_drift", "compiled", compiled=True)
-    if phi_functions.load_compiled():
-        times.wrap(phi_functions._compiled, "frozen_advance", "compiled", compiled=True)
 
 
 def worker_accounting(episodes: int = 20, batch: int = 64, batch_steps: int = 300) -> dict:
