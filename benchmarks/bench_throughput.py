@@ -470,6 +470,54 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
     return out
 
 
+def worker_threads(rounds: int) -> dict[str, float]:
+    """env-steps/s of the native vector env on 1 thread and on every thread numba allows
+    (`num_threads`), against SyncVectorEnv (B = 64, 1 path) and B single envs in a loop (B = 16,
+    20 paths), interleaved in one process; SERB, and EM at B = 64, 1 path."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401
+    from agent_envs.dynamics.laplacian import max_compiled_threads
+    from agent_envs.envs import ENV_ID
+
+    most = max_compiled_threads()
+    out: dict[str, float] = {"threads": float(most)}
+    for integrator, b, n_paths in (("serb", 64, 1), ("serb", 16, 20), ("em", 64, 1)):
+        kwargs = env_kwargs("paper", integrator, n_paths=n_paths)
+        actions = np.random.default_rng(1).uniform(-0.5, 0.5, (b, 100)).astype(np.float32)
+        fns: dict[str, Callable[[], None]] = {}
+        for threads in sorted({1, most}):
+            env = gym.make_vec(
+                ENV_ID, num_envs=b, vectorization_mode="vector_entry_point",
+                num_threads=threads, **kwargs,
+            )  # fmt: skip
+            env.reset(seed=0)
+            fns[f"native{threads}"] = lambda env=env, a=actions: env.step(a)
+        if n_paths == 1:
+            sync = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="sync", **kwargs)
+            sync.reset(seed=0)
+            fns["baseline"] = lambda sync=sync, a=actions: sync.step(a)
+        else:
+            singles = [single_env_stepper(kwargs, first_seed=1000 * i) for i in range(b)]
+            fns["baseline"] = lambda singles=singles: [s() for s in singles]
+        fns["baseline"]()
+        start = time.perf_counter()
+        fns["baseline"]()
+        calls = max(2, int(0.3 / (time.perf_counter() - start)))
+        for name, seconds in interleaved(fns, calls, rounds).items():
+            out[f"{name}/{integrator}/B{b}/P{n_paths}"] = b / seconds
+    # the paper single env (20 paths), SERB and EM, on 1 thread and on `most`
+    singles = {}
+    for threads in sorted({1, most}):
+        for integrator in ("serb", "em"):
+            singles[f"single{threads}/{integrator}"] = single_env_stepper(
+                env_kwargs("paper", integrator, num_threads=threads)
+            )
+    for name, seconds in interleaved(singles, 100, rounds).items():
+        out[name] = 1.0 / seconds
+    return out
+
+
 def worker_ppo(timesteps: int) -> dict[str, float]:
     """PPO env-steps/s at the paper setting (fresh process), and the env's share of the time."""
     import torch
@@ -931,6 +979,7 @@ WORKERS = {
     "ratios": worker_ratios,
     "krylov": worker_krylov,
     "vector": worker_vector,
+    "threads": worker_threads,
     "ppo": worker_ppo,
     "device": worker_device,
     "accounting": worker_accounting,
@@ -1210,6 +1259,43 @@ def main() -> int:
                 f" {sync_total / (compiled + draws):.2f}"
             )
         print()
+
+    if "threads" not in args.skip:
+        res = run_worker(sys.executable, "threads", rounds=r)
+        most = int(res["threads"])
+        print(f"## 3b. The native vector env on {most} threads (`num_threads`, this tree)\n")
+        if most < 2:
+            print("numba allows one thread here (NUMBA_NUM_THREADS, or no numba): skipped\n")
+        else:
+            print(
+                f"| integrator | paths | B | baseline | native, 1 thread | native, {most} threads"
+                f" | native / baseline, 1 thread | {most} threads | {most} threads / 1 |"
+            )
+            print("|---|---|---|---|---|---|---|---|---|")
+            for integrator, b, n_paths in (("serb", 64, 1), ("serb", 16, 20), ("em", 64, 1)):
+                key = f"{integrator}/B{b}/P{n_paths}"
+                one, many, base = (
+                    res[f"native1/{key}"],
+                    res[f"native{most}/{key}"],
+                    res[f"baseline/{key}"],
+                )
+                name = "SyncVectorEnv" if n_paths == 1 else f"{b} single envs in a loop"
+                print(
+                    f"| {integrator} | {n_paths} | {b} | {name}: {base:,.0f} | {one:,.0f} |"
+                    f" {many:,.0f} | {one / base:.2f} | {many / base:.2f} | {many / one:.2f} |"
+                )
+            print(
+                "\nThe paper single env (20 paths), env steps/s: SERB"
+                f" {res['single1/serb']:,.0f} on 1 thread, {res[f'single{most}/serb']:,.0f} on"
+                f" {most}; EM {res['single1/em']:,.0f} and {res[f'single{most}/em']:,.0f}; SERB"
+                f" / EM (step time) {res['single1/em'] / res['single1/serb']:.2f} on 1 thread,"
+                f" {res[f'single{most}/em'] / res[f'single{most}/serb']:.2f} on {most}"
+            )
+            print(
+                "\n(env-steps/s, interleaved rounds in one process. The issue's targets are"
+                " the one-thread ratios of part 3; threads add the machine's other cores to the"
+                " compiled passes, bit for bit the same results.)\n"
+            )
 
     if "ppo" not in args.skip:
         print(f"## 4. PPO on NativeVecEnv, paper setting, {args.ppo_timesteps} timesteps\n")

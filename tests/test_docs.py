@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import inspect
 import os
 import re
 import subprocess
@@ -85,7 +86,10 @@ def test_swarm_env_docstring_lists_every_keyword_argument():
     from agent_envs.envs.swarm_env import SwarmEnv
     from agent_envs.params import SwarmParams
 
-    accepted = set(SwarmParams.field_names()) | {"render_mode"}
+    # the env's own arguments (render_mode, num_threads) and the episode's configuration
+    own = set(inspect.signature(SwarmEnv.__init__).parameters) - {"self", "kwargs"}
+    assert own == {"render_mode", "num_threads"}
+    accepted = set(SwarmParams.field_names()) | own
     accepted |= {f.name for f in dataclasses.fields(EpisodeConfig) if f.name != "params"}
     assert _documented_kwargs(SwarmEnv.__doc__) == accepted
 

@@ -33,7 +33,9 @@ it). `fastmath={"reassoc"}` in `_row_with_sums_1d` and `lower_product`, whose re
 a row vectorize no other way (the order is then the machine code's, the same in every call);
 an entry of P there is (x_j - x_k)^2 + alpha^2 and one division, operations reassociation does
 not touch, so P keeps its bits; `_lower_row`, which sums d > 1 squares, runs without it (a
-reassociated alpha^2 + |x_k - x_l|^2 would change them). No threads.
+reassociated alpha^2 + |x_k - x_l|^2 would change them). One thread, except in
+`cucker_smale_drift_threads` (the envs' `num_threads`): contiguous spans of members on numba's
+threads, each span one call of `cucker_smale_drift`, so the bits are the one-thread call's.
 
 `error_model="numpy"`: a division follows IEEE 754 (x / 0 is inf or nan) instead of numba's
 default Python model, which tests every divisor for zero to raise ZeroDivisionError, a branch
@@ -54,7 +56,7 @@ directory when that is read-only) the first time and loaded from there in every 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True, fastmath={"contract", "reassoc"})
@@ -223,6 +225,29 @@ def cucker_smale_drift(
         for i in range(n):
             for c in range(d):
                 drift[b, i, c] = (acc[c, i] - sb[i] * xt[c, i]) / n
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def cucker_smale_drift_threads(
+    x: np.ndarray,
+    weight: float,
+    alpha2: float,
+    p: np.ndarray,
+    s: np.ndarray,
+    drift: np.ndarray,
+    chunks: int,
+) -> None:
+    """`cucker_smale_drift` of the members in `chunks` contiguous spans, the spans on numba's
+    threads (`prange`; the caller sets how many, `agent_envs.dynamics.laplacian.
+    compiled_threads`). Each span is one call of `cucker_smale_drift` on its slices, whose
+    members are computed alone (a member's P, s and drift do not depend on the rest of the
+    batch), so the result equals one call over the whole batch bit for bit
+    (tests/test_compiled_threads.py)."""
+    members = x.shape[0]
+    for c in prange(chunks):
+        lo = (members * c) // chunks
+        hi = (members * (c + 1)) // chunks
+        cucker_smale_drift(x[lo:hi], weight, alpha2, p[lo:hi], s[lo:hi], drift[lo:hi])
 
 
 @njit(cache=True)

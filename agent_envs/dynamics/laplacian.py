@@ -39,6 +39,8 @@ from __future__ import annotations
 import importlib
 import math
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -106,21 +108,86 @@ def use_compiled_kernel(enabled: bool) -> bool:
 
 
 def compiled_cucker_smale_drift(
-    x: np.ndarray, weight: float, alpha2: float, p: np.ndarray
+    x: np.ndarray, weight: float, alpha2: float, p: np.ndarray, threads: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
     """(s, L(x) x) with the lower triangle of P (and its diagonal) written into `p` (..., N, N)
     by the compiled pass, for x (..., N, d) and the symmetric kernel with scalar weight w
     (`load_compiled_kernel` must have answered True); `UpperTriangle` fills the rest when a
-    consumer of the whole P asks for it."""
+    consumer of the whole P asks for it. `threads` > 1 (`load_compiled_threads` must have
+    answered True): the members on that many threads, the same bits."""
     *batch, n, d = x.shape
     members = math.prod(batch)
     flat = readonly_view(np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d))
     row_sums = np.empty((members, n))
     drift = np.empty((members, n, d))
-    _compiled_kernel.cucker_smale_drift(
-        flat, float(weight), float(alpha2), p.reshape(members, n, n), row_sums, drift
-    )
+    args = (flat, float(weight), float(alpha2), p.reshape(members, n, n), row_sums, drift)
+    if threads > 1 and members > 1:
+        with compiled_threads(threads):
+            _compiled_kernel.cucker_smale_drift_threads(*args, min(threads, members))
+    else:
+        _compiled_kernel.cucker_smale_drift(*args)
     return row_sums.reshape(*batch, n), drift.reshape(*batch, n, d)
+
+
+def max_compiled_threads() -> int:
+    """The most threads the compiled passes may use in this process: numba's
+    ``NUMBA_NUM_THREADS`` (its default: the CPUs it sees), or 1 where the compiled passes are
+    not available (no numba, or ``AGENT_ENVS_NUMBA=0``)."""
+    if not load_compiled_kernel():
+        return 1
+    import numba
+
+    return int(numba.config.NUMBA_NUM_THREADS)
+
+
+def check_compiled_threads(value: Any, name: str = "num_threads") -> int:
+    """`value` as the number of threads of the compiled passes: an int in [1,
+    `max_compiled_threads`]; else TypeError or ValueError naming `name` and the range (above 1
+    without numba: the message says what to install)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an int >= 1, got {value!r}")
+    most = max_compiled_threads()
+    if value < 1 or value > most:
+        if value > 1 and most == 1:
+            raise ValueError(
+                f"{name}={value}: threads need the compiled passes (numba: pip install "
+                f"'agent-envs[fast]', and AGENT_ENVS_NUMBA not 0); without them {name} must be 1"
+            )
+        raise ValueError(f"{name} must be an int in [1, {most}] (numba's threads), got {value}")
+    return int(value)
+
+
+@contextmanager
+def compiled_threads(threads: int) -> Iterator[None]:
+    """numba's parallel regions on `threads` threads inside (`numba.set_num_threads`, which
+    holds for the calling thread; its value before is restored on exit). The first use starts
+    numba's threading layer (TBB where installed, else OpenMP, else its own workqueue; GNU
+    OpenMP's threads do not survive a `fork`: fork before, or use the spawn start method)."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
+def load_compiled_threads(threads: int) -> bool:
+    """Whether the compiled kernel pass can run on `threads` threads (1 <= threads <=
+    `max_compiled_threads`); loads the threaded pass and starts numba's threading layer with
+    one call, so that this cost falls where this is called (the native vector env's
+    constructor, through `agent_envs.integrators.phi_functions.load_compiled_threads`) and not
+    in a step."""
+    if threads < 1 or threads > max_compiled_threads():
+        return False
+    if threads > 1:
+        x = readonly_view(np.zeros((2, 2, 1)))
+        with compiled_threads(threads):
+            _compiled_kernel.cucker_smale_drift_threads(
+                x, 1.0, 1.0, np.empty((2, 2, 2)), np.empty((2, 2)), np.empty((2, 2, 1)), 2
+            )
+    return True
 
 
 class UpperTriangle:

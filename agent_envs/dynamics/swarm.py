@@ -40,10 +40,12 @@ from agent_envs.dynamics.laplacian import (
     FrozenLaplacian,
     KernelWorkspace,
     UpperTriangle,
+    check_compiled_threads,
     compiled_cucker_smale_drift,
     fill_cucker_smale,
     krylov_bounds,
     load_compiled_kernel,
+    load_compiled_threads,
     readonly_view,
 )
 from agent_envs.dynamics.operators import (
@@ -130,7 +132,15 @@ class SwarmModel:
     matrix-free for numpy states with the Cucker-Smale kernel when d = 1 and N >= 500 or
     d = 2 and N >= 2000 (`AUTO_MATRIX_FREE_MIN_AGENTS`), or when the dense matrices of a step
     would exceed `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
+
+    `threads` (default 1): the compiled passes over a batch's members (the kernel pass, and
+    the fused exponential Rosenbrock-Euler step of the envs' models) run on that many of
+    numba's threads, in contiguous spans of members; the results are the same bit for bit
+    (each member is computed alone). At most `agent_envs.dynamics.laplacian.
+    max_compiled_threads()`; 1 without numba.
     """
+
+    _threads = 1
 
     def __init__(self, params: SwarmParams, linear_operator: str = "auto") -> None:
         self.params = params
@@ -153,6 +163,17 @@ class SwarmModel:
         memo of them."""
         self.__dict__.update(state)
         self.__dict__.setdefault("_matrix_free_answers", {})
+
+    @property
+    def threads(self) -> int:
+        """Threads of the compiled passes over a batch's members (see the class docstring)."""
+        return self._threads
+
+    @threads.setter
+    def threads(self, value: int) -> None:
+        threads = check_compiled_threads(value, "threads")
+        load_compiled_threads(threads)  # (the threaded pass's one-time load falls here)
+        self._threads = threads
 
     def _uses_workspace(self, x: Any) -> bool:
         """Whether x takes the workspace path: numpy, the Cucker-Smale kernel, dense."""
@@ -179,7 +200,7 @@ class SwarmModel:
         if compiled is not None:
             # the symmetric kernel with a scalar weight: P's lower triangle, s and L(x) x in one
             # compiled pass; the upper triangle is filled if a consumer of the whole P asks
-            row_sums, drift = compiled_cucker_smale_drift(x, *compiled, p)
+            row_sums, drift = compiled_cucker_smale_drift(x, *compiled, p, self.threads)
             return self._workspace_operator(p, row_sums, UpperTriangle(p)), drift
         weights = kernel.weights if kernel._scalar_weight is None else kernel._scalar_weight
         fill_cucker_smale(x, kernel.alpha, weights, out=p, scratch=scratch)

@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from agent_envs.dynamics.laplacian import check_compiled_threads
 from agent_envs.envs.episode import (
     EpisodeAttributes,
     EpisodeConfig,
@@ -26,6 +27,7 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
+from agent_envs.integrators.phi_functions import load_compiled_threads
 from agent_envs.validation import check_seed
 
 ENV_ID = "agent_envs/Swarm-v0"
@@ -158,6 +160,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     | action_basis | "agents" | action -> u (Env options) | "agents", "modes", "common" |
     | agent_reward | "own" | PettingZoo's per-agent reward | "own" here (PettingZoo: also "team") |
     | render_mode | None | see Rendering | None, "rgb_array", "human" |
+    | num_threads | 1 | threads of the compiled passes over the paths | int in [1, numba's] |
 
     ## Env options (the learner's interface)
 
@@ -184,10 +187,16 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     capped. An unknown keyword raises Python's own
     `TypeError("SwarmEnv.__init__() got an unexpected keyword argument 'x'")`.
 
+    `num_threads` (numpy with numba) runs the compiled passes of a step over the env's
+    n_paths systems (the kernel pass; SERB's or ERB's fused step with the frozen Jacobian) on
+    that many of numba's threads: the same results bit for bit, faster where n_paths is large
+    (the paper's 20 paths). It changes no dynamics and is not part of the episode's
+    configuration; `agent_envs.envs.vector_env.SwarmVectorEnv` ("Threads") says more.
+
     ## Attributes (on `env.unwrapped`)
 
     params, model, max_control, n_steps, n_paths, dt, integrator_name, jacobian, positions
-    (n_paths, N, d), time, step_index, episode (the shared `SwarmEpisode`).
+    (n_paths, N, d), time, step_index, episode (the shared `SwarmEpisode`), num_threads.
 
     ## Version History
 
@@ -202,11 +211,15 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+    def __init__(self, render_mode: str | None = None, num_threads: int = 1, **kwargs: Any) -> None:
         self.config = EpisodeConfig.from_kwargs(
             f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
         )
+        self.num_threads = check_compiled_threads(num_threads, "num_threads")
         self.episode = SwarmEpisode(self.config)
+        if self.num_threads > 1:
+            load_compiled_threads(self.num_threads)  # (the one-time load falls here)
+            self.episode.model.threads = self.num_threads
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
         n, d = params.n_agents, params.dim

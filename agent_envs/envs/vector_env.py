@@ -40,6 +40,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from agent_envs import arrays
+from agent_envs.dynamics.laplacian import check_compiled_threads
 from agent_envs.envs.episode import (
     EpisodeConfig,
     _CachedLinearizationModel,
@@ -57,7 +58,11 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.integrators import Integrator, make_integrator
-from agent_envs.integrators.phi_functions import auto_phi_method, load_compiled
+from agent_envs.integrators.phi_functions import (
+    auto_phi_method,
+    load_compiled,
+    load_compiled_threads,
+)
 from agent_envs.simulator import (
     GeneratorHandles,
     fill_brownian_increments,
@@ -148,15 +153,30 @@ class SwarmVectorEnv(VectorEnv):
     `num_envs` (B >= 1); `autoreset_mode`; `device` ("cpu": numpy; "cuda", "cuda:1", ...:
     torch on that device); `backend` (None: numpy on "cpu", torch otherwise; "torch" with
     device "cpu" runs torch on the CPU); `tensor_output` (return torch tensors instead of
-    numpy arrays; torch only); and every keyword argument of the single env except
+    numpy arrays; torch only); `num_threads` (see Threads); and every keyword argument of the
+    single env except
     `render_mode` (the native env does not render; use `vectorization_mode="sync"` for
     rendering). Bad values raise `ValueError`/`TypeError` naming the argument.
 
+    ## Threads
+
+    `num_threads` (default 1; numpy backend with numba): the compiled passes of a step over the
+    batch's B x P systems (the kernel pass, and SERB's or ERB's fused step with the frozen
+    Jacobian) run on that many of numba's threads, in contiguous spans of systems. Every system
+    is computed alone, so observations, rewards and infos are the same bit for bit as with one
+    thread (tests/test_compiled_threads.py); the draws, the costs and the rest of the step stay
+    on the calling thread. At most numba's ``NUMBA_NUM_THREADS`` (the CPUs it sees). The default
+    keeps one thread, as the BLAS pools of the hot path: several env processes (Ray trials,
+    subprocess vector envs) on one machine would otherwise oversubscribe its cores. The first
+    env made with threads starts numba's threading layer (TBB where installed, else OpenMP,
+    else numba's workqueue); GNU OpenMP's threads do not survive a `fork`, so fork before it,
+    or use the spawn start method. docs/benchmarks.md has the speed-ups measured.
+
     ## Attributes
 
-    config (`EpisodeConfig`), model, integrator, phi_method (the resolved strategy), dt,
-    n_steps, n_paths, positions (B, P, N, d), step_index (B,), targets (B, d), np_randoms (one
-    generator per env).
+    config (`EpisodeConfig`), model, integrator, phi_method (the resolved strategy),
+    num_threads, dt, n_steps, n_paths, positions (B, P, N, d), step_index (B,), targets (B, d),
+    np_randoms (one generator per env).
 
     ## Version History
 
@@ -177,6 +197,7 @@ class SwarmVectorEnv(VectorEnv):
         device: Any = "cpu",
         backend: str | None = None,
         tensor_output: bool = False,
+        num_threads: int = 1,
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
@@ -203,6 +224,12 @@ class SwarmVectorEnv(VectorEnv):
         if tensor_output and backend != "torch":
             raise ValueError("tensor_output=True needs backend='torch' (or a torch device)")
         self.tensor_output = tensor_output
+        self.num_threads = check_compiled_threads(num_threads, "num_threads")
+        if self.num_threads > 1 and backend != "numpy":
+            raise ValueError(
+                "num_threads > 1 needs the numpy backend (its compiled passes run on the "
+                f"threads); backend={backend!r} runs torch's own"
+            )
         try:
             mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -244,6 +271,10 @@ class SwarmVectorEnv(VectorEnv):
         self._block_models = [self.model] + [
             _CachedLinearizationModel(params, self.config.linear_operator) for _ in self._blocks[1:]
         ]
+        if self.num_threads > 1:
+            load_compiled_threads(self.num_threads)  # (the one-time load falls here)
+            for model in self._block_models:
+                model.threads = self.num_threads
         # the block views of the current state the block models last saw (their cache keys)
         self._block_views: list[Any] = []
         self._block_views_of: Any = None

@@ -36,8 +36,11 @@ vector env relies on it). `fastmath` is on in two functions only, the product an
 allows the contraction of a multiply and an add into one fused operation there, and the
 reassociation of their sums (dots vectorize no other way: `_dot` as four scalar chains took
 0.41 us per recurrence iteration at N = 100, vectorized 0.21 us; the order is the machine
-code's, the same in every call); no threads: the BLAS pools of the hot path are one thread
-too. `error_model="numpy"` everywhere: a division follows IEEE 754
+code's, the same in every call). One thread by default, as the BLAS pools of the hot path;
+`frozen_advance_threads` runs the fused step's member loop on contiguous spans of members on
+numba's threads (`prange`, `parallel=True` in that driver only), for the envs' `num_threads`:
+each member is computed alone, by the same loop, so the bits are the one-thread call's.
+`error_model="numpy"` everywhere: a division follows IEEE 754
 instead of testing its divisor for zero to raise ZeroDivisionError (numba's error model covers
 `/`, `//` and `%`; `math.sqrt` and `math.log` test nothing either way). On finite data every
 divisor here is guarded or positive, so the bits are the same without the branches: 2-3 %
@@ -58,7 +61,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from agent_envs.dynamics.compiled_kernel import cucker_smale_drift
 from agent_envs.dynamics.compiled_kernel import lower_product as _product
@@ -436,6 +439,55 @@ def frozen_advance(
     )  # fmt: skip
     failed = 0
     for member in range(p.shape[0]):
+        if not converged[member]:
+            failed += 1
+    return failed
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def frozen_advance_threads(
+    p: np.ndarray,
+    s: np.ndarray,
+    scale: float,
+    v: np.ndarray,
+    rtol: float,
+    max_dim: int,
+    max_step: int,
+    peak: float,
+    out: np.ndarray,
+    extra: np.ndarray,
+    extra_scale: float,
+    x: np.ndarray,
+    dt: float,
+    noise: np.ndarray,
+    weight: float,
+    alpha2: float,
+    x_next: np.ndarray,
+    s_next: np.ndarray,
+    drift_next: np.ndarray,
+    chunks: int,
+) -> int:
+    """`frozen_advance` with the members in `chunks` contiguous spans, the spans on numba's
+    threads (`prange`; the caller sets how many, `agent_envs.dynamics.laplacian.
+    compiled_threads`). Each span runs the same member loop (`_members`) on its slices with
+    scratch arrays of its own; a member's step does not depend on the other members, so the
+    result equals `frozen_advance`'s bit for bit (tests/test_compiled_threads.py)."""
+    members = p.shape[0]
+    converged = np.empty(members, dtype=np.bool_)
+    with_extra = extra.shape[0] > 0
+    empty = np.empty(0)
+    for c in prange(chunks):
+        lo = (members * c) // chunks
+        hi = (members * (c + 1)) // chunks
+        span_extra = extra[lo:hi] if with_extra else extra
+        _members(
+            p[lo:hi], s[lo:hi], scale, v[lo:hi], 1, rtol, max_dim, max_step, empty, empty, empty,
+            peak, out[lo:hi], converged[lo:hi], span_extra, extra_scale, True, x[lo:hi], dt,
+            noise[lo:hi], weight, alpha2, p[lo:hi], x_next[lo:hi], s_next[lo:hi],
+            drift_next[lo:hi],
+        )  # fmt: skip
+    failed = 0
+    for member in range(members):
         if not converged[member]:
             failed += 1
     return failed

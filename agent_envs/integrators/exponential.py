@@ -94,7 +94,8 @@ class RosenbrockEuler(Integrator):
         if target is None:
             return None
         correction = 1.0 / dt if self.stochastic_correction and model.sigma != 0.0 else None
-        found = frozen_advance(lin.matrix, rhs, x, dt, noise, correction, *target)
+        threads = getattr(model, "threads", 1)
+        found = frozen_advance(lin.matrix, rhs, x, dt, noise, correction, *target, threads)
         if found is None:
             model.discard_linearization()
             return _GAVE_UP

@@ -45,10 +45,12 @@ import numpy as np
 from agent_envs import arrays
 from agent_envs.dynamics.laplacian import (
     FrozenLaplacian,
+    compiled_threads,
     import_compiled,
     readonly_view,
     use_compiled_kernel,
 )
+from agent_envs.dynamics.laplacian import load_compiled_threads as load_compiled_threads_kernel
 
 PHI_METHODS = ("auto", "expm", "eigh", "krylov")
 # Crossovers of "auto" (measured by benchmarks/bench_integrators.py, one BLAS thread).
@@ -923,6 +925,28 @@ def use_compiled(enabled: bool) -> bool:
     return before
 
 
+def load_compiled_threads(threads: int) -> bool:
+    """Whether the compiled kernel pass and the fused exponential Rosenbrock-Euler step
+    (`frozen_advance`) can run on `threads` threads (`agent_envs.dynamics.laplacian.
+    load_compiled_threads`: 1 <= threads <= `max_compiled_threads`, numba loaded); loads their
+    threaded versions with one call each (numba's threading layer starts there), so that this
+    cost falls where this is called and not in a step."""
+    if not load_compiled() or not load_compiled_threads_kernel(threads):
+        return False
+    if threads > 1:
+        p = readonly_view(np.full((2, 3, 3), 0.5))
+        s = readonly_view(p.sum(axis=-1))
+        v = readonly_view(np.ones((2, 3, 1)))
+        with compiled_threads(threads):
+            for extra in (_NO_EXTRA, v):
+                _compiled.frozen_advance_threads(
+                    np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((2, 3, 1)),
+                    extra, 1.0, v, 0.1, v, 1.0, 1.0, np.empty((2, 3, 1)), np.empty((2, 3)),
+                    np.empty((2, 3, 1)), 2,
+                )  # fmt: skip
+    return True
+
+
 def _warm_up() -> None:
     """One compiled call with the argument types of the env's calls (a read-only P, as the
     model's workspace hands out), so that loading the machine code happens here."""
@@ -1044,12 +1068,16 @@ def frozen_advance(
     p_next: np.ndarray,
     weight: float,
     alpha2: float,
+    threads: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """x + dt phi_1(dt A) (rhs + e dt A noise) + noise, and the kernel pass at that state, by
     the compiled `frozen_advance` (where `frozen_advance_applies`): (x_next, s_next, drift_next)
     with P(x_next) written into `p_next` (the workspace buffer A's P views), or None if some
     member's Lanczos did not converge within 100 dimensions (its P is P(x) still, the others'
     P(x_next): the caller discards the workspace and takes the general path).
+
+    `threads` > 1 (`load_compiled_threads` must have answered True for it): the members in
+    that many spans on numba's threads (`frozen_advance_threads`), the same bits.
 
     e = `extra_scale` (1 / dt for SERB's sigma A dW with sigma != 0; None: no product, ERB).
     The phi-action is `phi_action`'s on dt A with rtol = 1e-10 and its default
@@ -1065,13 +1093,18 @@ def frozen_advance(
     x_next = np.empty((members, n, d))
     s_next = np.empty((members, n))
     drift_next = np.empty((members, n, d))
-    failed = _compiled.frozen_advance(
+    args = (
         p_next.reshape(members, n, n),
         readonly_view(_contiguous(row_sums).reshape(members, n)),
         a.scale * float(dt), _as_members(rhs, full), 1e-10, 100, MAX_CHECK_STEP, a.peak, out,
         extra, 0.0 if extra_scale is None else float(extra_scale), _as_members(x, full),
         float(dt), noise_members, float(weight), float(alpha2), x_next, s_next, drift_next,
     )  # fmt: skip
+    if threads > 1 and members > 1:
+        with compiled_threads(threads):
+            failed = _compiled.frozen_advance_threads(*args, min(threads, members))
+    else:
+        failed = _compiled.frozen_advance(*args)
     if failed:
         return None
     return x_next.reshape(x.shape), s_next, drift_next
