@@ -268,6 +268,12 @@ BATTERY: list[tuple[list[str], str]] = [
     (["train", "--out", "{out}", "--device", "foo"], "--device"),
     (["train", "--out", "{out}", "--device", "cuda:99"], "--device"),
     (["train", "--out", "{out}", "--torch-threads", "-1"], "--torch-threads"),
+    (["train", "--out", "{out}", "--env-threads", "0"], "--env-threads"),
+    (["train", "--out", "{out}", "--env-threads", "100000"], "--env-threads"),
+    (
+        ["train", "--out", "{out}", "--env-id", "agent_envs.swarm_v0", "--env-threads", "2"],
+        "--env-threads",
+    ),
     (["train", "--out", "{out}", "--verbose", "3"], "--verbose"),
     (["train", "--out", "{out}", "--progress-bar=x"], "--progress-bar"),
     (["train", "--out", "{out}", "--tensorboard=x"], "--tensorboard"),

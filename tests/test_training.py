@@ -337,6 +337,42 @@ def test_training_is_reproducible_with_a_fixed_seed(tmp_path):
     assert curves[0] == curves[1]
 
 
+def _two_threads_allowed() -> bool:
+    from agent_envs.dynamics.laplacian import max_compiled_threads
+
+    return max_compiled_threads() >= 2
+
+
+def test_env_threads_reach_the_native_training_env(tmp_path):
+    """--env-threads builds the native training env on that many threads."""
+    if not _two_threads_allowed():
+        pytest.skip("numba allows one thread here")
+    from agent_envs.training.environments import make_training_env
+
+    venv = make_training_env(tiny_config(tmp_path, env_threads=2).validate(), 3)
+    assert venv.venv.num_threads == 2
+    assert all(model.threads == 2 for model in venv.venv._block_models)
+    venv.close()
+
+
+@pytest.mark.slow
+def test_training_on_env_threads_learns_the_same(tmp_path):
+    """The same seed on 1 and 2 env threads: the same learning curve (the envs' results are the
+    same bit for bit on any number of threads)."""
+    if not _two_threads_allowed():
+        pytest.skip("numba allows one thread here")
+    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.train import train
+
+    curves = []
+    for threads in (1, 2):
+        config = tiny_config(tmp_path / str(threads), "ppo", checkpoint_freq=0)
+        config.env_threads = threads
+        run_dir = train(config)
+        curves.append([r["cost_mean"] for r in read_learning_curve(run_dir / "learning_curve.csv")])
+    assert curves[0] == curves[1]
+
+
 class _InterruptAt:
     """An SB3 callback that raises KeyboardInterrupt (a Ctrl-C) at a given timestep."""
 

@@ -34,6 +34,7 @@ from agent_envs.training.defaults import (
     PETTINGZOO_ENV_ID,
     check_algo,
     check_env_id,
+    is_multiagent,
     parse_env_kwargs,
     parse_json_object,
 )
@@ -195,6 +196,11 @@ class TrainConfig:
         "torch intra-op threads during training (1 is by far the fastest for these small "
         "networks on CPU; 0 keeps torch's default)",
     )
+    env_threads: int = option_field(
+        1,
+        "threads of the training envs' compiled passes (numba; --vec-env native: over its "
+        "batch; the Gymnasium env only; the same results on any number)",
+    )
     progress_bar: bool = option_field(True, "show a progress bar (tqdm + rich)")
     tensorboard: bool = option_field(True, "write TensorBoard logs into the run directory (tb/)")
     verbose: int = option_field(0, "SB3 verbosity (0, 1, 2)")
@@ -228,6 +234,13 @@ class TrainConfig:
         check_int("--eval-seed", self.eval_seed, 0, MAX_SEED)
         check_int("--verbose", self.verbose, 0, 2)
         check_int("--torch-threads", self.torch_threads, 0, 1024)
+        check_int("--env-threads", self.env_threads, 1, 1024)
+        if self.env_threads > 1:
+            from agent_envs.dynamics.laplacian import check_compiled_threads
+
+            if is_multiagent(self.env_id):
+                raise ValueError("--env-threads > 1 needs the Gymnasium env (--env-id)")
+            check_compiled_threads(self.env_threads, "--env-threads")
         check_int("--eval-episodes", self.eval_episodes, 1, 10_000)
         if self.n_envs is not None:
             check_int("--n-envs", self.n_envs, 1, 1024)

@@ -112,16 +112,22 @@ def make_training_env(config: TrainConfig, n_envs: int):
         from agent_envs.training.native_vec_env import NativeVecEnv
 
         try:
-            venv = NativeVecEnv(n_envs, config.env_kwargs, horizon_as_termination=True)
+            venv = NativeVecEnv(
+                n_envs,
+                config.env_kwargs,
+                horizon_as_termination=True,
+                num_threads=config.env_threads,
+            )
         except TypeError as exc:  # unknown keyword: a user error, as in make_gym_env
             raise ValueError(f"--env-kwargs {config.env_kwargs}: {exc}") from None
         venv.seed(config.seed)  # as make_vec_env: env i resets with seed + i
         return venv
+    threads = {"num_threads": config.env_threads} if config.env_threads > 1 else {}
     return make_vec_env(
         config.env_id,
         n_envs=n_envs,
         seed=config.seed,
-        env_kwargs=config.env_kwargs,
+        env_kwargs={**config.env_kwargs, **threads},
         vec_env_cls=SubprocVecEnv if config.vec_env == "subproc" else DummyVecEnv,
         wrapper_class=HorizonAsTermination,
     )

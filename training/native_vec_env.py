@@ -53,6 +53,8 @@ class NativeVecEnv(VecEnv):
         n_envs: number of envs B >= 1.
         env_kwargs: keyword arguments of `agent_envs/Swarm-v0` (validated as the single env's).
         horizon_as_termination: report the end of the horizon as a termination (training).
+        num_threads: threads of the compiled passes over the batch
+            (`SwarmVectorEnv`'s `num_threads`; the same results on any number).
     """
 
     def __init__(
@@ -61,9 +63,13 @@ class NativeVecEnv(VecEnv):
         env_kwargs: dict[str, Any] | None = None,
         *,
         horizon_as_termination: bool = False,
+        num_threads: int = 1,
     ) -> None:
         self.venv = SwarmVectorEnv(
-            n_envs, autoreset_mode=AutoresetMode.SAME_STEP, **dict(env_kwargs or {})
+            n_envs,
+            autoreset_mode=AutoresetMode.SAME_STEP,
+            num_threads=num_threads,
+            **dict(env_kwargs or {}),
         )
         self.horizon_as_termination = bool(horizon_as_termination)
         super().__init__(

@@ -81,6 +81,7 @@ RESUME_OVERRIDES = (
     "device",
     "tensorboard",
     "torch_threads",
+    "env_threads",
 )
 
 
