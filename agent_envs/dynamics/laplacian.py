@@ -161,8 +161,9 @@ def check_compiled_threads(value: Any, name: str = "num_threads") -> int:
 def compiled_threads(threads: int) -> Iterator[None]:
     """numba's parallel regions on `threads` threads inside (`numba.set_num_threads`, which
     holds for the calling thread; its value before is restored on exit). The first use starts
-    numba's threading layer (TBB where installed, else OpenMP, else its own workqueue; GNU
-    OpenMP's threads do not survive a `fork`: fork before, or use the spawn start method)."""
+    numba's threading layer (TBB where installed, else OpenMP, else its own workqueue; with GNU
+    OpenMP a process forked after that is terminated by numba when it runs threads: the
+    `SwarmVectorEnv` docstring, "Threads")."""
     import numba
 
     before = numba.get_num_threads()

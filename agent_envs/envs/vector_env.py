@@ -169,8 +169,11 @@ class SwarmVectorEnv(VectorEnv):
     keeps one thread, as the BLAS pools of the hot path: several env processes (Ray trials,
     subprocess vector envs) on one machine would otherwise oversubscribe its cores. The first
     env made with threads starts numba's threading layer (TBB where installed, else OpenMP,
-    else numba's workqueue); GNU OpenMP's threads do not survive a `fork`, so fork before it,
-    or use the spawn start method. docs/benchmarks.md has the speed-ups measured.
+    else numba's workqueue). With GNU OpenMP (numba's choice without TBB), a process forked
+    after that is terminated by numba when it runs threads itself ("fork() called from a
+    process already using GNU OpenMP"): start subprocesses with "spawn" or "forkserver" (SB3's
+    SubprocVecEnv does), or set ``NUMBA_THREADING_LAYER=workqueue`` (fork-safe; one parallel
+    call at a time per process). docs/benchmarks.md has the speed-ups measured.
 
     ## Attributes
 
