@@ -177,9 +177,9 @@ def compiled_threads(threads: int) -> Iterator[None]:
 def load_compiled_threads(threads: int) -> bool:
     """Whether the compiled kernel pass can run on `threads` threads (1 <= threads <=
     `max_compiled_threads`); loads the threaded pass and starts numba's threading layer with
-    one call, so that this cost falls where this is called (the native vector env's
-    constructor, through `agent_envs.integrators.phi_functions.load_compiled_threads`) and not
-    in a step."""
+    one call, so that this cost falls where this is called (the envs' first reset, through
+    `agent_envs.integrators.phi_functions.load_compiled_threads`) and not in a step. (Not in a
+    constructor: a process that forks after GNU OpenMP started loses its children to it.)"""
     if threads < 1 or threads > max_compiled_threads():
         return False
     if threads > 1:

@@ -45,7 +45,7 @@ from agent_envs.dynamics.laplacian import (
     fill_cucker_smale,
     krylov_bounds,
     load_compiled_kernel,
-    load_compiled_threads,
+    max_compiled_threads,
     readonly_view,
 )
 from agent_envs.dynamics.operators import (
@@ -163,6 +163,10 @@ class SwarmModel:
         memo of them."""
         self.__dict__.update(state)
         self.__dict__.setdefault("_matrix_free_answers", {})
+        if self.__dict__.get("_threads", 1) > 1:
+            # threads are this process's setting: at most what numba allows here (1 without
+            # numba); the results are the same on any number
+            self._threads = min(self._threads, max_compiled_threads())
 
     @property
     def threads(self) -> int:
@@ -171,9 +175,9 @@ class SwarmModel:
 
     @threads.setter
     def threads(self, value: int) -> None:
-        threads = check_compiled_threads(value, "threads")
-        load_compiled_threads(threads)  # (the threaded pass's one-time load falls here)
-        self._threads = threads
+        # (validated only: compiling or running a threaded pass starts numba's threads, which
+        # the first threaded call does; the envs load them in their first reset)
+        self._threads = check_compiled_threads(value, "threads")
 
     def _uses_workspace(self, x: Any) -> bool:
         """Whether x takes the workspace path: numpy, the Cucker-Smale kernel, dense."""

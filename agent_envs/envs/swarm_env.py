@@ -215,11 +215,9 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
         self.config = EpisodeConfig.from_kwargs(
             f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
         )
-        self.num_threads = check_compiled_threads(num_threads, "num_threads")
+        threads = check_compiled_threads(num_threads, "num_threads")
         self.episode = SwarmEpisode(self.config)
-        if self.num_threads > 1:
-            load_compiled_threads(self.num_threads)  # (the one-time load falls here)
-            self.episode.model.threads = self.num_threads
+        self.episode.model.threads = threads
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
         n, d = params.n_agents, params.dim
@@ -238,6 +236,11 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
             else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
         )
 
+    @property
+    def num_threads(self) -> int:
+        """Threads of the compiled passes over the env's paths (its model's `threads`)."""
+        return self.episode.model.threads
+
     # ------------------------------------------------------------------ API
     def _observation(self) -> np.ndarray:
         return self._global_observation(self.observation_space, self.config.observation)
@@ -246,6 +249,12 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=check_seed(seed))
+        if self.num_threads > 1:
+            # the threaded passes' one-time load (it starts numba's threads) falls in the first
+            # reset, not in the constructor: Gymnasium's AsyncVectorEnv makes an env in the
+            # parent to read its spaces and then forks, and a fork after GNU OpenMP started
+            # terminates the children that use it
+            load_compiled_threads(self.num_threads)
         self.episode.reset(self.np_random, **reset_options(options, strict=True))
         if self._renderer is not None:
             self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)

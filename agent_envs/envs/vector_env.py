@@ -168,12 +168,15 @@ class SwarmVectorEnv(VectorEnv):
     on the calling thread. At most numba's ``NUMBA_NUM_THREADS`` (the CPUs it sees). The default
     keeps one thread, as the BLAS pools of the hot path: several env processes (Ray trials,
     subprocess vector envs) on one machine would otherwise oversubscribe its cores. The first
-    env made with threads starts numba's threading layer (TBB where installed, else OpenMP,
-    else numba's workqueue). With GNU OpenMP (numba's choice without TBB), a process forked
-    after that is terminated by numba when it runs threads itself ("fork() called from a
-    process already using GNU OpenMP"): start subprocesses with "spawn" or "forkserver" (SB3's
-    SubprocVecEnv does), or set ``NUMBA_THREADING_LAYER=workqueue`` (fork-safe; one parallel
-    call at a time per process). docs/benchmarks.md has the speed-ups measured.
+    reset of an env with threads starts numba's threading layer (TBB where installed, else
+    OpenMP, else numba's workqueue); its constructor does not, so Gymnasium's AsyncVectorEnv,
+    which makes one env in the parent and then forks, works with threads (tested). With GNU
+    OpenMP (numba's choice without TBB), a process forked after the threads started is
+    terminated by numba when it runs threads itself ("fork() called from a process already
+    using GNU OpenMP"): start subprocesses with "spawn" or "forkserver" (SB3's SubprocVecEnv
+    does), or set ``NUMBA_THREADING_LAYER=workqueue``, which survives a fork but aborts the
+    process if two Python threads step threaded envs at once (TBB and OpenMP allow that).
+    docs/benchmarks.md has the speed-ups measured.
 
     ## Attributes
 
@@ -274,10 +277,8 @@ class SwarmVectorEnv(VectorEnv):
         self._block_models = [self.model] + [
             _CachedLinearizationModel(params, self.config.linear_operator) for _ in self._blocks[1:]
         ]
-        if self.num_threads > 1:
-            load_compiled_threads(self.num_threads)  # (the one-time load falls here)
-            for model in self._block_models:
-                model.threads = self.num_threads
+        for model in self._block_models:  # (their threaded passes load in the first reset)
+            model.threads = self.num_threads
         # the block views of the current state the block models last saw (their cache keys)
         self._block_views: list[Any] = []
         self._block_views_of: Any = None
@@ -548,6 +549,11 @@ class SwarmVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every env (or those of ``options["reset_mask"]``); see the class docstring."""
         seeds = self._env_seeds(seed)
+        if self.num_threads > 1:
+            # the threaded passes' one-time load (it starts numba's threads) falls in the first
+            # reset, not in the constructor, so that a process may fork after making an env
+            # (see Threads)
+            load_compiled_threads(self.num_threads)
         options = dict(options or {})
         mask = options.pop("reset_mask", None)
         if mask is None:

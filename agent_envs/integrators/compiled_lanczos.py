@@ -265,7 +265,8 @@ def _phi_of_tridiagonal(alphas, betas, m, col, order, fact, out, d, e, rows, rot
     y = phi(Lambda) Z^T e_1 and K >= 0 the rotations of Z (`_tridiagonal_ql`), or, where the
     QL iteration gave up (more rotations than the buffers hold, from m above about 40, or more
     than 30 m iterations, not seen in practice), the coefficients themselves from LAPACK's
-    eigh and K = -1. d, e (>= m), rows (2, >= m) and the rotation buffers are scratch; on
+    eigh and K = -1 (a non-finite T: NaN throughout, so that no check passes). d, e (>= m),
+    rows (2, >= m) and the rotation buffers are scratch; on
     return d[:m] holds the eigenvalues, rows[:, :m] Z's first and last rows and phis[:m]
     phi_order of the eigenvalues (what `_error_bound` reads)."""
     for i in range(m):
@@ -276,6 +277,21 @@ def _phi_of_tridiagonal(alphas, betas, m, col, order, fact, out, d, e, rows, rot
     last = 0.0
     size = 0.0
     if count < 0:
+        finite = True
+        for i in range(m):
+            finite = finite and math.isfinite(alphas[i, col])
+        for i in range(m - 1):
+            finite = finite and math.isfinite(betas[i, col])
+        if not finite:
+            # (LAPACK refuses a non-finite T: the check fails instead of raising, so that the
+            # member reads as not converged in the one-thread and the threaded loop alike)
+            for j in range(m):
+                d[j] = np.nan
+                rows[0, j] = np.nan
+                rows[1, j] = np.nan
+                phis[j] = np.nan
+                out[j] = np.nan
+            return np.nan, np.nan, count
         t = np.zeros((m, m))
         for i in range(m):
             t[i, i] = alphas[i, col]
@@ -473,7 +489,9 @@ def frozen_advance_threads(
     scratch arrays of its own; a member's step does not depend on the other members, so the
     result equals `frozen_advance`'s bit for bit (tests/test_compiled_threads.py)."""
     members = p.shape[0]
-    converged = np.empty(members, dtype=np.bool_)
+    # (False until a span's loop sets it: numba's parallel loop may drop an error raised in a
+    # span, and a member left unwritten must read as not converged, never as garbage)
+    converged = np.zeros(members, dtype=np.bool_)
     with_extra = extra.shape[0] > 0
     empty = np.empty(0)
     for c in prange(chunks):

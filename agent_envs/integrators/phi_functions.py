@@ -63,6 +63,8 @@ _ACCUMULATE_BASIS_MIN_N = 2**14
 #: the compiled Lanczos module once `load_compiled` found it; False: unavailable or switched off;
 #: None: not tried yet
 _compiled: Any = None
+#: thread counts `load_compiled_threads` has warmed the threaded fused step up for
+_threads_loaded: set[int] = set()
 
 
 _NO_BOUNDS = readonly_view(np.empty(0))
@@ -933,7 +935,8 @@ def load_compiled_threads(threads: int) -> bool:
     cost falls where this is called and not in a step."""
     if not load_compiled() or not load_compiled_threads_kernel(threads):
         return False
-    if threads > 1:
+    if threads > 1 and threads not in _threads_loaded:
+        _threads_loaded.add(threads)
         p = readonly_view(np.full((2, 3, 3), 0.5))
         s = readonly_view(p.sum(axis=-1))
         v = readonly_view(np.ones((2, 3, 1)))
