@@ -518,8 +518,9 @@ def worker_threads(rounds: int) -> dict[str, float]:
     return out
 
 
-def worker_ppo(timesteps: int) -> dict[str, float]:
-    """PPO env-steps/s at the paper setting (fresh process), and the env's share of the time."""
+def worker_ppo(timesteps: int, threads: int = 1) -> dict[str, float]:
+    """PPO env-steps/s at the paper setting (fresh process), and the env's share of the time;
+    the native env on `threads` threads (`num_threads`; trees before it: 1 only)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
@@ -535,7 +536,8 @@ def worker_ppo(timesteps: int) -> dict[str, float]:
     torch.set_num_threads(1)
     config = TrainConfig(env_id=GYM_ENV_ID, vec_env="native", seed=0, env_kwargs=dict(PAPER_ENV))
     kwargs, n_envs, normalize_kwargs, policy = resolve_hyperparams(config)
-    venv = NativeVecEnv(n_envs, dict(PAPER_ENV), horizon_as_termination=True)
+    extra = {"num_threads": threads} if threads > 1 else {}
+    venv = NativeVecEnv(n_envs, dict(PAPER_ENV), horizon_as_termination=True, **extra)
     venv.seed(0)
     in_env = [0.0]
     for name in ("step_wait", "reset"):
@@ -1310,6 +1312,18 @@ def main() -> int:
         )
         if b:
             print(f"\nPPO after / before: {a['steps_per_s'] / b['steps_per_s']:.2f}x")
+        from agent_envs.dynamics.laplacian import max_compiled_threads
+
+        most = max_compiled_threads()
+        if most > 1:  # this tree, the native env on every thread numba allows
+            one = run_worker(sys.executable, "ppo", timesteps=args.ppo_timesteps)
+            many = run_worker(sys.executable, "ppo", timesteps=args.ppo_timesteps, threads=most)
+            print(
+                f"\nThis tree with the native env on {most} threads: {many['steps_per_s']:,.1f}"
+                f" env-steps/s (env share {100 * many['env_share']:.0f} %) against"
+                f" {one['steps_per_s']:,.1f} on one thread in the next process:"
+                f" {many['steps_per_s'] / one['steps_per_s']:.2f}x"
+            )
         print()
 
     if "accounting" not in args.skip:
