@@ -663,6 +663,7 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
         return apply(self, rows)
 
     reached, oracle, step_of = [], [], []
+    tridiagonals = []  # the oracle's T_m per sampled member and step (its one accepted check)
     pf._RowOperator.apply = counted
     try:
         for index, (dense, v, order, rtol, norms, widths, *_, low) in enumerate(captured):
@@ -673,7 +674,9 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
                                   100, bounds=bounds)  # fmt: skip
                 reached.append(count[0])
                 deflate = bool(np.isfinite(widths[j]))
-                oracle.append(_oracle_dimension(dense[j], v[j, :, 0], order, rtol, deflate))
+                m, alphas, betas = _oracle_lanczos(dense[j], v[j, :, 0], order, rtol, deflate)
+                oracle.append(m)
+                tridiagonals.append((m, alphas, betas))
                 step_of.append(index % env.config.n_steps)
     finally:
         pf._RowOperator.apply = apply
@@ -726,7 +729,60 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
 
         out["member_us"] = 1e6 * interleaved({"call": call}, 200, 5)["call"] / members_all
         out.update(_compiled_bounds(env, captured[min(2, len(captured) - 1)]))
+        out.update(_recurrence_and_checks(tridiagonals, p.shape[-1]))
     return out
+
+
+def _recurrence_and_checks(tridiagonals: list[tuple[Any, ...]], n: int) -> dict[str, float]:
+    """Per member and step, what a Lanczos phi-action that stops at the oracle's dimension m
+    with a single check must run besides its products: m iterations of the compiled
+    recurrence (`_scale_dot` and two `_axpy_dot` on n-vectors) and one QL check with its error
+    bound at m (`_phi_of_tridiagonal`, `_error_bound`) on the oracle's own T_m; microseconds
+    (means over the sampled member-steps)."""
+    from numba import njit
+
+    from agent_envs.integrators import compiled_lanczos as cl
+
+    @njit
+    def recurrence(w: Any, s: Any, q: Any, qp: Any, n: int, reps: int) -> float:
+        acc = 0.0
+        for _ in range(reps):
+            alpha = cl._scale_dot(w, s, q, 1.0, n)
+            proj = cl._axpy_dot(w, -1e-3 * alpha, q, qp, n)
+            acc += cl._axpy_dot(w, -1e-3 * proj, qp, w, n)
+        return acc
+
+    @njit
+    def checks(alphas: Any, betas: Any, m: int, fact: Any, reps: int) -> float:
+        out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
+        size = 2 * m * m + 8
+        rot_c, rot_s, phis = np.empty(size), np.empty(size), np.empty(m)
+        rot_at = np.empty(size, dtype=np.int64)
+        acc = 0.0
+        for _ in range(reps):
+            cl._phi_of_tridiagonal(alphas, betas, m, 0, 1, fact, out, d, e, rows, rot_c, rot_s,
+                                   rot_at, phis)  # fmt: skip
+            acc += cl._error_bound(d, rows, phis, m, 1, fact, d[m - 1])
+        return acc
+
+    rng = np.random.default_rng(0)
+    w, s, q, qp = (rng.uniform(0.5, 1.0, n) for _ in range(4))
+    reps = 20000
+    recurrence(w.copy(), s, q, qp, n, 1)
+    iteration_us = (
+        1e6
+        * interleaved({"rec": lambda: recurrence(w.copy(), s, q, qp, n, reps)}, 1, 5)["rec"]
+        / reps
+    )
+    fact = cl._factorials(cl.TAYLOR_TERMS + 3)
+    check_us = []
+    for m, alphas, betas in tridiagonals:
+        t_a, t_b = alphas.reshape(m, 1), np.append(betas, 0.0)[:m].reshape(m, 1)
+        checks(t_a, t_b, m, fact, 1)
+        start = time.perf_counter()
+        checks(t_a, t_b, m, fact, 50)
+        check_us.append(1e6 * (time.perf_counter() - start) / 50)
+    return {"iteration_us": iteration_us, "check_us": float(np.mean(check_us))}
 
 
 def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
@@ -1215,6 +1271,19 @@ def main() -> int:
                     print(
                         f"Products alone at {label} dimension (+ the noise product; part 2's"
                         f" pass and EM step): SERB / EM >= {(em + extra) / em:.2f}"
+                    )
+                if "check_us" in k:
+                    # the recurrence and the one check in units of this worker's product, at
+                    # part 2's machine speed (its pass is 20 members' products)
+                    scale = one_pass / 20 / (1e-6 * k["product_us"])
+                    members = 20 * 1e-6 * scale * (k["oracle"] * k["iteration_us"] + k["check_us"])
+                    bound = (em + (k["oracle"] + 1) * one_pass + members) / em
+                    print(
+                        f"Products, recurrence ({k['iteration_us']:.2f} us an iteration) and one"
+                        f" accepted check per member and step ({k['check_us']:.2f} us on average"
+                        f" at the oracle's T_m), at the oracle dimension: SERB / EM >= {bound:.2f}"
+                        " (a Lanczos that knew where to stop, with no other work and no"
+                        " interpreter time beyond EM's)"
                     )
         print()
 
