@@ -1390,7 +1390,8 @@ def main() -> int:
             print(
                 f"\nThis tree with the native env on {most} threads: {many['steps_per_s']:,.1f}"
                 f" env-steps/s (env share {100 * many['env_share']:.0f} %) against"
-                f" {one['steps_per_s']:,.1f} on one thread in the next process:"
+                f" {one['steps_per_s']:,.1f} (env share {100 * one['env_share']:.0f} %) on one"
+                f" thread in a process run just before it:"
                 f" {many['steps_per_s'] / one['steps_per_s']:.2f}x"
             )
         print()

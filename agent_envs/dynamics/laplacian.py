@@ -54,6 +54,8 @@ COMPILED_ENV_VAR = "AGENT_ENVS_NUMBA"
 #: `agent_envs.dynamics.compiled_kernel` once `load_compiled_kernel` found it; False:
 #: unavailable or switched off; None: not tried yet
 _compiled_kernel: Any = None
+#: thread counts `load_compiled_threads` has warmed the threaded kernel pass up for
+_threads_loaded: set[int] = set()
 
 
 def readonly_view(a: np.ndarray) -> np.ndarray:
@@ -182,7 +184,8 @@ def load_compiled_threads(threads: int) -> bool:
     constructor: a process that forks after GNU OpenMP started loses its children to it.)"""
     if threads < 1 or threads > max_compiled_threads():
         return False
-    if threads > 1:
+    if threads > 1 and threads not in _threads_loaded:
+        _threads_loaded.add(threads)
         x = readonly_view(np.zeros((2, 2, 1)))
         with compiled_threads(threads):
             _compiled_kernel.cucker_smale_drift_threads(

@@ -187,11 +187,13 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     capped. An unknown keyword raises Python's own
     `TypeError("SwarmEnv.__init__() got an unexpected keyword argument 'x'")`.
 
-    `num_threads` (numpy with numba) runs the compiled passes of a step over the env's
-    n_paths systems (the kernel pass; SERB's or ERB's fused step with the frozen Jacobian) on
-    that many of numba's threads: the same results bit for bit, faster where n_paths is large
-    (the paper's 20 paths). It changes no dynamics and is not part of the episode's
-    configuration; `agent_envs.envs.vector_env.SwarmVectorEnv` ("Threads") says more.
+    `num_threads` (needs numba, the `fast` extra) runs the compiled passes of a step over the
+    env's n_paths systems (the kernel pass; SERB's or ERB's fused step with the frozen Jacobian)
+    on that many of numba's threads: the same results bit for bit, faster where n_paths is large
+    (the paper's 20 paths). No effect with one path, with the matrix-free operator (large N),
+    or, for the fused step, where the phi-action is not the Lanczos (N below about 49). It
+    changes no dynamics and is not part of the episode's configuration;
+    `agent_envs.envs.vector_env.SwarmVectorEnv` ("Threads") says more.
 
     ## Attributes (on `env.unwrapped`)
 

@@ -162,7 +162,8 @@ class SwarmVectorEnv(VectorEnv):
 
     `num_threads` (default 1; numpy backend with numba): the compiled passes of a step over the
     batch's B x P systems (the kernel pass, and SERB's or ERB's fused step with the frozen
-    Jacobian) run on that many of numba's threads, in contiguous spans of systems. Every system
+    Jacobian, where the phi-action is the Lanczos) run on that many of numba's threads, in
+    contiguous spans of systems; the matrix-free operator (large N) is not threaded. Every system
     is computed alone, so observations, rewards and infos are the same bit for bit as with one
     thread (tests/test_compiled_threads.py); the draws, the costs and the rest of the step stay
     on the calling thread. At most numba's ``NUMBA_NUM_THREADS`` (the CPUs it sees). The default
