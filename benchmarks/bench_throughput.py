@@ -733,6 +733,31 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
     return out
 
 
+def _ql_check_runs() -> Callable[..., tuple[int, float]]:
+    """A compiled loop of `reps` QL checks of one T_m (`_phi_of_tridiagonal`, and with
+    `with_bound` its error bound at the top eigenvalue, `_error_bound`): (the number of
+    rotations, the sum of the bounds). Built on first use (numba is imported only here)."""
+    from numba import njit
+
+    from agent_envs.integrators import compiled_lanczos as cl
+
+    @njit
+    def runs(alphas: Any, betas: Any, m: int, fact: Any, reps: int, with_bound: bool) -> Any:
+        out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
+        size = 2 * m * m + 8
+        rot_c, rot_s, phis = np.empty(size), np.empty(size), np.empty(m)
+        rot_at = np.empty(size, dtype=np.int64)
+        count, acc = 0, 0.0
+        for _ in range(reps):
+            count = cl._phi_of_tridiagonal(alphas, betas, m, 0, 1, fact, out, d, e, rows, rot_c,
+                                           rot_s, rot_at, phis)[2]  # fmt: skip
+            if with_bound:
+                acc += cl._error_bound(d, rows, phis, m, 1, fact, d[m - 1])
+        return count, acc
+
+    return runs
+
+
 def _recurrence_and_checks(tridiagonals: list[tuple[Any, ...]], n: int) -> dict[str, float]:
     """Per member and step, what a Lanczos phi-action that stops at the oracle's dimension m
     with a single check must run besides its products: m iterations of the compiled
@@ -752,18 +777,7 @@ def _recurrence_and_checks(tridiagonals: list[tuple[Any, ...]], n: int) -> dict[
             acc += cl._axpy_dot(w, -1e-3 * proj, qp, w, n)
         return acc
 
-    @njit
-    def checks(alphas: Any, betas: Any, m: int, fact: Any, reps: int) -> float:
-        out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
-        size = 2 * m * m + 8
-        rot_c, rot_s, phis = np.empty(size), np.empty(size), np.empty(m)
-        rot_at = np.empty(size, dtype=np.int64)
-        acc = 0.0
-        for _ in range(reps):
-            cl._phi_of_tridiagonal(alphas, betas, m, 0, 1, fact, out, d, e, rows, rot_c, rot_s,
-                                   rot_at, phis)  # fmt: skip
-            acc += cl._error_bound(d, rows, phis, m, 1, fact, d[m - 1])
-        return acc
+    checks = _ql_check_runs()
 
     rng = np.random.default_rng(0)
     w, s, q, qp = (rng.uniform(0.5, 1.0, n) for _ in range(4))
@@ -778,9 +792,9 @@ def _recurrence_and_checks(tridiagonals: list[tuple[Any, ...]], n: int) -> dict[
     check_us = []
     for m, alphas, betas in tridiagonals:
         t_a, t_b = alphas.reshape(m, 1), np.append(betas, 0.0)[:m].reshape(m, 1)
-        checks(t_a, t_b, m, fact, 1)
+        checks(t_a, t_b, m, fact, 1, True)
         start = time.perf_counter()
-        checks(t_a, t_b, m, fact, 50)
+        checks(t_a, t_b, m, fact, 50, True)
         check_us.append(1e6 * (time.perf_counter() - start) / 50)
     return {"iteration_us": iteration_us, "check_us": float(np.mean(check_us))}
 
@@ -808,17 +822,7 @@ def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
             for k in range(n):
                 ck._lower_row(xt, k, w, a2, p[k], n, d)
 
-    @njit
-    def ql_checks(alphas: Any, betas: Any, m: int, fact: Any, reps: int) -> int:
-        out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
-        size = 2 * m * m + 8
-        rot_c, rot_s, phis = np.empty(size), np.empty(size), np.empty(m)
-        rot_at = np.empty(size, dtype=np.int64)
-        count = 0
-        for _ in range(reps):
-            count = cl._phi_of_tridiagonal(alphas, betas, m, 0, 1, fact, out, d, e, rows, rot_c,
-                                           rot_s, rot_at, phis)[2]  # fmt: skip
-        return count
+    ql_checks = _ql_check_runs()
 
     model = env.episode.model
     x = np.ascontiguousarray(env.episode.positions[:1])  # one member, (1, N, d)
@@ -849,8 +853,8 @@ def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
     m, alphas, betas = _oracle_lanczos(early[0][0], early[1][0, :, 0], 1, 1e-10, True)
     t_a, t_b = alphas.reshape(m, 1), np.append(betas, 0.0).reshape(m, 1)  # (e[m - 1]: scratch)
     fact = cl._factorials(cl.TAYLOR_TERMS + 2)
-    rotations = ql_checks(t_a, t_b, m, fact, 1)
-    ql_us = timed(lambda: ql_checks(t_a, t_b, m, fact, reps))
+    rotations = ql_checks(t_a, t_b, m, fact, 1, False)[0]
+    ql_us = timed(lambda: ql_checks(t_a, t_b, m, fact, reps, False))
     out.update(ql_m=float(m), ql_rotations=float(rotations), ql_us=ql_us)
     return out
 
