@@ -39,7 +39,7 @@ from __future__ import annotations
 import importlib
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -122,12 +122,13 @@ def compiled_cucker_smale_drift(
     flat = readonly_view(np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d))
     row_sums = np.empty((members, n))
     drift = np.empty((members, n, d))
-    args = (flat, float(weight), float(alpha2), p.reshape(members, n, n), row_sums, drift)
-    if threads > 1 and members > 1:
-        with compiled_threads(threads):
-            _compiled_kernel.cucker_smale_drift_threads(*args, min(threads, members))
-    else:
-        _compiled_kernel.cucker_smale_drift(*args)
+    call_on_threads(
+        _compiled_kernel.cucker_smale_drift,
+        _compiled_kernel.cucker_smale_drift_threads,
+        (flat, float(weight), float(alpha2), p.reshape(members, n, n), row_sums, drift),
+        members,
+        threads,
+    )
     return row_sums.reshape(*batch, n), drift.reshape(*batch, n, d)
 
 
@@ -176,6 +177,23 @@ def compiled_threads(threads: int) -> Iterator[None]:
         numba.set_num_threads(before)
 
 
+def call_on_threads(
+    one: Callable[..., Any],
+    spans: Callable[..., Any],
+    args: tuple[Any, ...],
+    members: int,
+    threads: int,
+) -> Any:
+    """A compiled pass over `members` batch members: ``one(*args)`` on the calling thread, or,
+    for `threads` > 1 and more than one member, its threaded driver ``spans(*args, k)`` on
+    k = min(threads, members) contiguous spans of members on numba's threads (inside
+    `compiled_threads`); the driver's result either way."""
+    if threads > 1 and members > 1:
+        with compiled_threads(threads):
+            return spans(*args, min(threads, members))
+    return one(*args)
+
+
 def load_compiled_threads(threads: int) -> bool:
     """Whether the compiled kernel pass can run on `threads` threads (1 <= threads <=
     `max_compiled_threads`); loads the threaded pass and starts numba's threading layer with
@@ -187,10 +205,13 @@ def load_compiled_threads(threads: int) -> bool:
     if threads > 1 and threads not in _threads_loaded:
         _threads_loaded.add(threads)
         x = readonly_view(np.zeros((2, 2, 1)))
-        with compiled_threads(threads):
-            _compiled_kernel.cucker_smale_drift_threads(
-                x, 1.0, 1.0, np.empty((2, 2, 2)), np.empty((2, 2)), np.empty((2, 2, 1)), 2
-            )
+        call_on_threads(
+            _compiled_kernel.cucker_smale_drift,
+            _compiled_kernel.cucker_smale_drift_threads,
+            (x, 1.0, 1.0, np.empty((2, 2, 2)), np.empty((2, 2)), np.empty((2, 2, 1))),
+            2,
+            threads,
+        )
     return True
 
 

@@ -45,7 +45,7 @@ import numpy as np
 from agent_envs import arrays
 from agent_envs.dynamics.laplacian import (
     FrozenLaplacian,
-    compiled_threads,
+    call_on_threads,
     import_compiled,
     readonly_view,
     use_compiled_kernel,
@@ -940,13 +940,12 @@ def load_compiled_threads(threads: int) -> bool:
         p = readonly_view(np.full((2, 3, 3), 0.5))
         s = readonly_view(p.sum(axis=-1))
         v = readonly_view(np.ones((2, 3, 1)))
-        with compiled_threads(threads):
-            for extra in (_NO_EXTRA, v):
-                _compiled.frozen_advance_threads(
-                    np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((2, 3, 1)),
+        for extra in (_NO_EXTRA, v):
+            args = (np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((2, 3, 1)),
                     extra, 1.0, v, 0.1, v, 1.0, 1.0, np.empty((2, 3, 1)), np.empty((2, 3)),
-                    np.empty((2, 3, 1)), 2,
-                )  # fmt: skip
+                    np.empty((2, 3, 1)))  # fmt: skip
+            call_on_threads(_compiled.frozen_advance, _compiled.frozen_advance_threads, args, 2,
+                            threads)  # fmt: skip
     return True
 
 
@@ -1103,11 +1102,9 @@ def frozen_advance(
         extra, 0.0 if extra_scale is None else float(extra_scale), _as_members(x, full),
         float(dt), noise_members, float(weight), float(alpha2), x_next, s_next, drift_next,
     )  # fmt: skip
-    if threads > 1 and members > 1:
-        with compiled_threads(threads):
-            failed = _compiled.frozen_advance_threads(*args, min(threads, members))
-    else:
-        failed = _compiled.frozen_advance(*args)
+    failed = call_on_threads(
+        _compiled.frozen_advance, _compiled.frozen_advance_threads, args, members, threads
+    )
     if failed:
         return None
     return x_next.reshape(x.shape), s_next, drift_next
