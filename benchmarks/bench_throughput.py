@@ -693,9 +693,8 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
     if pf.load_compiled():
         from numba import njit
 
+        from agent_envs.dynamics.compiled_kernel import lower_product as product
         from agent_envs.integrators import compiled_lanczos as cl
-
-        product = cl._product
 
         @njit
         def products(p: Any, q: Any, w: Any, n: int, reps: int) -> None:
@@ -715,6 +714,7 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
         start = time.perf_counter()
         products(p0, q, w, p.shape[-1], 20000)
         out["product_us"] = 1e6 * (time.perf_counter() - start) / 20000
+        out["pair_speedup"] = _pair_speedup(p0)
         members_all = p.shape[0]
         p_all = aligned_copy(p).reshape(members_all, *p.shape[-2:])
         p_all.flags.writeable = False
@@ -731,6 +731,40 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
         out.update(_compiled_bounds(env, captured[min(2, len(captured) - 1)]))
         out.update(_recurrence_and_checks(tridiagonals, p.shape[-1]))
     return out
+
+
+def _pair_speedup(p: np.ndarray, rounds: int = 30, reps: int = 1000) -> float:
+    """Two vectors' products over one P (aligned, in cache): two `lower_product` passes / one
+    `lower_product_pair` pass (d > 1: the Lanczos's k columns and the kernel pass's P x take
+    pairs), the median of the per-round ratios over alternating rounds."""
+    from numba import njit
+
+    from agent_envs.dynamics.compiled_kernel import lower_product, lower_product_pair
+
+    @njit
+    def singles(p: Any, q: Any, w: Any, n: int, reps: int) -> None:
+        for _ in range(reps):
+            lower_product(p, q[0], w[0], n)
+            lower_product(p, q[1], w[1], n)
+
+    @njit
+    def pairs(p: Any, q: Any, w: Any, n: int, reps: int) -> None:
+        for _ in range(reps):
+            lower_product_pair(p, q[0], q[1], w[0], w[1], n)
+
+    n = p.shape[-1]
+    q = np.random.default_rng(0).standard_normal((2, n))
+    w = np.empty((2, n))
+    singles(p, q, w, n, 1)
+    pairs(p, q, w, n, 1)
+    ratios = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        singles(p, q, w, n, reps)
+        middle = time.perf_counter()
+        pairs(p, q, w, n, reps)
+        ratios.append((middle - start) / (time.perf_counter() - middle))
+    return float(np.median(ratios))
 
 
 def _ql_check_runs() -> Callable[..., tuple[int, float]]:
@@ -1258,6 +1292,12 @@ def main() -> int:
                 f"{k['product_us']:.2f} us; the compiled phi-action of a near-consensus step: "
                 f"{k['member_us']:.2f} us per member"
             )
+            if "pair_speedup" in k:
+                print(
+                    "Two vectors' products in one pass over P (`lower_product_pair`: d > 1, the"
+                    " Lanczos's columns and the kernel pass's P x) against two passes:"
+                    f" {k['pair_speedup']:.2f}x (median of alternating rounds)"
+                )
             if "kernel_pass_us" in k:
                 print(
                     f"The compiled kernel pass of one member: {k['kernel_pass_us']:.2f} us, of"

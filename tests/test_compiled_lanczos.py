@@ -484,17 +484,19 @@ def test_check_schedule_is_the_same_rule_compiled_and_numpy(compiled):
 
 @pytest.mark.parametrize("n", [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 100])
 def test_product_reads_the_lower_triangle_and_equals_the_dense_product(compiled, n):
-    """`_product` (four rows per block, the n % 4 rows after them one by one) against P q for
+    """`lower_product` (four rows per block, the n % 4 rows after them one by one) against P q for
     a symmetric P, to round-off; NaN above the diagonal blocks does not reach the result (only
     the lower triangle and the 4 x 4 blocks on the diagonal are read); and a second call with
     the same inputs, from other buffers, gives the same bits."""
+    from agent_envs.dynamics import compiled_kernel
+
     rng = np.random.default_rng(n)
     half = rng.uniform(0.1, 2.0, (n, n))
     p = np.tril(half) + np.tril(half, -1).T
     q = rng.standard_normal(n)
     want = p @ q
     w = np.full(n, np.nan)
-    compiled._product(p, q, w, n)
+    compiled_kernel.lower_product(p, q, w, n)
     assert np.all(np.abs(w - want) <= 1e-14 * np.maximum(np.abs(p) @ np.abs(q), 1e-300))
     upper = p.copy()
     top = n - n % 4
@@ -502,8 +504,43 @@ def test_product_reads_the_lower_triangle_and_equals_the_dense_product(compiled,
         block_end = (i // 4 + 1) * 4 if i < top else i + 1
         upper[i, block_end:] = np.nan
     again = np.full(n, np.nan)
-    compiled._product(upper.copy(), q.copy(), again, n)
+    compiled_kernel.lower_product(upper.copy(), q.copy(), again, n)
     np.testing.assert_array_equal(again, w)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 13, 100])
+@pytest.mark.parametrize("k", [1, 2, 3, 4])
+def test_products_of_several_vectors_read_the_lower_triangle(compiled, n, k):
+    """`_products` (the Lanczos's products of k vectors: pairs in one pass over P by
+    `lower_product_pair`, an odd last one alone) against P q for each vector, to round-off;
+    NaN outside the triangle and the diagonal blocks does not reach the result; the same
+    inputs from other buffers give the same bits; and each column of a pair is the same
+    whatever the other column holds (a member's result depends only on its own data)."""
+    from agent_envs.dynamics import compiled_kernel
+
+    rng = np.random.default_rng(100 * n + k)
+    half = rng.uniform(0.1, 2.0, (n, n))
+    p = np.tril(half) + np.tril(half, -1).T
+    q = rng.standard_normal((k, n))
+    w = np.full((k, n), np.nan)
+    compiled._products(p, q, w, k, n)
+    for c in range(k):
+        tol = 1e-14 * np.maximum(np.abs(p) @ np.abs(q[c]), 1e-300)
+        assert np.all(np.abs(w[c] - p @ q[c]) <= tol)
+    upper = p.copy()
+    top = n - n % 4
+    for i in range(n):
+        block_end = (i // 4 + 1) * 4 if i < top else i + 1
+        upper[i, block_end:] = np.nan
+    again = np.full((k, n), np.nan)
+    compiled._products(upper.copy(), q.copy(), again, k, n)
+    np.testing.assert_array_equal(again, w)
+    if k >= 2:
+        other = q.copy()
+        other[1] = rng.standard_normal(n)
+        v = np.full((k, n), np.nan)
+        compiled_kernel.lower_product_pair(p, other[0], other[1], v[0], v[1], n)
+        np.testing.assert_array_equal(v[0], w[0])
 
 
 @pytest.mark.parametrize("n", [0, 1, 3, 4, 5, 17, 100])
