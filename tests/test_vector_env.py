@@ -118,6 +118,23 @@ def test_native_matches_sync_vector_env_with_autoreset_and_divergence(kwargs):
     assert truncated >= 6  # the other envs reached the horizon, episode after episode
 
 
+@pytest.mark.parametrize("integrator", ["em", "serb"])
+def test_an_env_that_diverges_on_its_last_step_is_terminated_and_truncated(integrator):
+    """gym.make's TimeLimit counts the diverging step: a single env that diverges on the
+    horizon step returns terminated and truncated, and so must its native twin (the native env
+    once counted only the steps that moved and said truncated=False there)."""
+    kwargs = {"n_agents": 10, "n_steps": 1, "max_control": 100.0, "divergence_threshold": 2.5,
+              "integrator": integrator, "epsilon": 0.5, "horizon": 0.1}  # fmt: skip
+    env = sync(2, **kwargs)
+    env.reset(seed=3)
+    a = np.full((2, 10), 0.01, dtype=np.float32)
+    a[1] = 1.0  # moves every agent of env 1 by 10 in its one step: beyond the threshold
+    _, _, terminated, truncated, _ = env.step(a)
+    assert terminated.tolist() == [False, True] and truncated.tolist() == [True, True]
+    terminated, truncated = run_side_by_side(3, 6, **kwargs)
+    assert terminated >= 3 and truncated >= 9
+
+
 @pytest.mark.parametrize(
     "kwargs",
     [

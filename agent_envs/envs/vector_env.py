@@ -623,7 +623,10 @@ class SwarmVectorEnv(VectorEnv):
             else:
                 self._mean_drift = self._mean_drift_of(self._positions)
 
-        truncated = moved & (self.step_index >= self.config.n_steps)
+        # the episode's steps so far, the diverging one included: gym.make's TimeLimit counts
+        # calls, so a single env that diverges on its last step is terminated and truncated
+        elapsed = self.step_index + diverged
+        truncated = stepping & (elapsed >= self.config.n_steps)
         terminated = diverged.copy()
         observations = self._observations()
         info = self._state_info()
