@@ -306,9 +306,10 @@ class _CallTimes:
 
 
 def _wrap_compiled(times: _CallTimes) -> None:
-    """Time the compiled calls under the key "compiled": the kernel pass, the compiled Lanczos
-    and the fused step (what numba runs); nothing in a tree without them (numba missing or
-    switched off, or a tree before them: the workers also run older checkouts)."""
+    """Time the compiled calls under the key "compiled": the kernel pass, the compiled Lanczos,
+    the fused step and the native env's prologue and epilogue (what numba runs); nothing in a
+    tree without them (numba missing or switched off, or a tree before them: the workers also
+    run older checkouts)."""
     try:  # (trees before the workspaces have no laplacian module: nothing compiled)
         from agent_envs.dynamics import laplacian
         from agent_envs.integrators import phi_functions
@@ -319,6 +320,13 @@ def _wrap_compiled(times: _CallTimes) -> None:
     if getattr(phi_functions, "load_compiled", lambda: False)():
         for name in ("frozen_advance", "frozen_lanczos"):
             times.wrap(phi_functions._compiled, name, "compiled", compiled=True)
+    try:  # the native env's compiled prologue and epilogue (trees before them: none)
+        from agent_envs.envs import fast_step
+    except ImportError:
+        return
+    if fast_step.load_compiled_step():
+        for name in ("prologue", "epilogue"):
+            times.wrap(fast_step.compiled_step(), name, "compiled", compiled=True)
 
 
 def compiled_share(
@@ -443,6 +451,14 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
                 sync = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="sync", **kwargs)
                 sync.reset(seed=0)
                 fns["sync"] = lambda sync=sync, actions=actions: sync.step(actions)
+                if getattr(native.unwrapped, "_compiled_kind", None) is not None:
+                    # the same env with its compiled prologue and epilogue off: the numpy step
+                    plain = gym.make_vec(
+                        ENV_ID, num_envs=b, vectorization_mode="vector_entry_point", **kwargs
+                    )
+                    plain.unwrapped._compiled_kind = None
+                    plain.reset(seed=0)
+                    fns["numpy_step"] = lambda plain=plain, actions=actions: plain.step(actions)
             # blocks of about 0.3 s of the slower side, from one timed call of each after a
             # warm-up (two calls per block at 20 paths, as before, moved the ratio by 0.1)
             probe = {}
@@ -1360,6 +1376,13 @@ def main() -> int:
             f"\nSyncVectorEnv, B = {b}, 1 path: {fmt_pair(a[key_s], o and o[key_s])} env-steps/s;"
             f" native / Sync = {fmt_pair(a[key_n] / a[key_s], o and o[key_n] / o[key_s], '.2f')}"
         )
+        key_p = f"numpy_step/B{b}/P1"
+        if key_p in a:
+            print(
+                f"The same native env with its numpy step (compiled prologue and epilogue off), in"
+                f" the same rounds: {a[key_p]:,.0f} env-steps/s; compiled / numpy step ="
+                f" {a[key_n] / a[key_p]:.2f}; numpy step / Sync = {a[key_p] / a[key_s]:.2f}"
+            )
         key_c = f"native_compiled/B{b}/P1"
         if key_c in a:
             native_total, sync_total = a[f"native_total/B{b}/P1"], a[f"sync_total/B{b}/P1"]

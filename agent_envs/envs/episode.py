@@ -286,6 +286,14 @@ class _CachedLinearizationModel(SwarmModel):
             self._cached_state = self._cached_matrix = None
         return found
 
+    def cached_linearization(self, x: Any) -> tuple[Any, np.ndarray] | None:
+        """(L(x) over the workspace's P, the drift L(x) x) kept for the state array `x` (by
+        identity) while the workspace still holds its P, else None (nothing is computed)."""
+        cached = self._cached_matrix
+        if x is self._cached_state and isinstance(cached, tuple) and cached[0].current:
+            return cached
+        return None
+
     def fused_relinearization(self, x: Any) -> tuple[np.ndarray, float, float] | None:
         """What an exponential integrator needs to take the kernel pass at its next state in
         its own compiled pass, member by member (`agent_envs.integrators.compiled_lanczos.

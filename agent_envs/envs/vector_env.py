@@ -51,13 +51,15 @@ from agent_envs.envs.episode import (
     reset_options,
     start_positions,
 )
+from agent_envs.envs.fast_step import compiled_step, load_compiled_step
 from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import (
     global_observation,
     interaction_drift_bound,
     observation_space,
 )
-from agent_envs.integrators import Integrator, make_integrator
+from agent_envs.integrators import EulerMaruyama, Integrator, make_integrator
+from agent_envs.integrators.exponential import GAVE_UP, RosenbrockEuler, fused_step_enabled
 from agent_envs.integrators.phi_functions import (
     auto_phi_method,
     load_compiled,
@@ -298,6 +300,16 @@ class SwarmVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
 
+        #: "fused" (SERB, ERB on the compiled fused step) or "em": the step's compiled
+        #: prologue and epilogue apply (see `_step_compiled`); None: the numpy step only
+        self._compiled_kind = self._compiled_step_kind()
+        self._all_rows = np.arange(self.num_envs)
+        space = self.single_observation_space
+        self._observation_bounds = (
+            np.ascontiguousarray(space.low, dtype=np.float32),
+            np.ascontiguousarray(space.high, dtype=np.float32),
+        )
+
         b, p = self.num_envs, self.config.n_paths
         self.np_randoms: list[np.random.Generator | None] = [None] * b
         self._handles: GeneratorHandles | None = None
@@ -490,9 +502,120 @@ class SwarmVectorEnv(VectorEnv):
             return config.jacobian == "frozen" and load_compiled()
         return True
 
-    def _state_info(self) -> dict[str, Any]:
+    def _compiled_step_kind(self) -> str | None:
+        """Whether this env's steps may take the compiled prologue and epilogue
+        (`agent_envs.envs.compiled_step`): numpy, every pass member by member in one block,
+        the "agents" action basis, and SERB or ERB with the frozen Jacobian ("fused": their
+        compiled fused step) or Euler-Maruyama ("em"), with the module loaded and equal to
+        numpy (`load_compiled_step`)."""
+        if (
+            self._device is not None
+            or len(self._blocks) != 1
+            or self.config.action_basis != "agents"
+            or not self._member_by_member()
+        ):
+            return None
+        integrator = self.integrator
+        if isinstance(integrator, RosenbrockEuler) and integrator.jacobian == "frozen":
+            kind = "fused"
+        elif type(integrator) is EulerMaruyama:
+            kind = "em"
+        else:
+            return None
+        return kind if load_compiled_step() else None
+
+    def _step_compiled(self, actions: Any) -> tuple[Any, ...] | None:
+        """`step` for the common case, where every env steps (no autoreset in this call) and
+        the actions are a float32 or float64 numpy array of shape (B, N d) or (B, N, d), from
+        the state whose L(x) the model keeps: the controls, running costs and right-hand sides
+        in one compiled call (`compiled_step.prologue`), the draws, the integrator's fused
+        step (or Euler-Maruyama's update and the kernel pass), and the divergence flags, path
+        means and observation in another compiled call (`compiled_step.epilogue`), the same
+        values bit for bit as the numpy step, which is about 30 numpy calls over the batch
+        (tests/test_fast_step.py). None, before any draw, where it does not apply (the numpy
+        step then runs, and raises for bad actions); a fused step that gives up or does not
+        apply takes the numpy step's `_advance` with the same draws."""
+        b = self.num_envs
+        n, d = self.config.params.n_agents, self.config.params.dim
+        if (
+            type(actions) is not np.ndarray
+            or actions.dtype not in (np.float32, np.float64)
+            or actions.shape not in ((b, n * d), (b, n, d))
+        ):
+            return None
+        kind = self._compiled_kind
+        if kind == "fused" and not fused_step_enabled():
+            return None
+        model, x = self.model, self._positions
+        cached = model.cached_linearization(x)
+        if cached is None or not (x.flags.c_contiguous and cached[1].flags.c_contiguous):
+            return None
+        operator, drift = cached
+        module = compiled_step()
+        controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
+        a = np.ascontiguousarray(actions).reshape(b, n, d)
+        params = self.config.params
+        if not module.prologue(
+            a, self.config.max_control, x, drift, self._targets, params.gamma, controls, costs, rhs
+        ):
+            return None  # (non-finite actions: the numpy step raises)
+        dw = fill_brownian_increments(
+            self.np_randoms, self._all_rows, np.empty(x.shape), self.dt, self._generator_handles()
+        )
+        noise = model.sigma * dw
+        if kind == "fused":  # (compiled: no numpy warnings to silence)
+            x_next = self.integrator.fused_step(model, operator, rhs, x, self.dt, noise)
+        else:  # Euler-Maruyama's x + dt F + sigma dW, then the kernel pass at x_next
+            with np.errstate(over="ignore", invalid="ignore"):
+                x_next = x + self.dt * rhs + noise
+                x_next.flags.writeable = False
+                model.interaction_drift(x_next)
+        every = self._all_rows >= 0  # (B,) True
+        if x_next is None or x_next is GAVE_UP:
+            if x_next is None:  # the fused step does not apply to this env: not again
+                self._compiled_kind = None
+            with arrays.hot_path_threads():
+                x_next, drift_next, diverged = self._advance(
+                    x, controls, self.times[:, None, None, None], dw
+                )
+            return self._finish_step(x, x_next, drift_next, diverged, controls, costs, every)
+        drift_next = model.cached_linearization(x_next)[1]
+        x_next, drift_next = np.ascontiguousarray(x_next), np.ascontiguousarray(drift_next)
+        absolute = self.config.observation == "absolute"
+        low, high = self._observation_bounds
+        mean_positions, mean_drift = np.empty((b, n, d)), np.empty((b, n, d))
+        observations = np.empty((b, low.shape[0]), dtype=np.float32)
+        diverged = np.empty(b, dtype=np.bool_)
+        module.epilogue(
+            x_next, drift_next, self.config.divergence_threshold, self._targets,
+            (self.step_index + 1) / self.config.n_steps, low, high, absolute, mean_positions,
+            mean_drift, observations, diverged,
+        )  # fmt: skip
+        if diverged.any() or not absolute or self.autoreset_mode is not AutoresetMode.NEXT_STEP:
+            if not absolute:
+                observations = None  # (the numpy observation of the state the step leaves)
+            return self._finish_step(
+                x, x_next, mean_drift, diverged, controls, costs, every, observations
+            )
+        # `_finish_step` where every env stepped and moved (NEXT_STEP autoresets): the same
+        # arrays with fewer passes over them
+        self._positions, self._mean_drift = x_next, mean_drift
+        self.step_index += 1
+        truncated = self.step_index >= self.config.n_steps
+        info = self._state_info(controls, costs)
+        self._autoreset = truncated.copy()
+        return observations, -self.dt * costs, diverged, truncated, info
+
+    def _state_info(self, control: Any = None, running_cost: Any = None) -> dict[str, Any]:
+        """The info of the current state, every key filled by every env; a reset's info has
+        the step keys too (zero control, zero running cost, as the single env's), a step's
+        its own `control` (B, N, d) and `running_cost` (B,) where given."""
         every = np.ones(self.num_envs, dtype=bool)
         n, d = self.config.params.n_agents, self.config.params.dim
+        if control is None:
+            control = np.zeros((self.num_envs, n, d))
+        if running_cost is None:
+            running_cost = np.zeros(self.num_envs)
         return {
             "positions": np.array(self.positions),
             "_positions": every,
@@ -500,11 +623,9 @@ class SwarmVectorEnv(VectorEnv):
             "_time": every.copy(),
             "diverged": np.zeros(self.num_envs, dtype=bool),
             "_diverged": every.copy(),
-            # a reset's info has the step keys too (zero control, zero running cost), as the
-            # single env's does
-            "control": np.zeros((self.num_envs, n, d)),
+            "control": control,
             "_control": every.copy(),
-            "running_cost": np.zeros(self.num_envs),
+            "running_cost": running_cost,
             "_running_cost": every.copy(),
         }
 
@@ -583,7 +704,11 @@ class SwarmVectorEnv(VectorEnv):
         """Step every env once (NEXT_STEP: the envs that ended last step are reset instead)."""
         if not self._has_reset:
             raise RuntimeError("call reset() before step()")
-        b, p, xp = self.num_envs, self.config.n_paths, self._xp
+        if self._compiled_kind is not None and not self._autoreset.any():
+            found = self._step_compiled(actions)
+            if found is not None:
+                return found
+        b, p = self.num_envs, self.config.n_paths
         n, d = self.config.params.n_agents, self.config.params.dim
         resetting = self._autoreset.copy()
         stepping = ~resetting
@@ -607,6 +732,29 @@ class SwarmVectorEnv(VectorEnv):
             x_next, drift_next, diverged_on_device = self._advance(
                 x, controls, self._on_device(self.times[:, None, None, None]), self._on_device(dw)
             )
+        return self._finish_step(x, x_next, drift_next, diverged_on_device, controls, costs,
+                                 stepping)  # fmt: skip
+
+    def _finish_step(
+        self,
+        x: Any,
+        x_next: Any,
+        drift_next: Any,
+        diverged_on_device: Any,
+        controls: Any,
+        costs: Any,
+        stepping: np.ndarray,
+        observations: Any = None,
+    ) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        """The rest of `step` after the integrator's step from x to x_next (E drift
+        `drift_next` (B, N, d), flags `diverged_on_device`): the new state, rewards, flags,
+        info and autoresets; `stepping` the (B,) mask of the envs that stepped (the others
+        autoreset in this call); `observations` the observation of the new state where the
+        caller has it (else computed here)."""
+        b, xp = self.num_envs, self._xp
+        resetting = ~stepping
+        every = bool(stepping.all())
+        stepping_on_device = self._on_device(stepping)
         diverged = arrays.to_numpy(diverged_on_device) & stepping
         moved = stepping & ~diverged
         if np.all(moved):
@@ -628,20 +776,20 @@ class SwarmVectorEnv(VectorEnv):
         elapsed = self.step_index + diverged
         truncated = stepping & (elapsed >= self.config.n_steps)
         terminated = diverged.copy()
-        observations = self._observations()
-        info = self._state_info()
-        info["diverged"] = diverged.copy()
+        if observations is None or not np.all(moved):
+            observations = self._observations()
         if every:  # (controls and costs are this call's own arrays)
             rewards = arrays.to_numpy(-self.dt * costs)
-            info["control"] = arrays.to_numpy(controls)
-            info["running_cost"] = arrays.to_numpy(costs)
+            info = self._state_info(arrays.to_numpy(controls), arrays.to_numpy(costs))
         else:
+            info = self._state_info()
             # envs that autoreset in this call: reward 0 and their reset info (zero control
             # and cost)
             rewards = arrays.to_numpy(xp.where(stepping_on_device, -self.dt * costs, 0.0))
             control_rows = stepping_on_device[:, None, None]
             info["control"] = arrays.to_numpy(xp.where(control_rows, controls, 0.0))
             info["running_cost"] = arrays.to_numpy(xp.where(stepping_on_device, costs, 0.0))
+        info["diverged"] = diverged.copy()
 
         ended = terminated | truncated
         if self.autoreset_mode == AutoresetMode.SAME_STEP and np.any(ended):

@@ -56,8 +56,8 @@ class RosenbrockEuler(Integrator):
         rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
         noise = model.sigma * dW
         if du_dt is None and dt != 0.0 and _fused[0]:
-            found = self._fused_step(model, lin, rhs, x, dt, noise)
-            if found is _GAVE_UP:  # the workspace's P was partly overwritten: L(x) again
+            found = self.fused_step(model, lin.matrix, rhs, x, dt, noise)
+            if found is GAVE_UP:  # the workspace's P was partly overwritten: L(x) again
                 rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
             elif found is not None:
                 return found
@@ -79,15 +79,18 @@ class RosenbrockEuler(Integrator):
             incr = incr + dt**2 * phi_action(scaled, lin.as_columns(v), 2, **kw)
         return x + lin.from_columns(incr, x) + noise
 
-    def _fused_step(self, model: Any, lin: Any, rhs: Any, x: Any, dt: float, noise: Any) -> Any:
+    def fused_step(self, model: Any, operator: Any, rhs: Any, x: Any, dt: float, noise: Any) -> Any:
         """The step and the model's next kernel pass in one compiled pass, member by member
         (`phi_functions.frozen_advance`), for a model that keeps its linearization
-        (`fused_relinearization`: the envs' models) on the compiled frozen L(x): x_next, equal
-        bit for bit to the general path's; None where it does not apply; `_GAVE_UP` when a
-        member's Lanczos did not converge (the model's workspace is then discarded)."""
+        (`fused_relinearization`: the envs' models) on the compiled frozen L(x) (`operator`,
+        the `FrozenLaplacian` of `model.drift_and_linearization`), with rhs = F(x, u) and
+        noise = sigma dW: x_next, equal bit for bit to the general path's; None where it does
+        not apply; `GAVE_UP` when a member's Lanczos did not converge (the model's workspace
+        is then discarded and L(x) must be computed again). The native vector env calls it
+        directly (`agent_envs.envs.vector_env`), with rhs from its compiled prologue."""
         relinearize = getattr(model, "fused_relinearization", None)
         if relinearize is None or not frozen_advance_applies(
-            lin.matrix, rhs, x, noise, self.phi_method
+            operator, rhs, x, noise, self.phi_method
         ):
             return None
         target = relinearize(x)
@@ -95,10 +98,10 @@ class RosenbrockEuler(Integrator):
             return None
         correction = 1.0 / dt if self.stochastic_correction and model.sigma != 0.0 else None
         threads = getattr(model, "threads", 1)
-        found = frozen_advance(lin.matrix, rhs, x, dt, noise, correction, *target, threads)
+        found = frozen_advance(operator, rhs, x, dt, noise, correction, *target, threads)
         if found is None:
             model.discard_linearization()
-            return _GAVE_UP
+            return GAVE_UP
         model.adopt_linearization(*found)
         return found[0]
 
@@ -106,10 +109,15 @@ class RosenbrockEuler(Integrator):
         return f"{type(self).__name__}(jacobian={self.jacobian!r}, phi_method={self.phi_method!r})"
 
 
-#: returned by `RosenbrockEuler._fused_step` when it wrote part of the model's P and gave up
-_GAVE_UP: Any = object()
+#: returned by `RosenbrockEuler.fused_step` when it wrote part of the model's P and gave up
+GAVE_UP: Any = object()
 #: whether the exponential integrators take the fused step where it applies (`use_fused_step`)
 _fused = [True]
+
+
+def fused_step_enabled() -> bool:
+    """Whether the exponential integrators take the fused step where it applies."""
+    return _fused[0]
 
 
 def use_fused_step(enabled: bool) -> bool:

@@ -1,0 +1,129 @@
+"""Loading the native vector env's compiled prologue and epilogue (`agent_envs.envs.compiled_step`).
+
+`load_compiled_step()` imports that module (numba) on its first call, when a native vector env
+that can use it is made, and checks it against the numpy calls it replaces, on fixed random
+data of several shapes: the controls, running costs and right-hand sides of `prologue` against
+`controls_from_actions`, `mean_running_cost` and F = L(x) x + u; the path means, observations
+and divergence flags of `epilogue` against `arrays.mean_axis`, `global_observation` and
+`advance_paths`'s checks, every value bit for bit (signed zeros included). Where numba is
+missing or switched off (``AGENT_ENVS_NUMBA=0``) it answers False; where a value differs (a
+numpy that sums in another order), or the module does not compile, False with a warning; the
+env then steps with its numpy calls.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+
+from agent_envs import arrays
+from agent_envs.dynamics.laplacian import import_compiled
+from agent_envs.envs.episode import mean_running_cost
+from agent_envs.envs.interface import controls_from_actions
+from agent_envs.envs.observation import global_observation, observation_space
+from agent_envs.simulator import diverged_paths
+
+#: `agent_envs.envs.compiled_step` once `load_compiled_step` found it equal to numpy; False:
+#: numba missing, ``AGENT_ENVS_NUMBA=0``, or values that differ; None: not tried yet
+_compiled_step: Any = None
+
+#: (B, P, N, d) of the load check: one and several paths, N below, at and above numpy's
+#: pairwise blocks (8, 128), d = 1, 2, 3 and 9 (a pairwise sum over the coordinates)
+CHECK_SHAPES = ((2, 1, 100, 1), (2, 20, 100, 1), (2, 3, 5, 2), (1, 2, 130, 3), (1, 1, 300, 2),
+                (2, 1, 1, 1), (1, 9, 17, 9))  # fmt: skip
+
+
+def compiled_step() -> Any:
+    """The compiled module (`load_compiled_step` must have answered True)."""
+    return _compiled_step
+
+
+def load_compiled_step() -> bool:
+    """Whether the native vector env may take its compiled prologue and epilogue (module
+    docstring); loads and checks them on the first call."""
+    global _compiled_step
+    if _compiled_step is None:
+        module = import_compiled("agent_envs.envs.compiled_step")
+        if module is not False:
+            try:
+                same = same_as_numpy(module)
+            except Exception as exc:  # a numba that cannot build it: the numpy step
+                warnings.warn(
+                    f"agent_envs.envs.compiled_step did not load ({type(exc).__name__}: "
+                    f"{exc}); the native vector env steps with numpy calls",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+                same = None
+            if same is False:
+                warnings.warn(
+                    "agent_envs.envs.compiled_step differs from numpy's sums on this install; "
+                    "the native vector env steps with numpy calls",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+            if not same:
+                module = False
+        _compiled_step = module
+    return _compiled_step is not False
+
+
+def _same_bits(a: np.ndarray, b: Any) -> bool:
+    b = np.asarray(b)
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def same_as_numpy(
+    module: Any, shapes: tuple[tuple[int, int, int, int], ...] = CHECK_SHAPES
+) -> bool:
+    """Whether `module.prologue` and `module.epilogue` give the numpy step's values bit for bit
+    on fixed random data of `shapes` (B, P, N, d), actions float32 and float64, states over
+    six orders of magnitude, and one env beyond the divergence threshold."""
+    rng = np.random.default_rng(20261127)
+    for b, p, n, d in shapes:
+        scale = 10.0 ** rng.uniform(-3, 3, (b, p, n, d))
+        x = rng.standard_normal((b, p, n, d)) * scale
+        drift = rng.standard_normal((b, p, n, d)) * scale
+        targets = rng.standard_normal((b, d))
+        for dtype in (np.float32, np.float64):
+            actions = rng.uniform(-2.0, 2.0, (b, n, d)).astype(dtype)
+            actions[0, 0, 0] = -0.0
+            controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
+            if not module.prologue(actions, 25.0, x, drift, targets, 0.37, controls, costs, rhs):
+                return False
+            want_u = controls_from_actions(actions.astype(np.float64), "agents", 25.0, n)
+            if not (
+                _same_bits(controls, want_u)
+                and _same_bits(costs, mean_running_cost(x, want_u, targets, 0.37))
+                and _same_bits(rhs, drift + want_u[:, None])
+            ):
+                return False
+        bad = np.array(actions)
+        bad[-1, -1, -1] = np.nan
+        if module.prologue(bad, 25.0, x, drift, targets, 0.37, controls, costs, rhs):
+            return False
+        x_next = np.array(x)
+        x_next[-1, -1, -1, -1] = 1e7  # beyond the threshold below: that env diverged
+        fractions = rng.uniform(0.0, 1.0, b)
+        for threshold in (1e6, np.inf):
+            space = observation_space(n, d, min(threshold, 1e6), 1e5)
+            means = np.empty((b, n, d)), np.empty((b, n, d))
+            obs = np.empty((b, *space.shape), dtype=np.float32)
+            flags = np.empty(b, dtype=np.bool_)
+            module.epilogue(x_next, drift, threshold, targets, fractions, space.low, space.high,
+                            True, *means, obs, flags)  # fmt: skip
+            want_x, want_f = arrays.mean_axis(x_next, -3), arrays.mean_axis(drift, -3)
+            want_obs = global_observation(want_x, want_f, targets, fractions, space)
+            want_flags = np.any(diverged_paths(x_next, threshold), axis=-1) | ~np.all(
+                np.isfinite(want_f), axis=(-2, -1)
+            )
+            if not (
+                _same_bits(means[0], want_x)
+                and _same_bits(means[1], want_f)
+                and _same_bits(obs, want_obs)
+                and _same_bits(flags, want_flags)
+            ):
+                return False
+    return True
