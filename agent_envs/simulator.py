@@ -311,8 +311,8 @@ def fill_brownian_increments(
     handles: GeneratorHandles | None = None,
 ) -> np.ndarray:
     """`brownian_increments` of out[i].shape from rngs[k] into out[i], for i = rows[k], the
-    other rows of `out` (float64, C-contiguous, zeroed by the caller) left as they are; returns
-    `out`.
+    other rows of `out` (float64, C-contiguous; zeroed by the caller where some row is not
+    drawn) left as they are; returns `out`.
 
     Each row's standard normals are drawn in place and scaled by sqrt(dt): the same draws from
     each generator and the same product, so the same bits as

@@ -541,6 +541,13 @@ def test_products_of_several_vectors_read_the_lower_triangle(compiled, n, k):
         v = np.full((k, n), np.nan)
         compiled_kernel.lower_product_pair(p, other[0], other[1], v[0], v[1], n)
         np.testing.assert_array_equal(v[0], w[0])
+        tol = 1e-14 * np.maximum(np.abs(p) @ np.abs(other[1]), 1e-300)
+        assert np.all(np.abs(v[1] - p @ other[1]) <= tol)
+        # the second column whatever the first holds: other[1] beside q[0] instead of other[0]
+        first, second = np.full(n, np.nan), np.full(n, np.nan)
+        compiled_kernel.lower_product_pair(p, q[0], other[1], first, second, n)
+        np.testing.assert_array_equal(second, v[1])
+        np.testing.assert_array_equal(first, w[0])
 
 
 @pytest.mark.parametrize("n", [0, 1, 3, 4, 5, 17, 100])

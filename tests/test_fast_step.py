@@ -55,6 +55,8 @@ class _OffByOneUlp:
             target.flat[0] = np.nextafter(target.flat[0], np.inf)
         if self.what == "observation":
             obs.flat[0] = np.nextafter(obs.flat[0], np.float32(np.inf))
+        if self.what == "flags":
+            args[11][0] = not args[11][0]
 
 
 @pytest.mark.parametrize("what", ["costs", "controls", "rhs", "positions", "drift", "observation"])
@@ -111,6 +113,88 @@ def test_native_env_through_the_compiled_step_equals_sync(monkeypatch, kwargs):
     # episodes end early, so at least one episode's worth of steps)
     assert calls["prologue"] >= kwargs["n_steps"]
     assert calls["epilogue"] == calls["prologue"]
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"n_agents": 100, "n_steps": 6, "autoreset_mode": "SameStep"},
+        {"n_agents": 30, "n_steps": 6, "dim": 2, "n_paths": 3, "phi_method": "krylov",
+         "autoreset_mode": "SameStep"},
+        {"n_agents": 131, "n_steps": 6, "integrator": "em", "epsilon": 0.5, "dim": 2},
+    ],
+)  # fmt: skip
+def test_same_step_autoreset_and_large_n_through_the_compiled_step(monkeypatch, kwargs):
+    """SAME_STEP (the compiled step hands its arrays to the numpy tail) and N > 128 (the
+    pairwise sums' second level) against SyncVectorEnv in that mode."""
+    from gymnasium.vector import AutoresetMode
+    from test_vector_env import actions, assert_info_equal, sync
+
+    calls = _count_calls(monkeypatch)
+    kwargs = {**DIVERGING, **kwargs}
+    mode = AutoresetMode(kwargs.pop("autoreset_mode", "NextStep"))
+    venv = native(3, autoreset_mode=mode, **kwargs)
+    senv = sync(3, autoreset_mode=mode, **kwargs)
+    venv.reset(seed=2)
+    senv.reset(seed=2)
+    rng = np.random.default_rng(0)
+    size = senv.single_action_space.shape[0]
+    for _ in range(2 * kwargs["n_steps"] + 1):
+        a = actions(rng, 3, size)
+        got, want = venv.step(a), senv.step(a)
+        for g, w in zip(got[:4], want[:4], strict=True):
+            np.testing.assert_array_equal(g, w)
+        assert_info_equal(got[4], want[4])
+    assert calls["prologue"] >= kwargs["n_steps"]
+
+
+def test_threads_partial_resets_and_strided_actions_through_the_compiled_step(monkeypatch):
+    """num_threads = 2 (where numba allows two), a reset of some envs mid-episode
+    (`reset_mask`) and actions of other memory layouts (Fortran order, a strided view, a
+    broadcast row, float32 (B, N, d)): the compiled step, the same bits as the numpy step."""
+    from agent_envs.dynamics.laplacian import max_compiled_threads
+
+    calls = _count_calls(monkeypatch)
+    threads = 2 if max_compiled_threads() >= 2 else 1
+    kwargs = {"n_agents": 100, "n_steps": 8, "n_paths": 2}
+    fast, slow = native(4, num_threads=threads, **kwargs), native(4, **kwargs)
+    slow.unwrapped._compiled_kind = None
+    fast.reset(seed=9)
+    slow.reset(seed=9)
+    rng = np.random.default_rng(3)
+    base = rng.uniform(-1.2, 1.2, (4, 200))
+    layouts = [
+        np.asfortranarray(base[:, :100]),
+        base[:, ::2],
+        np.broadcast_to(base[0, :100], (4, 100)),
+        base[:, :100].astype(np.float32).reshape(4, 100, 1),
+    ]
+    for step in range(12):
+        if step == 5:
+            mask = np.array([True, False, True, False])
+            for env in (fast, slow):
+                env.reset(options={"reset_mask": mask})
+        a = layouts[step % len(layouts)]
+        got, want = fast.step(a), slow.step(a)
+        for g, w in zip(got[:4], want[:4], strict=True):
+            np.testing.assert_array_equal(g, w)
+        for key in ("positions", "control", "running_cost", "time"):
+            np.testing.assert_array_equal(got[4][key], want[4][key])
+    assert calls["prologue"] >= 8
+
+
+def test_an_env_whose_phi_action_is_not_the_lanczos_takes_the_numpy_step(monkeypatch):
+    """SERB at N = 12 ("auto": expm) or with phi_method="eigh" never has the fused step: the
+    compiled step is off from the start, not tried and dropped."""
+    calls = _count_calls(monkeypatch)
+    for kwargs in ({"n_agents": 12}, {"n_agents": 100, "phi_method": "eigh"}):
+        env = native(2, n_steps=4, **kwargs)
+        assert env.unwrapped._compiled_kind is None
+        env.reset(seed=0)
+        env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    assert calls["prologue"] == 0
+    assert native(2, n_agents=100).unwrapped._compiled_kind == "fused"
+    assert native(2, n_agents=12, integrator="em").unwrapped._compiled_kind == "em"
 
 
 def test_compiled_and_numpy_steps_give_the_same_bits(monkeypatch):

@@ -71,20 +71,34 @@ def _pairwise_leaf(a: np.ndarray, start: int, n: int) -> float:
     return res
 
 
+#: levels of the pairwise sum's stack: the halves shrink by 2 each level, so n < 2^64
+STACK_DEPTH = 64
+
+
 @njit(cache=True, error_model="numpy")
-def _pairwise_sum(a: np.ndarray, start: int, n: int) -> float:
+def pairwise_stack() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Scratch of `_pairwise_sum` for sums of more than 128 terms (allocated once per call of
+    `prologue`, not once per sum)."""
+    return (
+        np.empty(STACK_DEPTH, dtype=np.int64),
+        np.empty(STACK_DEPTH, dtype=np.int64),
+        np.empty(STACK_DEPTH, dtype=np.int64),
+        np.empty(STACK_DEPTH + 1),
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _pairwise_sum(a: np.ndarray, start: int, n: int, stack: tuple) -> float:
     """numpy's pairwise sum of a[start : start + n] (a 1-d float64 array), without the
     reduction's identity (the caller adds 0.0): blocks of at most 128 (`_pairwise_leaf`), above
     that the sum of the two halves split at a multiple of 8. numpy recurses; this walks the
-    same tree with an explicit stack (numba's cache could not reload a recursive function
-    here: the second process crashed), left half first, so every addition is numpy's."""
+    same tree with an explicit stack (`pairwise_stack`; numba's cache could not reload a
+    recursive function here: the second process crashed), left half first, so every addition
+    is numpy's."""
     if n <= 128:
         return _pairwise_leaf(a, start, n)
-    depth = 64  # the halves shrink by 2 each level: n < 2^64
-    starts = np.empty(depth, dtype=np.int64)
-    sizes = np.empty(depth, dtype=np.int64)
-    stage = np.zeros(depth, dtype=np.int64)
-    values = np.empty(depth + 1)
+    starts, sizes, stage, values = stack
+    stage[0] = 0
     top = 0
     count = 0
     starts[0] = start
@@ -120,7 +134,7 @@ def _pairwise_sum(a: np.ndarray, start: int, n: int) -> float:
 @njit(cache=True, error_model="numpy")
 def sum_like_numpy(a: np.ndarray) -> float:
     """np.sum(a) of a 1-d float64 array, bit for bit (identity 0.0 + the pairwise sum)."""
-    return 0.0 + _pairwise_sum(a, 0, a.shape[0])
+    return 0.0 + _pairwise_sum(a, 0, a.shape[0], pairwise_stack())
 
 
 @njit(cache=True, error_model="numpy")
@@ -163,12 +177,17 @@ def prologue(
     per_agent = np.empty(n)
     per_path = np.empty(p_count)
     terms = np.empty(d)
+    stack = pairwise_stack()
     for b in range(b_count):
         row = acts[b]
         u = us[b]
         for i in range(size):
-            a = np.float64(row[i])
-            u[i] = max_control * min(max(a, -1.0), 1.0)
+            a = np.float64(row[i])  # (finite: np.clip(a, -1, 1)'s value)
+            if not a > -1.0:
+                a = -1.0
+            if not a < 1.0:
+                a = 1.0
+            u[i] = max_control * a
         xb = xs[b]
         target = targets[b]
         for j in range(p_count):
@@ -188,16 +207,16 @@ def prologue(
                     for c in range(d):
                         diff = xb[base + at + c] - target[c]
                         terms[c] = diff * diff
-                    position = 0.0 + _pairwise_sum(terms, 0, d)
+                    position = 0.0 + _pairwise_sum(terms, 0, d, stack)
                     for c in range(d):
                         terms[c] = u[at + c] * u[at + c]
-                    control = 0.0 + _pairwise_sum(terms, 0, d)
+                    control = 0.0 + _pairwise_sum(terms, 0, d, stack)
                 per_agent[k] = position + gamma * control
-            per_path[j] = (0.0 + _pairwise_sum(per_agent, 0, n)) / n
+            per_path[j] = (0.0 + _pairwise_sum(per_agent, 0, n, stack)) / n
         if p_count == 1:
             costs[b] = per_path[0] + 0.0
         else:
-            costs[b] = (0.0 + _pairwise_sum(per_path, 0, p_count)) / p_count
+            costs[b] = (0.0 + _pairwise_sum(per_path, 0, p_count, stack)) / p_count
         fb = fs[b]
         ob = out[b]
         for j in range(p_count):
@@ -246,7 +265,9 @@ def epilogue(
     L(x_next) x_next (B, P, N, d) into `mean_positions` and `mean_drift` (B, N, d); and, with
     `absolute` (the "absolute" observation layout), the observation (B, 2 N d + d + 1) float32
     of `agent_envs.envs.observation.global_observation`: the two means, the target and t/T
-    (`time_fractions`, (B,)), each cast to float32 and clipped to [low, high]. Every array
+    (`time_fractions`, (B,)), each cast to float32 and clipped to [low, high] by numpy's
+    rule for floats (max(v, low) then min(., high), NaN kept, a tie taking the bound). Every
+    array
     C-contiguous; each env's rows are taken flat."""
     b_count, p_count, n, d = x_next.shape
     size = n * d
@@ -279,5 +300,10 @@ def epilogue(
             for c in range(d):
                 obs[2 * size + c] = np.float32(targets[b, c])
             obs[2 * size + d] = np.float32(time_fractions[b])
-            for i in range(obs.shape[0]):
-                obs[i] = min(max(obs[i], low[i]), high[i])
+            for i in range(obs.shape[0]):  # np.clip's rule, signed zeros and NaN included
+                v = obs[i]
+                if not (v > low[i] or v != v):
+                    v = low[i]
+                if not (v < high[i] or v != v):
+                    v = high[i]
+                obs[i] = v

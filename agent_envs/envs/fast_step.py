@@ -5,7 +5,8 @@ that can use it is made, and checks it against the numpy calls it replaces, on f
 data of several shapes: the controls, running costs and right-hand sides of `prologue` against
 `controls_from_actions`, `mean_running_cost` and F = L(x) x + u; the path means, observations
 and divergence flags of `epilogue` against `arrays.mean_axis`, `global_observation` and
-`advance_paths`'s checks, every value bit for bit (signed zeros included). Where numba is
+`advance_paths`'s checks, every value bit for bit (signed zeros included, values the clip
+cuts), on read-only states as the env passes them. Where numba is
 missing or switched off (``AGENT_ENVS_NUMBA=0``) it answers False; where a value differs (a
 numpy that sums in another order), or the module does not compile, False with a warning; the
 env then steps with its numpy calls.
@@ -32,7 +33,7 @@ _compiled_step: Any = None
 #: (B, P, N, d) of the load check: one and several paths, N below, at and above numpy's
 #: pairwise blocks (8, 128), d = 1, 2, 3 and 9 (a pairwise sum over the coordinates)
 CHECK_SHAPES = ((2, 1, 100, 1), (2, 20, 100, 1), (2, 3, 5, 2), (1, 2, 130, 3), (1, 1, 300, 2),
-                (2, 1, 1, 1), (1, 9, 17, 9))  # fmt: skip
+                (2, 1, 1, 1), (1, 9, 17, 9), (1, 1, 8, 1), (1, 1, 128, 2))  # fmt: skip
 
 
 def compiled_step() -> Any:
@@ -86,6 +87,14 @@ def same_as_numpy(
         scale = 10.0 ** rng.uniform(-3, 3, (b, p, n, d))
         x = rng.standard_normal((b, p, n, d)) * scale
         drift = rng.standard_normal((b, p, n, d)) * scale
+        x.flat[:2] = (-0.0, 0.0)  # signed zeros, and below, means the clip cuts
+        drift.flat[-2:] = (-0.0, 0.0)
+        x.flat[2::7] *= 1e4
+        drift.flat[3::5] *= 1e3
+        # read-only, as the env passes its state and drift (numba compiles read-only arrays
+        # apart: this checks the machine code the env runs)
+        x.flags.writeable = False
+        drift.flags.writeable = False
         targets = rng.standard_normal((b, d))
         for dtype in (np.float32, np.float64):
             actions = rng.uniform(-2.0, 2.0, (b, n, d)).astype(dtype)
@@ -106,8 +115,11 @@ def same_as_numpy(
             return False
         x_next = np.array(x)
         x_next[-1, -1, -1, -1] = 1e7  # beyond the threshold below: that env diverged
+        x_next.flags.writeable = False
         fractions = rng.uniform(0.0, 1.0, b)
+        fractions[0] = -0.0  # a tie with the time slot's bound 0.0: np.clip gives +0.0
         for threshold in (1e6, np.inf):
+            # bounds the means cross (positions up to 1e7, drift up to 3e6): the clip cuts
             space = observation_space(n, d, min(threshold, 1e6), 1e5)
             means = np.empty((b, n, d)), np.empty((b, n, d))
             obs = np.empty((b, *space.shape), dtype=np.float32)

@@ -505,9 +505,10 @@ class SwarmVectorEnv(VectorEnv):
     def _compiled_step_kind(self) -> str | None:
         """Whether this env's steps may take the compiled prologue and epilogue
         (`agent_envs.envs.compiled_step`): numpy, every pass member by member in one block,
-        the "agents" action basis, and SERB or ERB with the frozen Jacobian ("fused": their
-        compiled fused step) or Euler-Maruyama ("em"), with the module loaded and equal to
-        numpy (`load_compiled_step`)."""
+        the "agents" action basis, and SERB or ERB with the frozen Jacobian whose phi-action is
+        the Lanczos ("fused": their compiled fused step; not with `phi_method` "expm" or
+        "eigh", or "auto" resolving to them, as it does for small N) or Euler-Maruyama ("em"),
+        with the module loaded and equal to numpy (`load_compiled_step`)."""
         if (
             self._device is not None
             or len(self._blocks) != 1
@@ -517,6 +518,8 @@ class SwarmVectorEnv(VectorEnv):
             return None
         integrator = self.integrator
         if isinstance(integrator, RosenbrockEuler) and integrator.jacobian == "frozen":
+            if integrator.phi_method != "krylov":  # (the single env's resolved strategy)
+                return None
             kind = "fused"
         elif type(integrator) is EulerMaruyama:
             kind = "em"
@@ -572,8 +575,10 @@ class SwarmVectorEnv(VectorEnv):
                 model.interaction_drift(x_next)
         every = self._all_rows >= 0  # (B,) True
         if x_next is None or x_next is GAVE_UP:
-            if x_next is None:  # the fused step does not apply to this env: not again
-                self._compiled_kind = None
+            # the fused step did not apply (say the compiled Lanczos switched off) or a
+            # member's Lanczos gave up (its workspace discarded): the numpy step's advance
+            # with the same draws (where it gave up, the integrator's general path tries the
+            # fused step once more before its own phi-action: a rare step's cost, not bits)
             with arrays.hot_path_threads():
                 x_next, drift_next, diverged = self._advance(
                     x, controls, self.times[:, None, None, None], dw
