@@ -19,7 +19,6 @@ from __future__ import annotations
 import ctypes
 import math
 import time
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,7 +27,7 @@ import numpy as np
 
 from agent_envs import arrays
 from agent_envs.dynamics.kernels import check_kernel_library
-from agent_envs.dynamics.laplacian import import_compiled
+from agent_envs.dynamics.laplacian import import_checked
 from agent_envs.dynamics.operators import check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
 from agent_envs.integrators import (
@@ -190,28 +189,11 @@ def load_compiled_noise() -> bool:
     never used."""
     global _compiled_noise
     if _compiled_noise is None:
-        module = import_compiled("agent_envs.compiled_noise")
-        if module is not False:
-            try:
-                same = _draws_equal_numpys(module)
-            except Exception as exc:  # a numba or llvmlite that cannot build it: numpy's calls
-                warnings.warn(
-                    f"agent_envs.compiled_noise did not load ({type(exc).__name__}: {exc}); "
-                    "the native vector env draws with one numpy call per env",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
-                same = None
-            if same is False:
-                warnings.warn(
-                    "agent_envs.compiled_noise draws differ from numpy's on this install; the "
-                    "native vector env draws with one numpy call per env",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
-            if not same:
-                module = False
-        _compiled_noise = module
+        _compiled_noise = import_checked(
+            "agent_envs.compiled_noise",
+            lambda module: _draws_equal_numpys(module),  # (looked up when called: tests swap it)
+            "the native vector env draws with one numpy call per env",
+        )
     return _compiled_noise is not False
 
 

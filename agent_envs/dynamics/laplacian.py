@@ -39,6 +39,7 @@ from __future__ import annotations
 import importlib
 import math
 import os
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -76,6 +77,33 @@ def import_compiled(module: str) -> Any:
         return importlib.import_module(module)
     except ImportError:
         return False
+
+
+def import_checked(module: str, check: Callable[[Any], bool], fallback: str) -> Any:
+    """`import_compiled(module)`, kept only where `check(module)` answers True (a compiled
+    module checked against the numpy calls it replaces): False where numba is missing or
+    switched off, and, with a RuntimeWarning that names `fallback` (what runs instead), where
+    the check answers False (another numpy, say) or raises (a numba that cannot build it)."""
+    found = import_compiled(module)
+    if found is False:
+        return False
+    try:
+        same = check(found)
+    except Exception as exc:  # a numba or llvmlite that cannot build it
+        warnings.warn(
+            f"{module} did not load ({type(exc).__name__}: {exc}); {fallback}",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return False
+    if not same:
+        warnings.warn(
+            f"{module} differs from numpy on this install; {fallback}",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return False
+    return found
 
 
 def load_compiled_kernel() -> bool:

@@ -14,13 +14,12 @@ env then steps with its numpy calls.
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import numpy as np
 
 from agent_envs import arrays
-from agent_envs.dynamics.laplacian import import_compiled
+from agent_envs.dynamics.laplacian import import_checked
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.interface import controls_from_actions
 from agent_envs.envs.observation import global_observation, observation_space
@@ -46,28 +45,11 @@ def load_compiled_step() -> bool:
     docstring); loads and checks them on the first call."""
     global _compiled_step
     if _compiled_step is None:
-        module = import_compiled("agent_envs.envs.compiled_step")
-        if module is not False:
-            try:
-                same = same_as_numpy(module)
-            except Exception as exc:  # a numba that cannot build it: the numpy step
-                warnings.warn(
-                    f"agent_envs.envs.compiled_step did not load ({type(exc).__name__}: "
-                    f"{exc}); the native vector env steps with numpy calls",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
-                same = None
-            if same is False:
-                warnings.warn(
-                    "agent_envs.envs.compiled_step differs from numpy's sums on this install; "
-                    "the native vector env steps with numpy calls",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
-            if not same:
-                module = False
-        _compiled_step = module
+        _compiled_step = import_checked(
+            "agent_envs.envs.compiled_step",
+            same_as_numpy,
+            "the native vector env steps with numpy calls",
+        )
     return _compiled_step is not False
 
 
