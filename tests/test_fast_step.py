@@ -104,8 +104,11 @@ def _count_calls(monkeypatch) -> dict[str, int]:
         {"n_agents": 10, "integrator": "em", "epsilon": 0.5, "n_paths": 2},
         {"n_agents": 100, "n_steps": 6, "observation": "relative"},
         {"n_agents": 20, "n_steps": 6, "dim": 9, "integrator": "em", "epsilon": 0.5},
+        {"n_agents": 100, "n_steps": 6, "action_basis": "common", "observation": "summary"},
+        {"n_agents": 30, "n_steps": 6, "dim": 2, "n_paths": 3, "phi_method": "krylov",
+         "action_basis": "common"},
     ],
-)
+)  # fmt: skip
 def test_native_env_through_the_compiled_step_equals_sync(monkeypatch, kwargs):
     """The native env against SyncVectorEnv with the compiled step (counted), through
     divergence (env 1 is pushed out of the threshold; its step falls back to the numpy tail)
@@ -201,6 +204,7 @@ def test_an_env_whose_phi_action_is_not_the_lanczos_takes_the_numpy_step(monkeyp
     assert calls["prologue"] == 0
     assert native(2, n_agents=100).unwrapped._compiled_kind == "fused"
     assert native(2, n_agents=12, integrator="em").unwrapped._compiled_kind == "em"
+    assert native(2, n_agents=100, action_basis="modes").unwrapped._compiled_kind is None
 
 
 def test_compiled_and_numpy_steps_give_the_same_bits(monkeypatch):

@@ -150,7 +150,8 @@ def prologue(
     rhs: np.ndarray,
 ) -> bool:
     """For every env b: u = max_control * clip(a, -1, 1) into `controls` (B, N, d), from the
-    actions (B, N, d) (float32 or float64, each entry taken as float64); the running cost
+    actions (B, N, d) ("agents" basis) or (B, 1, d) ("common" basis: the one row for every
+    agent) (float32 or float64, each entry taken as float64); the running cost
     c(x^n, u^n) of `eq:running_cost`, mean over the paths, into `costs` (B,); and the
     integrator's right-hand side F = L(x) x + u of every path into `rhs` (B, P, N, d), from the
     drift L(x) x (B, P, N, d). Returns False, with nothing written, when some action is not
@@ -162,11 +163,12 @@ def prologue(
     are taken flat."""
     b_count, p_count, n, d = x.shape
     size = n * d
-    acts = actions.reshape(b_count, size)
+    given = actions.shape[1] * d  # N d, or d for the "common" basis
+    acts = actions.reshape(b_count, given)
     for b in range(b_count):
         row = acts[b]
         finite = True
-        for i in range(size):
+        for i in range(given):
             finite &= np.isfinite(row[i])
         if not finite:
             return False
@@ -181,13 +183,15 @@ def prologue(
     for b in range(b_count):
         row = acts[b]
         u = us[b]
-        for i in range(size):
+        for i in range(given):
             a = np.float64(row[i])  # (finite: np.clip(a, -1, 1)'s value)
             if not a > -1.0:
                 a = -1.0
             if not a < 1.0:
                 a = 1.0
             u[i] = max_control * a
+        for i in range(given, size):  # "common": the row repeated for every agent
+            u[i] = u[i % d]
         xb = xs[b]
         target = targets[b]
         for j in range(p_count):

@@ -2,14 +2,14 @@
 
 `load_compiled_step()` imports that module (numba) on its first call, when a native vector env
 that can use it is made, and checks it against the numpy calls it replaces, on fixed random
-data of several shapes: the controls, running costs and right-hand sides of `prologue` against
-`controls_from_actions`, `mean_running_cost` and F = L(x) x + u; the path means, observations
-and divergence flags of `epilogue` against `arrays.mean_axis`, `global_observation` and
-`advance_paths`'s checks, every value bit for bit (signed zeros included, values the clip
-cuts), on read-only states as the env passes them. Where numba is
-missing or switched off (``AGENT_ENVS_NUMBA=0``) it answers False; where a value differs (a
-numpy that sums in another order), or the module does not compile, False with a warning; the
-env then steps with its numpy calls.
+data of several shapes: the controls ("agents" and "common" bases), running costs and
+right-hand sides of `prologue` against `controls_from_actions`, `mean_running_cost` and F =
+L(x) x + u; the path means, observations and divergence flags of `epilogue` against
+`arrays.mean_axis`, `global_observation` and `advance_paths`'s checks, every value bit for bit
+(signed zeros included, values the clip cuts), on read-only states as the env passes them.
+Where numba is missing or switched off (``AGENT_ENVS_NUMBA=0``) it answers False; where a value
+differs (a numpy that sums in another order), or the module does not compile, False with a
+warning; the env then steps with its numpy calls.
 """
 
 from __future__ import annotations
@@ -85,6 +85,16 @@ def same_as_numpy(
             if not module.prologue(actions, 25.0, x, drift, targets, 0.37, controls, costs, rhs):
                 return False
             want_u = controls_from_actions(actions.astype(np.float64), "agents", 25.0, n)
+            if not (
+                _same_bits(controls, want_u)
+                and _same_bits(costs, mean_running_cost(x, want_u, targets, 0.37))
+                and _same_bits(rhs, drift + want_u[:, None])
+            ):
+                return False
+            common = np.ascontiguousarray(actions[:, :1])  # the "common" basis: one row
+            if not module.prologue(common, 25.0, x, drift, targets, 0.37, controls, costs, rhs):
+                return False
+            want_u = controls_from_actions(common.astype(np.float64), "common", 25.0, n)
             if not (
                 _same_bits(controls, want_u)
                 and _same_bits(costs, mean_running_cost(x, want_u, targets, 0.37))

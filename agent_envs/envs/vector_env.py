@@ -505,14 +505,15 @@ class SwarmVectorEnv(VectorEnv):
     def _compiled_step_kind(self) -> str | None:
         """Whether this env's steps may take the compiled prologue and epilogue
         (`agent_envs.envs.compiled_step`): numpy, every pass member by member in one block,
-        the "agents" action basis, and SERB or ERB with the frozen Jacobian whose phi-action is
-        the Lanczos ("fused": their compiled fused step; not with `phi_method` "expm" or
-        "eigh", or "auto" resolving to them, as it does for small N) or Euler-Maruyama ("em"),
-        with the module loaded and equal to numpy (`load_compiled_step`)."""
+        SERB or ERB with the frozen Jacobian whose phi-action is the Lanczos ("fused": their
+        compiled fused step; not with `phi_method` "expm" or "eigh", or "auto" resolving to
+        them, as it does for small N) or Euler-Maruyama ("em"), the "agents" or "common"
+        action basis ("modes" transforms its actions by numpy), and the module loaded and
+        equal to numpy (`load_compiled_step`)."""
         if (
             self._device is not None
             or len(self._blocks) != 1
-            or self.config.action_basis != "agents"
+            or self.config.action_basis not in ("agents", "common")
             or not self._member_by_member()
         ):
             return None
@@ -529,7 +530,8 @@ class SwarmVectorEnv(VectorEnv):
 
     def _step_compiled(self, actions: Any) -> tuple[Any, ...] | None:
         """`step` for the common case, where every env steps (no autoreset in this call) and
-        the actions are a float32 or float64 numpy array of shape (B, N d) or (B, N, d), from
+        the actions are a float32 or float64 numpy array of shape (B, R d) or (B, R, d) (R = N,
+        or 1 for the "common" basis), from
         the state whose L(x) the model keeps: the controls, running costs and right-hand sides
         in one compiled call (`compiled_step.prologue`), the draws, the integrator's fused
         step (or Euler-Maruyama's update and the kernel pass), and the divergence flags, path
@@ -540,10 +542,11 @@ class SwarmVectorEnv(VectorEnv):
         apply takes the numpy step's `_advance` with the same draws."""
         b = self.num_envs
         n, d = self.config.params.n_agents, self.config.params.dim
+        rows = action_rows(self.config.action_basis, n)
         if (
             type(actions) is not np.ndarray
             or actions.dtype not in (np.float32, np.float64)
-            or actions.shape not in ((b, n * d), (b, n, d))
+            or actions.shape not in ((b, rows * d), (b, rows, d))
         ):
             return None
         kind = self._compiled_kind
@@ -556,7 +559,7 @@ class SwarmVectorEnv(VectorEnv):
         operator, drift = cached
         module = compiled_step()
         controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
-        a = np.ascontiguousarray(actions).reshape(b, n, d)
+        a = np.ascontiguousarray(actions).reshape(b, rows, d)
         params = self.config.params
         if not module.prologue(
             a, self.config.max_control, x, drift, self._targets, params.gamma, controls, costs, rhs
