@@ -137,23 +137,12 @@ def test_same_step_autoreset_and_large_n_through_the_compiled_step(monkeypatch, 
     """SAME_STEP (the compiled step hands its arrays to the numpy tail) and N > 128 (the
     pairwise sums' second level) against SyncVectorEnv in that mode."""
     from gymnasium.vector import AutoresetMode
-    from test_vector_env import actions, assert_info_equal, sync
 
     calls = _count_calls(monkeypatch)
     kwargs = {**DIVERGING, **kwargs}
-    mode = AutoresetMode(kwargs.pop("autoreset_mode", "NextStep"))
-    venv = native(3, autoreset_mode=mode, **kwargs)
-    senv = sync(3, autoreset_mode=mode, **kwargs)
-    venv.reset(seed=2)
-    senv.reset(seed=2)
-    rng = np.random.default_rng(0)
-    size = senv.single_action_space.shape[0]
-    for _ in range(2 * kwargs["n_steps"] + 1):
-        a = actions(rng, 3, size)
-        got, want = venv.step(a), senv.step(a)
-        for g, w in zip(got[:4], want[:4], strict=True):
-            np.testing.assert_array_equal(g, w)
-        assert_info_equal(got[4], want[4])
+    if "autoreset_mode" in kwargs:  # (native and SyncVectorEnv both take it)
+        kwargs["autoreset_mode"] = AutoresetMode(kwargs["autoreset_mode"])
+    run_side_by_side(3, 2 * kwargs["n_steps"] + 1, seed=2, **kwargs)
     assert calls["prologue"] >= kwargs["n_steps"]
 
 

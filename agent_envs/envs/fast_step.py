@@ -82,25 +82,18 @@ def same_as_numpy(
             actions = rng.uniform(-2.0, 2.0, (b, n, d)).astype(dtype)
             actions[0, 0, 0] = -0.0
             controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
-            if not module.prologue(actions, 25.0, x, drift, targets, 0.37, controls, costs, rhs):
-                return False
-            want_u = controls_from_actions(actions.astype(np.float64), "agents", 25.0, n)
-            if not (
-                _same_bits(controls, want_u)
-                and _same_bits(costs, mean_running_cost(x, want_u, targets, 0.37))
-                and _same_bits(rhs, drift + want_u[:, None])
-            ):
-                return False
-            common = np.ascontiguousarray(actions[:, :1])  # the "common" basis: one row
-            if not module.prologue(common, 25.0, x, drift, targets, 0.37, controls, costs, rhs):
-                return False
-            want_u = controls_from_actions(common.astype(np.float64), "common", 25.0, n)
-            if not (
-                _same_bits(controls, want_u)
-                and _same_bits(costs, mean_running_cost(x, want_u, targets, 0.37))
-                and _same_bits(rhs, drift + want_u[:, None])
-            ):
-                return False
+            # the "agents" basis (a row per agent) and the "common" one (one row for all)
+            for given, basis in ((actions, "agents"), (actions[:, :1].copy(), "common")):
+                if not module.prologue(given, 25.0, x, drift, targets, 0.37, controls, costs,
+                                       rhs):  # fmt: skip
+                    return False
+                want_u = controls_from_actions(given.astype(np.float64), basis, 25.0, n)
+                if not (
+                    _same_bits(controls, want_u)
+                    and _same_bits(costs, mean_running_cost(x, want_u, targets, 0.37))
+                    and _same_bits(rhs, drift + want_u[:, None])
+                ):
+                    return False
         bad = np.array(actions)
         bad[-1, -1, -1] = np.nan
         if module.prologue(bad, 25.0, x, drift, targets, 0.37, controls, costs, rhs):
