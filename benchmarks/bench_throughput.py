@@ -13,7 +13,9 @@ paper = N 100, m 50, 20 Brownian paths; quick = N 10, m 20, 20 paths.
    (``p = w / (alpha^2 + (x_l - x_k)^2); (p @ x - p.sum(-1) * x) / N``, its floor), over the
    same in place, and over the env's own kernel pass (compiled with numba); one bare
    SERB step over one bare EM step (`integrator.step` with a `SwarmModel`, N = 100, 1 path,
-   zero control, the same states: episodes from uniform starts).
+   zero control, the same states: episodes from uniform starts); SERB / EM where interpreter
+   time does not dilute it: a native vector env of 16 paper envs (20 paths each,
+   compute-bound) and the compiled calls alone.
 2b. Krylov dimensions per member and step of the paper SERB env, this tree only
    (`_oracle_dimension`: the smallest dimension within rtol of the dense eigh value, which no
    stopping rule can beat), one compiled product in cache and a near-consensus step's compiled
@@ -388,10 +390,28 @@ def krylov_products_per_step(step: Callable[[], None], steps: int = 100) -> floa
     return count[0] / steps
 
 
+def native_stepper(kwargs: dict[str, Any], num_envs: int) -> Callable[[], None]:
+    """One step of a native vector env of `num_envs` envs per call (fixed actions; the env
+    autoresets its envs at their episodes' ends)."""
+    import gymnasium as gym
+
+    import agent_envs  # noqa: F401  (registers the id)
+    from agent_envs.envs import ENV_ID
+
+    env = gym.make_vec(ENV_ID, num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    env.reset(seed=0)
+    n = kwargs["n_agents"]
+    actions = np.random.default_rng(1).uniform(-0.5, 0.5, (num_envs, n)).astype(np.float32)
+    return lambda: env.step(actions)  # type: ignore[no-any-return]
+
+
 def worker_ratios(rounds: int) -> dict[str, float]:
     fns = {
         "serb_env": single_env_stepper(env_kwargs("paper", "serb")),
         "em_env": single_env_stepper(env_kwargs("paper", "em")),
+        # compute-bound: 16 envs of 20 paths in one native env (320 systems per step)
+        "serb_native": native_stepper(env_kwargs("paper", "serb"), 16),
+        "em_native": native_stepper(env_kwargs("paper", "em"), 16),
         "plain": plain_kernel_drift(),
         "inplace": inplace_kernel_drift(),
         "floor": kernel_drift_floor(20),
@@ -1006,7 +1026,8 @@ def worker_accounting(episodes: int = 20, batch: int = 64, batch_steps: int = 30
     """Where an env step's time goes, call by call (this tree; `time.perf_counter` around each
     call, about 0.3 us each): the paper single env, SERB and EM episodes alternating, per step,
     and the compiled call of SERB's steps 0-2 against steps >= 10; the native vector env at
-    B = `batch`, 1 path, SERB, per batch step. Microseconds."""
+    B = `batch`, 1 path, SERB, per batch step (its compiled step: prologue, draws, the
+    integrator's fused step, epilogue). Microseconds."""
     import gymnasium as gym
 
     import agent_envs  # noqa: F401
@@ -1069,8 +1090,10 @@ def worker_accounting(episodes: int = 20, batch: int = 64, batch_steps: int = 30
         native.step(acts)
     times = _CallTimes()
     for name, key in (("_controls", "actions and controls"), ("_observations", "observation"),
-                      ("_state_info", "info arrays"), ("_advance", "advance")):  # fmt: skip
+                      ("_state_info", "info arrays"), ("_advance", "advance"),
+                      ("_step_compiled", "compiled step")):  # fmt: skip
         times.wrap(native, name, key)
+    times.wrap(native.integrator, "fused_step", "fused step")
     times.wrap(vector_env, "mean_running_cost", "running cost")
     times.wrap(vector_env, "fill_brownian_increments", "draws")
     times.wrap(episode, "diverged_paths", "diverged_paths")
@@ -1247,6 +1270,11 @@ def main() -> int:
             ("EM env step / in-place numpy kernel + drift", "em_env", "inplace"),
             ("EM env step / the env's kernel + drift (compiled with numba)", "em_env", "floor"),
             ("one SERB step / one EM step (N = 100, 1 path)", "serb_bare_1", "em_bare_1"),
+            (
+                "SERB / EM, native vector env of 16 paper envs (20 paths each)",
+                "serb_native",
+                "em_native",
+            ),
         ):
             a, b = res["after"], res.get("before")
             print(
@@ -1280,7 +1308,9 @@ def main() -> int:
                 f" {1e3 * a['serb_total']:.3f} ms, EM {1e3 * a['em_compiled']:.3f} of"
                 f" {1e3 * a['em_total']:.3f} ms; SERB / EM with no interpreter time beyond EM's"
                 " = (EM step + SERB's compiled time - EM's) / EM step ="
-                f" {fmt_pair(bounds['after'], bounds.get('before'), '.2f')}"
+                f" {fmt_pair(bounds['after'], bounds.get('before'), '.2f')}; the compiled"
+                f" calls alone (no interpreter time in either step): SERB / EM ="
+                f" {a['serb_compiled'] / a['em_compiled']:.2f}"
             )
         per_product = {
             k: (v["serb_bare_1"] - v["em_bare_1"]) / v["krylov_products_1"] for k, v in res.items()
@@ -1491,11 +1521,19 @@ def main() -> int:
         print("\nNative vector env, B = 64, 1 path, SERB, microseconds per batch step:\n")
         print("| call | us |")
         print("|---|---|")
-        for key in ("total", "advance", "compiled in advance", "diverged_paths", "mean drift",
-                    "draws", "actions and controls", "running cost", "observation",
+        for key in ("total", "compiled step", "compiled in compiled step", "fused step",
+                    "compiled in fused step", "advance", "compiled in advance", "diverged_paths",
+                    "mean drift", "draws", "actions and controls", "running cost", "observation",
                     "info arrays"):  # fmt: skip
             if f"native/{key}" in acc:
                 print(f"| {key} | {acc[f'native/{key}']:.1f} |")
+        if "native/compiled" in acc:
+            rest = acc["native/total"] - acc["native/compiled"] - acc.get("native/draws", 0.0)
+            print(
+                f"\nCompiled calls {acc['native/compiled']:.0f} us, draws"
+                f" {acc.get('native/draws', 0.0):.0f} us, the rest (interpreter, numpy and these"
+                f" timers) {rest:.0f} us per batch step."
+            )
         print()
 
     if args.device and "device" not in args.skip:
