@@ -1518,15 +1518,28 @@ def main() -> int:
                 f" 10-49 (medians). Interpreter and numpy: SERB {python['serb']:.0f}, EM"
                 f" {python['em']:.0f} us per step."
             )
-        print("\nNative vector env, B = 64, 1 path, SERB, microseconds per batch step:\n")
+        print("\nNative vector env, B = 64, 1 path, SERB, microseconds per batch step")
+        print("(inclusive; a compiled call is charged to the innermost call it ran in):\n")
         print("| call | us |")
         print("|---|---|")
-        for key in ("total", "compiled step", "compiled in compiled step", "fused step",
-                    "compiled in fused step", "advance", "compiled in advance", "diverged_paths",
-                    "mean drift", "draws", "actions and controls", "running cost", "observation",
-                    "info arrays"):  # fmt: skip
+        for key, label in (
+            ("total", "total"),
+            ("compiled step", "compiled step (`_step_compiled`)"),
+            ("compiled in compiled step", "its prologue and epilogue (compiled)"),
+            ("fused step", "the integrator's fused step"),
+            ("compiled in fused step", "its compiled pass"),
+            ("advance", "numpy step's advance (autoresets, fallbacks)"),
+            ("compiled in advance", "its compiled passes"),
+            ("diverged_paths", "diverged_paths"),
+            ("mean drift", "mean drift"),
+            ("draws", "draws"),
+            ("actions and controls", "actions and controls"),
+            ("running cost", "running cost"),
+            ("observation", "observation"),
+            ("info arrays", "info arrays"),
+        ):
             if f"native/{key}" in acc:
-                print(f"| {key} | {acc[f'native/{key}']:.1f} |")
+                print(f"| {label} | {acc[f'native/{key}']:.1f} |")
         if "native/compiled" in acc:
             rest = acc["native/total"] - acc["native/compiled"] - acc.get("native/draws", 0.0)
             print(

@@ -11,8 +11,8 @@ alternating rounds in one process:
 
 - ref/new: the current step's time over the one-call step's (median and quartiles over the
   rounds);
-- the interpreter time left around the one call, before it and after it, per batch step
-  (medians over single steps).
+- the interpreter time left around the one call, before it (from the state's checks on) and
+  after it, per batch step (medians over single steps).
 
 Paper SERB env (N = 100, m = 50, eps = 0.05, frozen Jacobian, max_control = 25), B envs of
 P paths, the "absolute" observation; numba required. It reaches into the env's private
@@ -70,7 +70,10 @@ def step_one_call(env: Any, actions: np.ndarray, marks: list[float]) -> Any:
         return env.step(actions)
     marks.append(time.perf_counter())
     operator, drift = cached
-    p_next, weight, alpha2 = model.fused_relinearization(x)
+    target = model.fused_relinearization(x)
+    if target is None:
+        raise RuntimeError("the model's compiled kernel pass does not serve this state")
+    p_next, weight, alpha2 = target
     b, (n, d) = env.num_envs, x.shape[-2:]
     members = b * x.shape[1]
     rows = 1 if env.config.action_basis == "common" else n
@@ -137,13 +140,20 @@ def main() -> int:
         raise SystemExit("this env takes no compiled fused step here (numba missing?)")
     actions = np.random.default_rng(1).uniform(-0.5, 0.5, (args.envs, 100)).astype(np.float32)
     marks: list[float] = []
-    for k in range(120):  # (two episodes and a half: autoresets included)
+    for k in range(120):  # (two episodes and a half: two autoresets, which take env.step)
         want, got = ref.step(actions), step_one_call(new, actions, marks)
         same = all(np.array_equal(w, g) for w, g in zip(want[:4], got[:4], strict=True))
+        same &= want[4].keys() == got[4].keys()
         same &= all(np.array_equal(want[4][key], got[4][key]) for key in want[4])
         if not same:
             raise SystemExit(f"the one-call step differs from the env's step at step {k}")
-    print(f"B = {args.envs}, {args.paths} path(s): the same outputs bit for bit over 120 steps")
+    taken = len(marks) // 4  # (four marks per step through the one call)
+    if taken != 118:
+        raise SystemExit(f"only {taken} of the 120 steps went through the one call (118 should)")
+    print(
+        f"B = {args.envs}, {args.paths} path(s): the same outputs bit for bit over 120 steps,"
+        f" {taken} of them through the one call"
+    )
     ratios, times = [], {"ref": [], "new": []}
     for _ in range(args.rounds):
         for name, fn in (("ref", lambda: ref.step(actions)),
