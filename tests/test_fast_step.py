@@ -257,3 +257,25 @@ def test_other_actions_take_the_numpy_step(monkeypatch):
     assert calls["prologue"] == 0
     env.step(np.zeros((2, 100, 1)))  # (B, N, d) float64
     assert calls["prologue"] == 1
+
+
+@pytest.mark.slow
+def test_the_one_call_experiment_still_runs_and_matches_the_env_bit_for_bit():
+    """benchmarks/one_call_step.py backs a figure in docs/benchmarks.md ("Where the two ratio
+    targets end"): the native step composed into one compiled call gives the env's outputs bit
+    for bit (it exits non-zero otherwise, or when its steps did not take the one call). It
+    reaches into the env's private state, so a refactor that breaks it should show here."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "one_call_step.py"
+    done = subprocess.run(
+        [sys.executable, str(script), "--envs", "8", "--rounds", "1"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:] + done.stdout[-2000:]
+    assert "bit for bit over 120 steps, 118 of them through the one call" in done.stdout
+    assert "current / one call" in done.stdout
