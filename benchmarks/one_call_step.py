@@ -128,6 +128,9 @@ def main() -> int:
     parser.add_argument("--paths", type=int, default=1)
     parser.add_argument("--rounds", type=int, default=40)
     args = parser.parse_args()
+    for name in ("envs", "paths", "rounds"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} must be an integer >= 1, got {getattr(args, name)}")
     kwargs = {"n_agents": 100, "n_steps": 50, "n_paths": args.paths, "epsilon": 0.05,
               "jacobian": "frozen", "max_control": 25.0, "integrator": "serb"}  # fmt: skip
     envs = []
