@@ -19,6 +19,10 @@ from agent_envs.envs import SwarmEnv, SwarmParallelEnv, register_envs  # isort: 
 
 register_envs()
 
+from agent_envs.tasks import register_tasks  # noqa: E402  (the benchmark's task ids)
+
+register_tasks()
+
 __version__ = "0.1.0"
 
 __all__ = [

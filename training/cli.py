@@ -8,8 +8,8 @@ and its `config.option_field` metadata), the namespace becomes the dataclass
 of `agent_envs.validation`. The dataclasses live next to the code they configure
 (`experiments.uncontrolled.UncontrolledConfig`, `experiments.turnpike_controlled.
 TurnpikeReproductionConfig`, `experiments.turnpike_property.TurnpikePropertyConfig`,
-`evaluate.EvaluateConfig`, `report.ReportConfig`, `config.TrainConfig`, `compare.CompareConfig`,
-`sweep.SweepConfig`) and are imported only when their subcommand is chosen, so
+`evaluate_options.EvaluateConfig`, `task_evaluation.TasksConfig`, `report.ReportConfig`,
+`config.TrainConfig`, `compare.CompareConfig`, `sweep.SweepConfig`) and are imported only when their subcommand is chosen, so
 `agent-envs reproduce uncontrolled` does not pay for importing torch.
 
 Conventions shared by every subcommand:
@@ -49,7 +49,7 @@ TRAIN_EXTRA_MODULES = frozenset(
 #: ``cli.parse_seeds`` and ``cli.parse_policy_specs`` were defined here before.
 _MOVED = {
     "parse_seeds": "agent_envs.training.defaults",
-    "parse_policy_specs": "agent_envs.training.evaluate",
+    "parse_policy_specs": "agent_envs.training.evaluate_options",
     "MAX_SEEDS": "agent_envs.training.defaults",
 }
 
@@ -312,6 +312,10 @@ def _print_statistics_sources(meta: dict[str, Any]) -> None:
 
 
 def _run_evaluate(config: Any) -> int:
+    if config.task is not None:  # the benchmark: core install only for callable policies
+        from agent_envs.training.task_evaluation import evaluate_task
+
+        return evaluate_task(config)
     from agent_envs.training.storage import check_output_dir
 
     check_output_dir(config.out)
@@ -322,7 +326,8 @@ def _run_evaluate(config: Any) -> int:
     from agent_envs.training.report import build_report, display_table
     from agent_envs.training.results import summarize
 
-    policies = config.policy_specs()
+    policies: dict[str, Any] = dict(config.policy_specs())
+    _objects_as_factories(policies)
     # evaluate_policies resolves every policy and makes every env before the first episode
     results = evaluate_policies(
         policies,
@@ -344,6 +349,24 @@ def _run_evaluate(config: Any) -> int:
         paths = build_report([results], config.out / "report")
         print(f"report: {paths['markdown']} and {paths['html']}")
     return 0
+
+
+def _objects_as_factories(policies: dict[str, Any]) -> None:
+    """``module:attribute`` specs -> factories of `evaluate_policies` (imported here: named)."""
+    from agent_envs.tasks.scoring import as_policy
+    from agent_envs.training.evaluate_options import is_object_spec
+    from agent_envs.training.task_evaluation import import_policy
+
+    for name, spec in policies.items():
+        if isinstance(spec, str) and is_object_spec(spec):
+            obj, _ = import_policy(spec)
+            policies[name] = lambda env, obj=obj: as_policy(obj, env)
+
+
+def _run_tasks(config: Any) -> int:
+    from agent_envs.training.task_evaluation import run_tasks_command
+
+    return run_tasks_command(config)
 
 
 def _run_report(config: Any) -> int:
@@ -470,9 +493,16 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         _T + "experiments.cheap_control_bound:CheapControlBoundConfig",
         _run_cheap_control_bound,
     ),
+    "tasks": Subcommand(
+        "the benchmark's tasks: list them (id, what it tests, N, d, m, V), regenerate or "
+        "verify their reference data",
+        _T + "task_evaluation:TasksConfig",
+        _run_tasks,
+    ),
     "evaluate": Subcommand(
-        "run policies on an env over fixed seeds, store results",
-        _T + "evaluate:EvaluateConfig",
+        "run policies on an env over fixed seeds, store results; --task ID scores them on a "
+        "benchmark task against its shipped references",
+        _T + "evaluate_options:EvaluateConfig",
         _run_evaluate,
     ),
     "report": Subcommand(

@@ -26,127 +26,21 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import MISSING, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from agent_envs.training.config import option_field
 from agent_envs.training.defaults import (
-    BASELINE_POLICIES,
-    DEFAULT_BETA,
-    DEFAULT_DELTA,
     DEFAULT_TEST_SEEDS,
-    FEEDBACK_BASELINES,
     GYM_ENV_ID,
     check_env_id,
     is_multiagent,
-    parse_env_kwargs,
-    parse_seeds,
 )
-from agent_envs.training.policies import ModelSpec, PolicySpec, check_model, resolve_policy
+from agent_envs.training.evaluate_options import EvaluateConfig, parse_policy_specs
+from agent_envs.training.policies import PolicySpec, resolve_policy
 from agent_envs.training.results import EPISODE_COLUMNS, Episode, EvaluationResults, stack_episodes
 from agent_envs.training.storage import check_output_dir
-from agent_envs.validation import TARGET_RANGE, check_positive, check_real
-
-
-def parse_policy_specs(items: Sequence[str] | None) -> dict[str, str]:
-    """``NAME=SPEC`` or ``SPEC`` items -> {name: spec} (a bare path is named by its file stem).
-
-    A SPEC is a baseline name or ``[ALGO:]MODEL.zip[:STATS.pkl]``. None or no items: the three
-    reference controllers.
-    """
-    if not items:
-        return {name: name for name in FEEDBACK_BASELINES}
-    out: dict[str, str] = {}
-    for item in items:
-        if "=" in item:
-            name, spec = item.split("=", 1)
-        else:
-            spec = item
-            name = item if item in BASELINE_POLICIES else ModelSpec.parse(item).path.stem
-        if not name or not spec:
-            raise ValueError(f"--policy {item!r}: write NAME=SPEC or SPEC")
-        if name in out:
-            raise ValueError(f"--policy name {name!r} given twice; use NAME=SPEC to rename")
-        out[name] = spec
-    return out
-
-
-@dataclass(frozen=True, kw_only=True)
-class EvaluateConfig:
-    """The options of `agent-envs evaluate`; validated on construction (the saved models named
-    by --policy are checked by `check_models`, the output folder by the command).
-
-    `seeds` may be given as ints or as seed-list strings (`defaults.parse_seeds`) and is stored
-    as a tuple of ints; `env_kwargs` as a JSON object or a dict.
-    """
-
-    policies: tuple[str, ...] | None = option_field(
-        None,
-        "a baseline (turnpike | proportional | zero | optimal | mpc) or a saved SB3 model "
-        "PATH.zip (ALGO:PATH to name the algorithm, PATH.zip:STATS.pkl to name its VecNormalize "
-        "statistics; statistics are found by themselves only in a run folder of agent-envs "
-        "train, checked against its manifest.json, or of rl-zoo3); repeat for several. Default: "
-        "turnpike, proportional, zero.",
-        flags=("--policy", "-p"),
-        action="append",
-        metavar="[NAME=]SPEC",
-    )
-    env_id: str = option_field(GYM_ENV_ID, "Gymnasium env id")
-    env_kwargs: dict = field(
-        default_factory=dict,
-        metadata={
-            "help": 'env keyword arguments as a JSON object, e.g. \'{"n_agents": 20, '
-            '"integrator": "em"}\' (default: the env\'s defaults)'
-        },
-    )
-    seeds: tuple[int, ...] = option_field(
-        DEFAULT_TEST_SEEDS,
-        "reset seeds: '0 1 2', '0-19', '0:20' or '0,1,2' (default 10000-10019)",
-        nargs="*",
-        type=str,
-    )
-    target: float | None = option_field(None, "reset option: the target (default: the env's)")
-    beta: float = option_field(DEFAULT_BETA, "baselines' beta")
-    delta: float = option_field(DEFAULT_DELTA, "baselines' delta")
-    out: Path = option_field(MISSING, "output folder")
-    report: bool = option_field(False, "also write a report in OUT/report", action="store_true")
-    progress: bool = option_field(
-        True, "no progress bar", flags=("--no-progress",), action="store_false"
-    )
-
-    def __post_init__(self) -> None:
-        if self.policies is not None:
-            object.__setattr__(self, "policies", tuple(self.policies))
-        self.policy_specs()  # ValueError naming --policy
-        object.__setattr__(self, "env_kwargs", parse_env_kwargs(self.env_kwargs))
-        object.__setattr__(self, "seeds", tuple(parse_seeds(self.seeds)))
-        object.__setattr__(self, "out", Path(self.out))
-        check_env_id(self.env_id)
-        if self.target is not None:
-            check_real("--target", self.target, TARGET_RANGE)
-        check_positive("--beta", self.beta)
-        check_positive("--delta", self.delta)
-
-    def policy_specs(self) -> dict[str, str]:
-        """{name: spec} of the --policy items (`parse_policy_specs`)."""
-        return parse_policy_specs(self.policies)
-
-    def check_models(self) -> None:
-        """Check every saved model named: its file, algorithm and statistics (nothing is
-        unpickled); an apg run folder is checked against its manifest when it is loaded."""
-        from agent_envs.training.apg_policy import is_apg_run
-
-        for spec in self.policy_specs().values():
-            if spec not in BASELINE_POLICIES and not is_apg_run(spec):
-                check_model(spec)
-
-    def reset_options(self) -> dict[str, Any] | None:
-        """The options of every reset: the target when given."""
-        return {"target": self.target} if self.target is not None else None
 
 
 def rollout(
