@@ -8,6 +8,7 @@ import sys
 import tempfile
 
 import gymnasium as gym
+import numpy as np
 
 import agent_envs
 from agent_envs import SwarmParams, simulate, swarm_v0
@@ -52,3 +53,42 @@ with tempfile.TemporaryDirectory() as tmp:
     assert done.returncode == 1 and len(lines) == 1, done.stderr
     assert 'pip install "agent-envs[train]"' in lines[0], lines
 print(f"minimal install OK: agent_envs {agent_envs.__version__}, episode cost {-total:.4f}")
+
+# The benchmark on the core install: the task list and scoring a callable policy (numpy only;
+# the references are package data, checked against their recorded hash).
+with tempfile.TemporaryDirectory() as tmp:
+    with open(f"{tmp}/third_party.py", "w") as handle:
+        handle.write(
+            "import numpy as np\n"
+            "def act(obs):\n"
+            "    return np.clip(12.0 * (obs[20] - obs[:10]) / 25.0, -1, 1)\n"
+        )
+    done = subprocess.run([*cli, "tasks"], cwd=tmp, capture_output=True, text=True)
+    assert done.returncode == 0 and "agent_envs/StiffSwarm-v0" in done.stdout, done.stderr
+    done = subprocess.run(
+        [
+            *cli,
+            "evaluate",
+            "--task",
+            "agent_envs/NoisySwarm-v0",
+            "-p",
+            "third_party:act",
+            "-p",
+            "proportional",
+            "--out",
+            "s",
+        ],
+        cwd=tmp,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    with open(f"{tmp}/s/scores.csv") as handle:
+        assert sum(1 for line in handle if ",act,policy," in line) == 20
+from agent_envs.tasks import score  # noqa: E402
+
+result = score(lambda obs: np.zeros(10, np.float32), "agent_envs/NoisySwarm-v0")
+assert abs(result.summary()["score"].mean) < 1e-9, result
+bad = sorted(m for m in ("torch", "stable_baselines3", "pandas") if m in sys.modules)
+assert not bad, bad
+print("minimal install: tasks listed and a callable scored without torch")

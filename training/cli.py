@@ -9,7 +9,8 @@ of `agent_envs.validation`. The dataclasses live next to the code they configure
 (`experiments.uncontrolled.UncontrolledConfig`, `experiments.turnpike_controlled.
 TurnpikeReproductionConfig`, `experiments.turnpike_property.TurnpikePropertyConfig`,
 `evaluate_options.EvaluateConfig`, `task_evaluation.TasksConfig`, `report.ReportConfig`,
-`config.TrainConfig`, `compare.CompareConfig`, `sweep.SweepConfig`) and are imported only when their subcommand is chosen, so
+`config.TrainConfig`, `compare.CompareConfig`, `sweep.SweepConfig`,
+`leaderboard.LeaderboardConfig`) and are imported only when their subcommand is chosen, so
 `agent-envs reproduce uncontrolled` does not pay for importing torch.
 
 Conventions shared by every subcommand:
@@ -363,6 +364,12 @@ def _objects_as_factories(policies: dict[str, Any]) -> None:
             policies[name] = lambda env, obj=obj: as_policy(obj, env)
 
 
+def _run_leaderboard(config: Any) -> int:
+    from agent_envs.training.leaderboard import run_leaderboard
+
+    return run_leaderboard(config)
+
+
 def _run_tasks(config: Any) -> int:
     from agent_envs.training.task_evaluation import run_tasks_command
 
@@ -537,6 +544,12 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         "(each one train + evaluation on the held-out test seeds) and write "
         "OUT/report/report.md with across-seed statistics (needs the 'sweep' extra: pip "
         "install 'agent-envs[sweep]').",
+    ),
+    "leaderboard": Subcommand(
+        "every benchmark task x every policy we ship (apg, SAC, the references), scored on the "
+        "tasks' test seeds; resumable in parts",
+        _T + "leaderboard:LeaderboardConfig",
+        _run_leaderboard,
     ),
     "tune": Subcommand(
         "hyperparameter search for one learner of a preset (Ray Tune + Optuna)",

@@ -1,0 +1,357 @@
+"""`agent-envs leaderboard`: every benchmark task x every policy we ship, scored on its test seeds.
+
+    agent-envs leaderboard --out leaderboard                       # all tasks, 3 training seeds
+    agent-envs leaderboard --out leaderboard --tasks agent_envs/NoisySwarm-v0   # one part
+    agent-envs leaderboard --out leaderboard --table docs/leaderboard-table.md  # table only
+
+Units of work. For each trainable task (every task but `LargeSwarm`) and each learner of
+`LEARNERS` and each training seed, one *unit*: train the learner on the task's env (the paper
+preset's hyperparameters and budgets, `agent_envs.training.presets`; its validation during
+training on the task's validation seeds 1000..), then score its best model on the task's 20 test
+seeds with `agent_envs.tasks.score`. `LargeSwarm` (N = 10^4) trains nothing: its units score the
+policies trained on `StiffSwarm` (the same dynamics at N = 100), a transfer to 100 times more
+agents. The references (the optimum, MPC, the lower bound, proportional, turnpike, zero) are
+the task's shipped data: nothing is re-solved.
+
+Resumable in parts: each unit writes ``OUT/units/TASK__LEARNER__SEED.csv`` (its per-episode
+scores) when it is done, and a unit whose file exists is skipped; training itself reuses a
+finished run and resumes an interrupted one (`experiment.train_from_dict`). ``--tasks`` runs
+part of the grid; ``--workers`` runs units in parallel processes (one torch and BLAS thread
+each). When every unit of the selected tasks is done, ``OUT/episodes.csv`` (every unit and the
+references, one row per policy x training seed x test seed) and ``OUT/leaderboard.md`` are
+written; ``--table`` rebuilds the table from an episodes file alone (no training).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agent_envs.tasks import TASK_LIST, TaskSpec, get_task, load_references
+from agent_envs.tasks.scores import summarize
+from agent_envs.training.config import option_field
+from agent_envs.training.storage import write_text_atomic
+
+#: The learners of the leaderboard, by their name in the paper preset: `apg` (a per-agent
+#: feedback law trained through SERB) and SAC with the summary observation and one common
+#: control, the best SB3 learner of the paper study (docs/results.md).
+LEARNERS = ("apg", "sac")
+#: Training seeds of every learner.
+TRAINING_SEEDS = (0, 1, 2)
+#: Tasks whose learners are not trained there but transferred from another task.
+TRANSFERS = {"agent_envs/LargeSwarm-v0": "agent_envs/StiffSwarm-v0"}
+#: Columns of a unit's file and of episodes.csv.
+EPISODE_COLUMNS = (
+    "task",
+    "policy",
+    "kind",
+    "training_seed",
+    "seed",
+    "cost",
+    "value",
+    "zero_cost",
+    "gap",
+    "score",
+    "diverged",
+)
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One learner x training seed on one task (trained there, or transferred from `source`)."""
+
+    task: str
+    learner: str
+    seed: int
+    source: str
+
+    @property
+    def stem(self) -> str:
+        return f"{get_task(self.task).file_stem}__{self.learner}__{self.seed}"
+
+
+def task_preset(task: TaskSpec, timesteps_scale: float = 1.0) -> Any:
+    """A `Preset` that trains the leaderboard's learners on `task` (paper hyperparameters)."""
+    from agent_envs.training.presets import PRESETS, EnvSetting, Preset
+
+    paper = PRESETS["paper"]
+    learners = tuple(lr for lr in paper.learners if lr.name in LEARNERS)
+    return Preset(
+        name=f"task-{task.file_stem}",
+        description=f"the learners of the leaderboard on {task.id}",
+        env_kwargs=dict(task.env_kwargs),
+        settings=(EnvSetting(task.file_stem, task.tests),),
+        learners=learners,
+        seeds=TRAINING_SEEDS,
+        references=(),
+        test_episodes=len(task.test_seeds),
+        validation_episodes=paper.validation_episodes,
+        evaluations=paper.evaluations,
+        vec_env=paper.vec_env,
+    )
+
+
+def units(tasks: Sequence[str], seeds: Sequence[int] = TRAINING_SEEDS) -> list[Unit]:
+    """Every unit of `tasks` (transfers after the units they read)."""
+    out = []
+    for task_id in tasks:
+        source = TRANSFERS.get(task_id, task_id)
+        out += [Unit(task_id, lr, s, source) for lr in LEARNERS for s in seeds]
+    return sorted(out, key=lambda u: u.task != u.source)
+
+
+def _train(unit: Unit, out: Path, timesteps_scale: float) -> Path:
+    """Train (or reuse) the unit's learner on its source task; the run directory."""
+    from agent_envs.training.config import TrainConfig
+    from agent_envs.training.experiment import (
+        ExperimentOptions,
+        learner_config,
+        train_from_dict,
+    )
+
+    source = get_task(unit.source)
+    preset = task_preset(source)
+    learner = next(lr for lr in preset.learners if lr.name == unit.learner)
+    options = ExperimentOptions(timesteps_scale=timesteps_scale, torch_threads=1)
+    config = learner_config(
+        preset, preset.settings[0], learner, unit.seed, options, out / "runs" / source.file_stem
+    )
+    if isinstance(config, TrainConfig):  # validated on the task's validation seeds 1000..
+        config = config.to_dict()
+    return train_from_dict(config)
+
+
+def _csv(rows: list[dict[str, Any]]) -> str:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(EPISODE_COLUMNS), lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
+    return buffer.getvalue()
+
+
+def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
+    """Train and score one unit; write and return its file."""
+    from threadpoolctl import threadpool_limits
+
+    from agent_envs.tasks import score
+    from agent_envs.training.experiment import evaluation_spec
+    from agent_envs.training.policies import resolve_policy
+
+    with threadpool_limits(1):
+        import torch
+
+        torch.set_num_threads(1)
+        run_dir = _train(unit, out, timesteps_scale)
+        spec = evaluation_spec(run_dir)
+
+        def make(env: Any) -> Any:
+            return resolve_policy(spec, env)[0]
+
+        result = score(make, unit.task, name=unit.learner)
+    rows = [
+        {
+            **{k: row[k] for k in EPISODE_COLUMNS if k in row},
+            "kind": "learner",
+            "training_seed": unit.seed,
+        }
+        for row in result.rows()
+    ]
+    path = out / "units" / f"{unit.stem}.csv"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, _csv(rows))
+    return path
+
+
+def reference_rows(task_id: str) -> list[dict[str, Any]]:
+    """The task's shipped references as episode rows (training seed empty)."""
+    from agent_envs.training.task_evaluation import reference_scores
+
+    rows = []
+    for result in reference_scores(load_references(task_id)):
+        for row in result.rows():
+            rows.append(
+                {
+                    **{k: row[k] for k in EPISODE_COLUMNS if k in row},
+                    "kind": "reference",
+                    "training_seed": "",
+                }
+            )
+    return rows
+
+
+def read_episodes(path: Path) -> list[dict[str, Any]]:
+    """Rows of an episodes file, numbers parsed."""
+    rows = []
+    with open(path, newline="") as handle:
+        for row in csv.DictReader(handle):
+            for key in ("cost", "value", "zero_cost", "gap", "score"):
+                row[key] = float(row[key])
+            row["seed"] = int(row["seed"])
+            row["diverged"] = row["diverged"] == "True"
+            rows.append(row)
+    return rows
+
+
+#: Display names of the policies in the table.
+POLICY_LABELS = {
+    "apg": "apg (per-agent feedback, trained through SERB)",
+    "sac": "sac (summary observation, common control)",
+    "optimal": "optimal (open-loop plan, 20 paths)",
+    "mpc": "mpc (re-solve every step)",
+    "lower_bound": "lower bound (certified, not a policy)",
+    "proportional": "proportional (12 (xbar - x_k))",
+    "turnpike": "turnpike (the paper's controller)",
+    "zero": "zero",
+}
+
+
+def leaderboard_table(rows: list[dict[str, Any]]) -> str:
+    """The leaderboard in Markdown from episode rows: one section per task, one row per policy.
+
+    Score and gap: mean over the test seeds with a 95% t-interval (a learner: of the per-seed
+    mean over its training seeds), IQM over every episode; a learner's mean score per training
+    seed is listed too.
+    """
+    out = []
+    order = {name: i for i, name in enumerate(POLICY_LABELS)}
+    for task in TASK_LIST:
+        task_rows = [r for r in rows if r["task"] == task.id]
+        if not task_rows:
+            continue
+        trained = TRANSFERS.get(task.id)
+        note = f" (learners trained on {trained}, N = 100)" if trained else ""
+        out.append(f"### {task.id}{note}\n\n{task.tests}. V = {task.yardstick}.\n")
+        out.append(
+            "| policy | score [95% CI] | IQM | gap to V [95% CI] | score by training seed "
+            "| mean cost |\n|---|---|---|---|---|---|"
+        )
+        names = sorted({r["policy"] for r in task_rows}, key=lambda n: (order.get(n, 99), n))
+        for name in names:
+            mine = [r for r in task_rows if r["policy"] == name]
+            runs = sorted({r["training_seed"] for r in mine})
+            seeds = sorted({r["seed"] for r in mine})
+            cell = {(r["training_seed"], r["seed"]): r for r in mine}
+            scores = np.array([[cell[(t, s)]["score"] for s in seeds] for t in runs])
+            gaps = np.array([[cell[(t, s)]["gap"] for s in seeds] for t in runs])
+            costs = np.array([[cell[(t, s)]["cost"] for s in seeds] for t in runs])
+            s, g = summarize(scores), summarize(gaps)
+            by_seed = ", ".join(f"{v:.2f}" for v in scores.mean(axis=1)) if runs != [""] else "-"
+            out.append(
+                f"| {POLICY_LABELS.get(name, name)} | {s.mean:.2f} [{s.mean_low:.2f}, "
+                f"{s.mean_high:.2f}] | {s.iqm:.2f} | {100 * g.mean:+.2f}% "
+                f"[{100 * g.mean_low:+.2f}%, {100 * g.mean_high:+.2f}%] | {by_seed} "
+                f"| {costs.mean():.5g} |"
+            )
+        out.append("")
+    return "\n".join(out)
+
+
+def collect(out: Path, tasks: Sequence[str]) -> list[dict[str, Any]]:
+    """Every row of `tasks`: the units' files that exist and the shipped references."""
+    rows: list[dict[str, Any]] = []
+    for task_id in tasks:
+        rows += reference_rows(task_id)
+    for path in sorted((out / "units").glob("*.csv")):
+        unit_rows = read_episodes(path)
+        rows += [r for r in unit_rows if r["task"] in tasks]
+    return rows
+
+
+@dataclass(frozen=True, kw_only=True)
+class LeaderboardConfig:
+    """The options of `agent-envs leaderboard`."""
+
+    out: Path = option_field(Path("leaderboard"), "output folder (units, runs, episodes.csv)")
+    tasks: tuple[str, ...] | None = option_field(
+        None, "task ids to run (default: all)", nargs="+", metavar="ID"
+    )
+    seeds: tuple[int, ...] = option_field(TRAINING_SEEDS, "training seeds of every learner")
+    workers: int = option_field(1, "units run in parallel processes")
+    timesteps_scale: float = option_field(1.0, "multiply every training budget (a smoke run: 0.01)")
+    table: Path | None = option_field(
+        None,
+        "write the Markdown table of OUT/episodes.csv to this file and stop (no training)",
+    )
+
+    def __post_init__(self) -> None:
+        from agent_envs.validation import check_int, check_positive
+
+        object.__setattr__(self, "out", Path(self.out))
+        ids = self.tasks or tuple(t.id for t in TASK_LIST)
+        object.__setattr__(self, "tasks", tuple(get_task(i).id for i in ids))
+        for task_id in self.tasks:
+            source = TRANSFERS.get(task_id)
+            if source and source not in self.tasks:
+                object.__setattr__(self, "tasks", (source, *self.tasks))
+        object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
+        for s in self.seeds:
+            check_int("--seeds", s, 0, 999)
+        check_int("--workers", self.workers, 1, 64)
+        check_positive("--timesteps-scale", self.timesteps_scale)
+
+
+def run_leaderboard(config: LeaderboardConfig) -> int:
+    """`agent-envs leaderboard` (module docstring)."""
+    episodes = config.out / "episodes.csv"
+    if config.table is not None:
+        if not episodes.is_file():
+            raise ValueError(f"--table: {episodes} does not exist; run the leaderboard first")
+        write_text_atomic(config.table, leaderboard_table(read_episodes(episodes)) + "\n")
+        print(f"wrote {config.table}")
+        return 0
+    todo = [
+        u
+        for u in units(config.tasks, config.seeds)
+        if not (config.out / "units" / f"{u.stem}.csv").is_file()
+    ]
+    print(f"{len(todo)} units to run ({len(units(config.tasks, config.seeds)) - len(todo)} done)")
+    direct = [u for u in todo if u.task == u.source]
+    transfer = [u for u in todo if u.task != u.source]
+    for batch in (direct, transfer):
+        if not batch:
+            continue
+        with ProcessPoolExecutor(max_workers=config.workers) as pool:
+            futures = {
+                pool.submit(run_unit, u, config.out, config.timesteps_scale): u for u in batch
+            }
+            for future in as_completed(futures):
+                print(f"done: {future.result()}", flush=True)
+    rows = collect(config.out, config.tasks)
+    write_text_atomic(episodes, _csv(rows))
+    table = leaderboard_table(rows)
+    write_text_atomic(config.out / "leaderboard.md", table + "\n")
+    print(table)
+    meta = {
+        "tasks": list(config.tasks),
+        "seeds": list(config.seeds),
+        "learners": LEARNERS,
+        "timesteps_scale": config.timesteps_scale,
+    }
+    write_text_atomic(config.out / "leaderboard.json", json.dumps(meta, indent=1) + "\n")
+    return 0
+
+
+__all__ = [
+    "EPISODE_COLUMNS",
+    "LEARNERS",
+    "TRAINING_SEEDS",
+    "TRANSFERS",
+    "LeaderboardConfig",
+    "Unit",
+    "collect",
+    "leaderboard_table",
+    "read_episodes",
+    "run_leaderboard",
+    "run_unit",
+    "task_preset",
+    "units",
+]
