@@ -1,0 +1,1 @@
+"""Standalone example scripts (importable as ``examples.NAME`` from the repo root, for scoring)."""
