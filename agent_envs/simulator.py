@@ -25,9 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs import arrays
+from agent_envs import arrays, native
 from agent_envs.dynamics.kernels import check_kernel_library
-from agent_envs.dynamics.laplacian import import_checked
 from agent_envs.dynamics.operators import check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel, kernel_from_params
 from agent_envs.integrators import (
@@ -174,27 +173,15 @@ def brownian_increments(rng: np.random.Generator, shape: tuple[int, ...], dt: fl
     return increments
 
 
-#: `agent_envs.compiled_noise` once `load_compiled_noise` found it and its draws equal numpy's;
-#: False: numba missing, ``AGENT_ENVS_NUMBA=0``, or draws that differ; None: not tried yet
-_compiled_noise: Any = None
-
-
 def load_compiled_noise() -> bool:
-    """Whether `fill_brownian_increments` draws a batch in one compiled call
-    (`agent_envs.compiled_noise`, needs numba); loads it on the first call (the native vector
-    env calls this when it is made, not in a step) and checks there, on two fixed-seed
-    generators, that its normals and the generators' states after them are numpy's bit for
-    bit. False where numba is missing or switched off (``AGENT_ENVS_NUMBA=0``), and, with a
-    warning, where the check fails or the module does not compile: the compiled draws are then
-    never used."""
-    global _compiled_noise
-    if _compiled_noise is None:
-        _compiled_noise = import_checked(
-            "agent_envs.compiled_noise",
-            lambda module: _draws_equal_numpys(module),  # (looked up when called: tests swap it)
-            "the native vector env draws with one numpy call per env",
-        )
-    return _compiled_noise is not False
+    """``native.available("noise")``: whether `fill_brownian_increments` draws a batch in one
+    compiled call (`agent_envs.native.noise`, needs numba); loads it on the first call (the
+    native vector env asks when it is made, not in a step) and checks there, by
+    `_draws_equal_numpys` (registered with the loader below), that its normals and the
+    generators' states after them are numpy's bit for bit. False where numba is missing or
+    switched off (``AGENT_ENVS_NUMBA=0``), and, with a warning, where the check fails or the
+    module does not compile: the compiled draws are then never used."""
+    return native.available("noise")
 
 
 def _draws_equal_numpys(module: Any) -> bool:
@@ -218,15 +205,18 @@ def _draws_equal_numpys(module: Any) -> bool:
     return bool(np.array_equal(out, expected) and same_states)
 
 
+native.register_check(
+    "noise",
+    lambda module: _draws_equal_numpys(module),  # (looked up when called: tests swap it)
+    "the native vector env draws with one numpy call per env",
+)
+
+
 def use_compiled_noise(enabled: bool) -> bool:
-    """Switch the compiled draws on (when numba is installed and they equal numpy's) or off
-    for this process; returns whether they were in use before."""
-    global _compiled_noise
-    before = load_compiled_noise()
-    _compiled_noise = None if enabled else False
-    if enabled:
-        load_compiled_noise()
-    return before
+    """``native.use("noise", enabled)``: switch the compiled draws on (when numba is installed
+    and they equal numpy's) or off for this process; returns whether they were in use
+    before."""
+    return native.use("noise", enabled)
 
 
 def _function_address(function: Any) -> int:
@@ -301,7 +291,7 @@ def fill_brownian_increments(
     `brownian_increments(rngs[k], out[i].shape, dt)` (the native vector env's rows equal their
     single twins', tests/test_vector_env.py), without one temporary and one product per row.
     With `handles` (`GeneratorHandles` of `rngs`, else ValueError) and numba, the whole batch
-    is one compiled call (`agent_envs.compiled_noise`: numpy's algorithm on the same bit
+    is one compiled call (`agent_envs.native.noise`: numpy's algorithm on the same bit
     generators, the same bits; 0.5 against 2.1 us per generator for 100 normals; the
     generators must not be used from another thread meanwhile), else one numpy call per row.
     A row outside `out` raises IndexError either way."""
@@ -310,12 +300,12 @@ def fill_brownian_increments(
             raise ValueError("handles must be the GeneratorHandles of these rngs, in order")
         if len(rows) != len(handles.rngs):
             raise ValueError(f"rows must have one entry per generator, got {len(rows)}")
-        if out.dtype == np.float64 and out.flags.c_contiguous and load_compiled_noise():
+        if out.dtype == np.float64 and out.flags.c_contiguous and native.available("noise"):
             index = np.asarray(rows, dtype=np.int64).reshape(-1)
             size = out.shape[0]
             if index.size and not (index.min() >= -size and index.max() < size):
                 raise IndexError(f"rows must index the {size} rows of out, got {rows!r}")
-            _compiled_noise.fill_standard_normal(
+            native.loaded("noise").fill_standard_normal(
                 handles.states, handles.next_uint64, handles.next_double, handles.sources,
                 index % size if size else index, out.reshape(size, -1), float(np.sqrt(dt)),
             )  # fmt: skip

@@ -1,6 +1,6 @@
 """The compiled kernel pass (numba) against the numpy passes of the dense workspace path.
 
-`agent_envs.dynamics.compiled_kernel` builds P, s = P 1 and L(x) x for the symmetric
+`agent_envs.native.kernel` builds P, s = P 1 and L(x) x for the symmetric
 Cucker-Smale kernel when numba is installed; these tests require it (skipped without numba:
 the `dev` extra installs it, so CI runs them).
 """

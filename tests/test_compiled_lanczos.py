@@ -1,6 +1,6 @@
 """The compiled Lanczos (numba) against the numpy Lanczos and the Array-API reference.
 
-`agent_envs.integrators.compiled_lanczos` serves phi_p(c L(x)) V for the frozen L(x) on numpy
+`agent_envs.native.lanczos` serves phi_p(c L(x)) V for the frozen L(x) on numpy
 when numba is installed; these tests require it (skipped without numba: the `dev` extra
 installs it, so CI runs them). Without numba the package must still import and step
 (`test_package_works_without_numba`, which runs everywhere).
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import agent_envs  # noqa: F401  (registers the env ids)
-from agent_envs import SwarmModel, SwarmParams, make_integrator
+from agent_envs import SwarmModel, SwarmParams, make_integrator, native
 from agent_envs.integrators import phi_functions as pf
 
 TOL = 1e-12
@@ -33,7 +33,7 @@ def compiled():
     """The compiled path on for the test (and restored after)."""
     _needs_numba()
     before = pf.use_compiled(True)
-    yield pf._compiled
+    yield native.loaded("lanczos")
     pf.use_compiled(before)
 
 
@@ -334,12 +334,12 @@ def test_steps_use_the_machine_code_loaded_at_make():
         import gymnasium as gym
         import agent_envs
         from agent_envs import SwarmParams, simulate
-        from agent_envs.dynamics import compiled_kernel
-        from agent_envs.integrators import compiled_lanczos
+        from agent_envs.native import kernel
+        from agent_envs.native import lanczos
         env = gym.make("agent_envs/Swarm-v0", n_agents=100, n_paths=3, integrator="serb")
-        counts = lambda: (len(compiled_kernel.cucker_smale_drift.signatures),
-                          len(compiled_lanczos.frozen_lanczos.signatures),
-                          len(compiled_lanczos.frozen_advance.signatures))
+        counts = lambda: (len(kernel.cucker_smale_drift.signatures),
+                          len(lanczos.frozen_lanczos.signatures),
+                          len(lanczos.frozen_advance.signatures))
         made = counts()
         env.reset(seed=0)
         for _ in range(3):
@@ -410,17 +410,17 @@ def test_fused_step_that_gives_up_takes_the_general_path(compiled, monkeypatch):
     the step discards it, evaluates L(x) again and takes the general path, with the general
     path's result (simulated: the compiled call reports one member unconverged)."""
     calls = []
-    original = pf._compiled.frozen_advance
+    original = native.loaded("lanczos").frozen_advance
 
     def unconverged(*args):
         assert original(*args) == 0
         calls.append(1)
         return 1  # the number of members that did not converge
 
-    monkeypatch.setattr(pf._compiled, "frozen_advance", unconverged)
+    monkeypatch.setattr(native.loaded("lanczos"), "frozen_advance", unconverged)
     gave_up = _episode(True, None, steps=8)
     assert len(calls) == 8
-    monkeypatch.setattr(pf._compiled, "frozen_advance", original)
+    monkeypatch.setattr(native.loaded("lanczos"), "frozen_advance", original)
     general = _episode(False, None, steps=8)
     for got, expected in zip(gave_up, general, strict=True):
         np.testing.assert_array_equal(got, expected)
@@ -488,7 +488,7 @@ def test_product_reads_the_lower_triangle_and_equals_the_dense_product(compiled,
     a symmetric P, to round-off; NaN above the diagonal blocks does not reach the result (only
     the lower triangle and the 4 x 4 blocks on the diagonal are read); and a second call with
     the same inputs, from other buffers, gives the same bits."""
-    from agent_envs.dynamics import compiled_kernel
+    from agent_envs.native import kernel
 
     rng = np.random.default_rng(n)
     half = rng.uniform(0.1, 2.0, (n, n))
@@ -496,7 +496,7 @@ def test_product_reads_the_lower_triangle_and_equals_the_dense_product(compiled,
     q = rng.standard_normal(n)
     want = p @ q
     w = np.full(n, np.nan)
-    compiled_kernel.lower_product(p, q, w, n)
+    kernel.lower_product(p, q, w, n)
     assert np.all(np.abs(w - want) <= 1e-14 * np.maximum(np.abs(p) @ np.abs(q), 1e-300))
     upper = p.copy()
     top = n - n % 4
@@ -504,7 +504,7 @@ def test_product_reads_the_lower_triangle_and_equals_the_dense_product(compiled,
         block_end = (i // 4 + 1) * 4 if i < top else i + 1
         upper[i, block_end:] = np.nan
     again = np.full(n, np.nan)
-    compiled_kernel.lower_product(upper.copy(), q.copy(), again, n)
+    kernel.lower_product(upper.copy(), q.copy(), again, n)
     np.testing.assert_array_equal(again, w)
 
 
@@ -516,7 +516,7 @@ def test_products_of_several_vectors_read_the_lower_triangle(compiled, n, k):
     NaN outside the triangle and the diagonal blocks does not reach the result; the same
     inputs from other buffers give the same bits; and each column of a pair is the same
     whatever the other column holds (a member's result depends only on its own data)."""
-    from agent_envs.dynamics import compiled_kernel
+    from agent_envs.native import kernel
 
     rng = np.random.default_rng(100 * n + k)
     half = rng.uniform(0.1, 2.0, (n, n))
@@ -539,13 +539,13 @@ def test_products_of_several_vectors_read_the_lower_triangle(compiled, n, k):
         other = q.copy()
         other[1] = rng.standard_normal(n)
         v = np.full((k, n), np.nan)
-        compiled_kernel.lower_product_pair(p, other[0], other[1], v[0], v[1], n)
+        kernel.lower_product_pair(p, other[0], other[1], v[0], v[1], n)
         np.testing.assert_array_equal(v[0], w[0])
         tol = 1e-14 * np.maximum(np.abs(p) @ np.abs(other[1]), 1e-300)
         assert np.all(np.abs(v[1] - p @ other[1]) <= tol)
         # the second column whatever the first holds: other[1] beside q[0] instead of other[0]
         first, second = np.full(n, np.nan), np.full(n, np.nan)
-        compiled_kernel.lower_product_pair(p, q[0], other[1], first, second, n)
+        kernel.lower_product_pair(p, q[0], other[1], first, second, n)
         np.testing.assert_array_equal(second, v[1])
         np.testing.assert_array_equal(first, w[0])
 

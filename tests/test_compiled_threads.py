@@ -1,8 +1,8 @@
 """The compiled passes on several threads (`num_threads` of the native vector env,
 `SwarmModel.threads`): the same bits as one thread, and clear errors for bad values.
 
-The threaded drivers (`compiled_kernel.cucker_smale_drift_threads`,
-`compiled_lanczos.frozen_advance_threads`) split the members into contiguous spans, one per
+The threaded drivers (`native.kernel.cucker_smale_drift_threads`,
+`native.lanczos.frozen_advance_threads`) split the members into contiguous spans, one per
 thread, and run the one-thread loop on each span; a member's result does not depend on the
 others, so the results must equal the one-thread call's bit for bit, whatever the spans.
 Skipped without numba; the threaded cases need numba to allow at least 2 threads.
@@ -23,6 +23,7 @@ from agent_envs import SwarmModel, SwarmParams
 from agent_envs.dynamics import laplacian
 from agent_envs.dynamics.laplacian import check_compiled_threads, max_compiled_threads
 from agent_envs.integrators import phi_functions
+from agent_envs.native import loader
 
 try:
     import numba
@@ -47,7 +48,7 @@ def spread_states(rng: np.random.Generator, members: int, n: int, d: int) -> np.
 @needs_two
 @pytest.mark.parametrize("members, chunks, d", [(7, 2, 1), (7, 3, 1), (2, 2, 2), (3, 5, 1)])
 def test_threaded_kernel_pass_equals_one_thread(members, chunks, d):
-    from agent_envs.dynamics import compiled_kernel
+    from agent_envs.native import kernel
 
     rng = np.random.default_rng(members + chunks)
     x = laplacian.readonly_view(spread_states(rng, members, 30, d))
@@ -57,9 +58,9 @@ def test_threaded_kernel_pass_equals_one_thread(members, chunks, d):
         s, drift = np.empty((members, 30)), np.empty((members, 30, d))
         if threaded:
             with laplacian.compiled_threads(2):
-                compiled_kernel.cucker_smale_drift_threads(x, 0.3, 0.01, p, s, drift, chunks)
+                kernel.cucker_smale_drift_threads(x, 0.3, 0.01, p, s, drift, chunks)
         else:
-            compiled_kernel.cucker_smale_drift(x, 0.3, 0.01, p, s, drift)
+            kernel.cucker_smale_drift(x, 0.3, 0.01, p, s, drift)
         outs.append((np.tril(p), s, drift))
     for got, want in zip(outs[1], outs[0], strict=True):
         np.testing.assert_array_equal(got, want)
@@ -69,13 +70,13 @@ def test_threaded_kernel_pass_equals_one_thread(members, chunks, d):
 def _advance_inputs(rng: np.random.Generator, members: int, spread: float):
     """The arguments of one fused SERB step at N = 40 from states of that spread: P, s, the
     right-hand side, x and the noise, as the env's model and integrator hand them over."""
-    from agent_envs.dynamics import compiled_kernel
+    from agent_envs.native import kernel
 
     n = 40
     x = laplacian.readonly_view(spread * rng.uniform(-1.0, 1.0, (members, n, 1)))
     p = np.empty((members, n, n))
     s, drift = np.empty((members, n)), np.empty((members, n, 1))
-    compiled_kernel.cucker_smale_drift(x, 20.0, 0.01, p, s, drift)
+    kernel.cucker_smale_drift(x, 20.0, 0.01, p, s, drift)
     rhs = laplacian.readonly_view(drift + rng.uniform(-1.0, 1.0, (members, 1, 1)))
     noise = laplacian.readonly_view(0.1 * rng.standard_normal((members, n, 1)))
     return p, laplacian.readonly_view(s), rhs, x, noise
@@ -86,7 +87,7 @@ def _advance_inputs(rng: np.random.Generator, members: int, spread: float):
 @pytest.mark.parametrize("members, chunks", [(9, 2), (5, 3), (2, 2)])
 @pytest.mark.parametrize("with_noise_product", [True, False])
 def test_threaded_fused_step_equals_one_thread(spread, members, chunks, with_noise_product):
-    from agent_envs.integrators import compiled_lanczos
+    from agent_envs.native import lanczos
 
     rng = np.random.default_rng(members)
     p, s, rhs, x, noise = _advance_inputs(rng, members, spread)
@@ -101,9 +102,9 @@ def test_threaded_fused_step_equals_one_thread(spread, members, chunks, with_noi
                 1.0 / dt, x, dt, noise, 20.0, 0.01, x_next, s_next, drift_next)  # fmt: skip
         if threaded:
             with laplacian.compiled_threads(2):
-                failed = compiled_lanczos.frozen_advance_threads(*args, chunks)
+                failed = lanczos.frozen_advance_threads(*args, chunks)
         else:
-            failed = compiled_lanczos.frozen_advance(*args)
+            failed = lanczos.frozen_advance(*args)
         assert failed == 0
         results.append((np.tril(pw), out, x_next, s_next, drift_next))
     for got, want in zip(results[1], results[0], strict=True):
@@ -127,8 +128,7 @@ def test_native_env_on_two_threads_matches_sync_vector_env(monkeypatch, kwargs, 
     bit, through autoresets and a diverging env, as the one-thread env is
     (tests/test_vector_env.py); the threaded kernel pass runs in every case, the threaded
     fused step where SERB or ERB take Lanczos."""
-    from agent_envs.dynamics import compiled_kernel
-    from agent_envs.integrators import compiled_lanczos
+    from agent_envs.native import kernel, lanczos
 
     calls = {"kernel": 0, "fused": 0}
 
@@ -139,10 +139,10 @@ def test_native_env_on_two_threads_matches_sync_vector_env(monkeypatch, kwargs, 
 
         return call
 
-    kernel_pass = counted("kernel", compiled_kernel.cucker_smale_drift_threads)
-    monkeypatch.setattr(laplacian._compiled_kernel, "cucker_smale_drift_threads", kernel_pass)
-    fused_step = counted("fused", compiled_lanczos.frozen_advance_threads)
-    monkeypatch.setattr(phi_functions._compiled, "frozen_advance_threads", fused_step)
+    kernel_pass = counted("kernel", kernel.cucker_smale_drift_threads)
+    monkeypatch.setattr(loader.loaded("kernel"), "cucker_smale_drift_threads", kernel_pass)
+    fused_step = counted("fused", lanczos.frozen_advance_threads)
+    monkeypatch.setattr(loader.loaded("lanczos"), "frozen_advance_threads", fused_step)
     kwargs = {**DIVERGING, **kwargs}
     venv, senv = native(4, num_threads=2, **kwargs), sync(4, **kwargs)
     assert venv.unwrapped.num_threads == 2
@@ -171,16 +171,16 @@ def test_native_env_on_two_threads_matches_sync_vector_env(monkeypatch, kwargs, 
 def test_threads_are_used_and_the_thread_count_is_restored(monkeypatch):
     """A SERB step of a 2-thread env goes through the threaded fused step (the path is not
     dead), and numba's thread count of the calling thread is the same after the step."""
-    from agent_envs.integrators import compiled_lanczos
+    from agent_envs.native import lanczos
 
     calls = []
-    threaded = compiled_lanczos.frozen_advance_threads
+    threaded = lanczos.frozen_advance_threads
 
     def counting(*args):
         calls.append(numba.get_num_threads())
         return threaded(*args)
 
-    monkeypatch.setattr(phi_functions._compiled, "frozen_advance_threads", counting)
+    monkeypatch.setattr(loader.loaded("lanczos"), "frozen_advance_threads", counting)
     env = native(4, num_threads=2, n_agents=100)  # (Lanczos from N = 49 on)
     env.reset(seed=0)
     calls.clear()  # (the first reset's one-time load called it too)
@@ -229,7 +229,7 @@ def test_async_vector_env_forks_after_making_a_threaded_env():
 def test_a_pickled_model_keeps_at_most_this_processs_threads(monkeypatch):
     model = SwarmModel(SwarmParams(n_agents=10))
     model._threads = 3  # as pickled in a process that allowed 3
-    monkeypatch.setattr(laplacian, "_compiled_kernel", False)  # here: no compiled passes
+    monkeypatch.setitem(loader._loaded, "kernel", False)  # here: no compiled passes
     loaded = pickle.loads(pickle.dumps(model))
     assert loaded.threads == 1
 
@@ -263,7 +263,7 @@ def test_model_threads_setter_checks_its_value():
 
 def test_threads_without_numba_ask_for_it(monkeypatch):
     """(Runs with or without numba: the compiled passes are switched off here.)"""
-    monkeypatch.setattr(laplacian, "_compiled_kernel", False)
+    monkeypatch.setitem(loader._loaded, "kernel", False)
     assert max_compiled_threads() == 1
     assert check_compiled_threads(1) == 1
     with pytest.raises(ValueError, match="numba"):

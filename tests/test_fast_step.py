@@ -1,4 +1,4 @@
-"""The native vector env's compiled prologue and epilogue (`agent_envs.envs.compiled_step`).
+"""The native vector env's compiled prologue and epilogue (`agent_envs.native.step`).
 
 They replace about 30 numpy calls of the native env's step (controls, running costs,
 right-hand sides, divergence flags, path means, observation) and must give their values bit
@@ -15,7 +15,7 @@ import pytest
 from test_vector_env import DIVERGING, native, run_side_by_side
 
 from agent_envs.envs import fast_step
-from agent_envs.integrators import phi_functions
+from agent_envs.native import loader
 
 pytestmark = pytest.mark.skipif(
     not fast_step.load_compiled_step(), reason="the compiled step needs numba"
@@ -67,15 +67,13 @@ def test_the_load_check_sees_one_ulp(what):
 def test_a_module_that_differs_is_not_used(monkeypatch):
     """load_compiled_step answers False, with a warning, where the check fails; the env then
     takes the numpy step."""
-    from agent_envs.dynamics import laplacian
-
-    off, real = _OffByOneUlp("costs"), laplacian.import_compiled
+    off, real = _OffByOneUlp("costs"), loader.import_compiled
 
     def importing(name):  # (the other compiled modules load as they are)
-        return off if name == "agent_envs.envs.compiled_step" else real(name)
+        return off if name == "agent_envs.native.step" else real(name)
 
-    monkeypatch.setattr(fast_step, "_compiled_step", None)
-    monkeypatch.setattr(laplacian, "import_compiled", importing)
+    monkeypatch.setitem(loader._loaded, "step", None)
+    monkeypatch.setattr(loader, "import_compiled", importing)
     with pytest.warns(RuntimeWarning, match="differs from numpy"):
         assert not fast_step.load_compiled_step()
     assert native(2, n_agents=20, integrator="em").unwrapped._compiled_kind is None
@@ -234,13 +232,13 @@ def test_a_fused_step_that_gives_up_takes_the_numpy_advance(monkeypatch):
     """Where a member's Lanczos does not converge, the compiled step takes the numpy step's
     `_advance` with the same draws (the single envs give up too here: the same bits)."""
     calls = _count_calls(monkeypatch)
-    original = phi_functions._compiled.frozen_advance
+    original = loader.loaded("lanczos").frozen_advance
 
     def unconverged(*args):
         original(*args)
         return 1  # the number of members that did not converge
 
-    monkeypatch.setattr(phi_functions._compiled, "frozen_advance", unconverged)
+    monkeypatch.setattr(loader.loaded("lanczos"), "frozen_advance", unconverged)
     kwargs = {**DIVERGING, "n_agents": 100, "n_steps": 5}
     run_side_by_side(3, 8, **kwargs)
     assert calls["prologue"] >= 5 and calls["epilogue"] == 0

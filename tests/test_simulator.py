@@ -376,13 +376,14 @@ def test_compiled_draws_that_differ_from_numpys_are_switched_off(monkeypatch):
     is never used, with a RuntimeWarning, and the draws are numpy's calls."""
     _compiled_noise_or_skip()
     from agent_envs import simulator
+    from agent_envs.native import loader
 
     def failing(module):
         raise RuntimeError("no codegen")
 
     for check, message in ((lambda module: False, "differ"), (failing, "did not load")):
         monkeypatch.setattr(simulator, "_draws_equal_numpys", check)
-        monkeypatch.setattr(simulator, "_compiled_noise", None)
+        monkeypatch.setitem(loader._loaded, "noise", None)
         with pytest.warns(RuntimeWarning, match=message):
             assert simulator.load_compiled_noise() is False
         rngs = [np.random.default_rng(3)]

@@ -236,7 +236,7 @@ class TrainConfig:
         check_int("--torch-threads", self.torch_threads, 0, 1024)
         check_int("--env-threads", self.env_threads, 1, 1024)
         if self.env_threads > 1:
-            from agent_envs.dynamics.laplacian import check_compiled_threads
+            from agent_envs.native import check_compiled_threads
 
             if is_multiagent(self.env_id):
                 raise ValueError("--env-threads > 1 needs the Gymnasium env (--env-id)")

@@ -24,9 +24,10 @@ batch member, both from quantities the drift already has (s, and p_max = w / alp
   in a few steps; `phi_functions` deflates the constant vector (L 1 = 0) and uses the width to
   decide from which Krylov dimension its a posteriori error estimate may be trusted.
 
-With numba the compiled pass writes only P's lower triangle (and its diagonal), which is all
-that the compiled Lanczos and the drift read; the operator's `UpperTriangle` fills the rest
-the first time a consumer of the whole P asks (`matrix`, `dense()`, `@`), so an
+With numba the compiled pass (`agent_envs.native.kernel`, the compiled path "kernel"; this
+module's numpy passes are its reference) writes only P's lower triangle (and its diagonal),
+which is all that the compiled Lanczos and the drift read; the operator's `UpperTriangle`
+fills the rest the first time a consumer of the whole P asks (`matrix`, `dense()`, `@`), so an
 Euler-Maruyama or compiled SERB step never pays for it.
 
 A `FrozenLaplacian` refers to the workspace it was built in: the model's next evaluation
@@ -36,27 +37,27 @@ product). The public `SwarmModel.frozen_linearization` still returns a fresh arr
 
 from __future__ import annotations
 
-import importlib
 import math
-import os
-import warnings
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
-from agent_envs import arrays
+from agent_envs import arrays, native
 
+# (kept for callers of the names this module had before the native layer: the loader, the
+# switch and the thread dispatch of every compiled path live in `agent_envs.native`)
+from agent_envs.native import call_on_threads as call_on_threads
+from agent_envs.native import check_compiled_threads as check_compiled_threads
+from agent_envs.native import compiled_threads as compiled_threads
+from agent_envs.native import import_checked as import_checked
+from agent_envs.native import import_compiled as import_compiled
+from agent_envs.native import load_compiled_threads as load_compiled_threads
+from agent_envs.native import max_compiled_threads as max_compiled_threads
+
+#: (kept as well) the environment variable that switches every compiled path off
+COMPILED_ENV_VAR = native.ENV_VAR
 #: batch shapes a `KernelWorkspace` keeps buffers for (the oldest is dropped beyond this)
 _MAX_SHAPES = 2
-#: set to "0" to keep the numpy kernel and Lanczos even where numba is installed
-COMPILED_ENV_VAR = "AGENT_ENVS_NUMBA"
-#: `agent_envs.dynamics.compiled_kernel` once `load_compiled_kernel` found it; False:
-#: unavailable or switched off; None: not tried yet
-_compiled_kernel: Any = None
-#: thread counts `load_compiled_threads` has warmed the threaded kernel pass up for
-_threads_loaded: set[int] = set()
 
 
 def readonly_view(a: np.ndarray) -> np.ndarray:
@@ -68,73 +69,19 @@ def readonly_view(a: np.ndarray) -> np.ndarray:
     return view
 
 
-def import_compiled(module: str) -> Any:
-    """The numba-compiled module `module` (e.g. ``"agent_envs.dynamics.compiled_kernel"``), or
-    False: numba not importable, or ``AGENT_ENVS_NUMBA=0`` in the environment."""
-    if os.environ.get(COMPILED_ENV_VAR, "1") == "0":
-        return False
-    try:
-        return importlib.import_module(module)
-    except ImportError:
-        return False
-
-
-def import_checked(module: str, check: Callable[[Any], bool], fallback: str) -> Any:
-    """`import_compiled(module)`, kept only where `check(module)` answers True (a compiled
-    module checked against the numpy calls it replaces): False where numba is missing or
-    switched off, and, with a RuntimeWarning that names `fallback` (what runs instead), where
-    the check answers False (another numpy, say) or raises (a numba that cannot build it)."""
-    found = import_compiled(module)
-    if found is False:
-        return False
-    try:
-        same = check(found)
-    except Exception as exc:  # a numba or llvmlite that cannot build it
-        warnings.warn(
-            f"{module} did not load ({type(exc).__name__}: {exc}); {fallback}",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-        return False
-    if not same:
-        warnings.warn(
-            f"{module} differs from numpy on this install; {fallback}",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-        return False
-    return found
-
-
 def load_compiled_kernel() -> bool:
-    """Whether the compiled kernel pass (`agent_envs.dynamics.compiled_kernel`, needs numba)
-    builds P, its row sums and the drift for the symmetric Cucker-Smale kernel; loads it on
-    the first call (importing numba and loading, or the first time in a cache directory
-    compiling, its machine code: `SwarmModel` calls this when it is made, not in a step).
-    Without numba, or with ``AGENT_ENVS_NUMBA=0``, False: `fill_cucker_smale` and one product
+    """Whether the compiled kernel pass (`agent_envs.native.kernel`, needs numba) builds P, its
+    row sums and the drift for the symmetric Cucker-Smale kernel: ``native.available("kernel")``
+    (loaded on the first call: `SwarmModel` asks when it is made, not in a step). Without
+    numba, or with ``AGENT_ENVS_NUMBA=0``, False: `fill_cucker_smale` and one product
     P [x | 1] run."""
-    global _compiled_kernel
-    if _compiled_kernel is None:
-        _compiled_kernel = import_compiled("agent_envs.dynamics.compiled_kernel")
-        if _compiled_kernel is not False:
-            x = readonly_view(np.zeros((1, 2, 1)))  # one call with every call's types
-            _compiled_kernel.cucker_smale_drift(
-                x, 1.0, 1.0, np.empty((1, 2, 2)), np.empty((1, 2)), np.empty((1, 2, 1))
-            )
-            _compiled_kernel.mirror_lower(np.zeros((1, 2, 2)))
-    return _compiled_kernel is not False
+    return native.available("kernel")
 
 
 def use_compiled_kernel(enabled: bool) -> bool:
-    """Switch the compiled kernel pass on (when numba is installed) or off for this process;
-    returns whether it was in use before (`phi_functions.use_compiled` switches it with the
-    compiled Lanczos)."""
-    global _compiled_kernel
-    before = load_compiled_kernel()
-    _compiled_kernel = None if enabled else False
-    if enabled:
-        load_compiled_kernel()
-    return before
+    """``native.use("kernel", enabled)``: switch the compiled kernel pass on (when numba is
+    installed) or off for this process; returns whether it was in use before."""
+    return native.use("kernel", enabled)
 
 
 def compiled_cucker_smale_drift(
@@ -142,105 +89,24 @@ def compiled_cucker_smale_drift(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(s, L(x) x) with the lower triangle of P (and its diagonal) written into `p` (..., N, N)
     by the compiled pass, for x (..., N, d) and the symmetric kernel with scalar weight w
-    (`load_compiled_kernel` must have answered True); `UpperTriangle` fills the rest when a
-    consumer of the whole P asks for it. `threads` > 1 (`load_compiled_threads` must have
-    answered True): the members on that many threads, the same bits."""
+    (``native.available("kernel")`` must have answered True); `UpperTriangle` fills the rest
+    when a consumer of the whole P asks for it. `threads` > 1
+    (``native.load_compiled_threads`` must have answered True): the members on that many
+    threads, the same bits."""
     *batch, n, d = x.shape
     members = math.prod(batch)
     flat = readonly_view(np.ascontiguousarray(x, dtype=np.float64).reshape(members, n, d))
     row_sums = np.empty((members, n))
     drift = np.empty((members, n, d))
-    call_on_threads(
-        _compiled_kernel.cucker_smale_drift,
-        _compiled_kernel.cucker_smale_drift_threads,
+    kernel = native.loaded("kernel")
+    native.call_on_threads(
+        kernel.cucker_smale_drift,
+        kernel.cucker_smale_drift_threads,
         (flat, float(weight), float(alpha2), p.reshape(members, n, n), row_sums, drift),
         members,
         threads,
     )
     return row_sums.reshape(*batch, n), drift.reshape(*batch, n, d)
-
-
-def max_compiled_threads() -> int:
-    """The most threads the compiled passes may use in this process: numba's
-    ``NUMBA_NUM_THREADS`` (its default: the CPUs it sees), or 1 where the compiled passes are
-    not available (no numba, or ``AGENT_ENVS_NUMBA=0``)."""
-    if not load_compiled_kernel():
-        return 1
-    import numba
-
-    return int(numba.config.NUMBA_NUM_THREADS)
-
-
-def check_compiled_threads(value: Any, name: str = "num_threads") -> int:
-    """`value` as the number of threads of the compiled passes: an int in [1,
-    `max_compiled_threads`]; else TypeError or ValueError naming `name` and the range (above 1
-    without numba: the message says what to install)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an int >= 1, got {value!r}")
-    most = max_compiled_threads()
-    if value < 1 or value > most:
-        if value > 1 and most == 1:
-            raise ValueError(
-                f"{name}={value}: threads need the compiled passes (numba: pip install "
-                f"'agent-envs[fast]', and AGENT_ENVS_NUMBA not 0); without them {name} must be 1"
-            )
-        raise ValueError(f"{name} must be an int in [1, {most}] (numba's threads), got {value}")
-    return int(value)
-
-
-@contextmanager
-def compiled_threads(threads: int) -> Iterator[None]:
-    """numba's parallel regions on `threads` threads inside (`numba.set_num_threads`, which
-    holds for the calling thread; its value before is restored on exit). The first use starts
-    numba's threading layer (TBB where installed, else OpenMP, else its own workqueue; with GNU
-    OpenMP a process forked after that is terminated by numba when it runs threads: the
-    `SwarmVectorEnv` docstring, "Threads")."""
-    import numba
-
-    before = numba.get_num_threads()
-    numba.set_num_threads(threads)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)
-
-
-def call_on_threads(
-    one: Callable[..., Any],
-    spans: Callable[..., Any],
-    args: tuple[Any, ...],
-    members: int,
-    threads: int,
-) -> Any:
-    """A compiled pass over `members` batch members: ``one(*args)`` on the calling thread, or,
-    for `threads` > 1 and more than one member, its threaded driver ``spans(*args, k)`` on
-    k = min(threads, members) contiguous spans of members on numba's threads (inside
-    `compiled_threads`); the driver's result either way."""
-    if threads > 1 and members > 1:
-        with compiled_threads(threads):
-            return spans(*args, min(threads, members))
-    return one(*args)
-
-
-def load_compiled_threads(threads: int) -> bool:
-    """Whether the compiled kernel pass can run on `threads` threads (1 <= threads <=
-    `max_compiled_threads`); loads the threaded pass and starts numba's threading layer with
-    one call, so that this cost falls where this is called (the envs' first reset, through
-    `agent_envs.integrators.phi_functions.load_compiled_threads`) and not in a step. (Not in a
-    constructor: a process that forks after GNU OpenMP started loses its children to it.)"""
-    if threads < 1 or threads > max_compiled_threads():
-        return False
-    if threads > 1 and threads not in _threads_loaded:
-        _threads_loaded.add(threads)
-        x = readonly_view(np.zeros((2, 2, 1)))
-        call_on_threads(
-            _compiled_kernel.cucker_smale_drift,
-            _compiled_kernel.cucker_smale_drift_threads,
-            (x, 1.0, 1.0, np.empty((2, 2, 2)), np.empty((2, 2)), np.empty((2, 2, 1))),
-            2,
-            threads,
-        )
-    return True
 
 
 class UpperTriangle:
@@ -261,8 +127,8 @@ class UpperTriangle:
             return
         p = self._buffer
         n = p.shape[-1]
-        if load_compiled_kernel():
-            _compiled_kernel.mirror_lower(p.reshape(-1, n, n))
+        if native.available("kernel"):
+            native.loaded("kernel").mirror_lower(p.reshape(-1, n, n))
         else:
             upper = np.triu_indices(n, 1)
             p[..., upper[0], upper[1]] = p[..., upper[1], upper[0]]

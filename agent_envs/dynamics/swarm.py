@@ -34,18 +34,15 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs import arrays
+from agent_envs import arrays, native
 from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
 from agent_envs.dynamics.laplacian import (
     FrozenLaplacian,
     KernelWorkspace,
     UpperTriangle,
-    check_compiled_threads,
     compiled_cucker_smale_drift,
     fill_cucker_smale,
     krylov_bounds,
-    load_compiled_kernel,
-    max_compiled_threads,
     readonly_view,
 )
 from agent_envs.dynamics.operators import (
@@ -136,8 +133,8 @@ class SwarmModel:
     `threads` (default 1): the compiled passes over a batch's members (the kernel pass, and
     the fused exponential Rosenbrock-Euler step of the envs' models) run on that many of
     numba's threads, in contiguous spans of members; the results are the same bit for bit
-    (each member is computed alone). At most `agent_envs.dynamics.laplacian.
-    max_compiled_threads()`; 1 without numba.
+    (each member is computed alone). At most `agent_envs.native.max_compiled_threads()`; 1
+    without numba.
     """
 
     _threads = 1
@@ -156,7 +153,7 @@ class SwarmModel:
         self._peak: float | None = None
         if isinstance(kernel, CuckerSmaleKernel) and kernel.weights.ndim == 0:
             self._peak = float(kernel.weights) / kernel.alpha**2
-            load_compiled_kernel()  # its one-time load falls here, not in a step
+            native.available("kernel")  # its one-time load falls here, not in a step
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         """Unpickling: a model pickled before `matrix_free` kept its answers gets an empty
@@ -166,7 +163,7 @@ class SwarmModel:
         if self.__dict__.get("_threads", 1) > 1:
             # threads are this process's setting: at most what numba allows here (1 without
             # numba); the results are the same on any number
-            self._threads = min(self._threads, max_compiled_threads())
+            self._threads = min(self._threads, native.max_compiled_threads())
 
     @property
     def threads(self) -> int:
@@ -177,7 +174,7 @@ class SwarmModel:
     def threads(self, value: int) -> None:
         # (validated only: compiling or running a threaded pass starts numba's threads, which
         # the first threaded call does; the envs load them in their first reset)
-        self._threads = check_compiled_threads(value, "threads")
+        self._threads = native.check_compiled_threads(value, "threads")
 
     def _uses_workspace(self, x: Any) -> bool:
         """Whether x takes the workspace path: numpy, the Cucker-Smale kernel, dense."""
@@ -193,7 +190,7 @@ class SwarmModel:
         One kernel pass into the workspace's P, one product P [x | 1] = [P x | s], then
         F = (P x - s * x) / N; nothing of size (..., N, N) is allocated after the first call.
         With numba, for the symmetric kernel with a scalar weight, the compiled pass
-        (`agent_envs.dynamics.compiled_kernel`) writes P's lower triangle and returns s and F
+        (`agent_envs.native.kernel`) writes P's lower triangle and returns s and F
         instead (the operator fills the upper triangle if a consumer of the whole P asks).
         """
         kernel = self.kernel
@@ -239,7 +236,7 @@ class SwarmModel:
             self._peak is None
             or not isinstance(x, np.ndarray)
             or x.dtype != np.float64
-            or not load_compiled_kernel()
+            or not native.available("kernel")
         ):
             return None
         kernel = self.kernel

@@ -296,7 +296,7 @@ class _CachedLinearizationModel(SwarmModel):
 
     def fused_relinearization(self, x: Any) -> tuple[np.ndarray, float, float] | None:
         """What an exponential integrator needs to take the kernel pass at its next state in
-        its own compiled pass, member by member (`agent_envs.integrators.compiled_lanczos.
+        its own compiled pass, member by member (`agent_envs.native.lanczos.
         frozen_advance`): (the workspace's P for x's shape, writable; w; alpha^2), or None
         where the compiled kernel pass does not serve x or x is not on the dense workspace path.
         The integrator then hands the result to `adopt_linearization`, or calls

@@ -1,14 +1,16 @@
-"""Loading the native vector env's compiled prologue and epilogue (`agent_envs.envs.compiled_step`).
+"""The reference check of the native vector env's compiled prologue and epilogue
+(`agent_envs.native.step`, the compiled path "step").
 
-`load_compiled_step()` imports that module (numba) on its first call, when a native vector env
-that can use it is made, and checks it against the numpy calls it replaces, on fixed random
-data of several shapes: the controls ("agents" and "common" bases), running costs and
+`same_as_numpy` is registered with the loader (`agent_envs.native.register_check`) when this
+module is imported; the loader runs it when the path first loads, when a native vector env
+that can use it is made. It checks the module against the numpy calls it replaces, on fixed
+random data of several shapes: the controls ("agents" and "common" bases), running costs and
 right-hand sides of `prologue` against `controls_from_actions`, `mean_running_cost` and F =
 L(x) x + u; the path means, observations and divergence flags of `epilogue` against
 `arrays.mean_axis`, `global_observation` and `advance_paths`'s checks, every value bit for bit
 (signed zeros included, values the clip cuts), on read-only states as the env passes them.
-Where numba is missing or switched off (``AGENT_ENVS_NUMBA=0``) it answers False; where a value
-differs (a numpy that sums in another order), or the module does not compile, False with a
+Where numba is missing or switched off (``AGENT_ENVS_NUMBA=0``) the path is off; where a value
+differs (a numpy that sums in another order), or the module does not compile, off with a
 warning; the env then steps with its numpy calls.
 """
 
@@ -18,16 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs import arrays
-from agent_envs.dynamics.laplacian import import_checked
+from agent_envs import arrays, native
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.interface import controls_from_actions
 from agent_envs.envs.observation import global_observation, observation_space
 from agent_envs.simulator import diverged_paths
-
-#: `agent_envs.envs.compiled_step` once `load_compiled_step` found it equal to numpy; False:
-#: numba missing, ``AGENT_ENVS_NUMBA=0``, or values that differ; None: not tried yet
-_compiled_step: Any = None
 
 #: (B, P, N, d) of the load check: one and several paths, N below, at and above numpy's
 #: pairwise blocks (8, 128), d = 1, 2, 3 and 9 (a pairwise sum over the coordinates)
@@ -36,21 +33,15 @@ CHECK_SHAPES = ((2, 1, 100, 1), (2, 20, 100, 1), (2, 3, 5, 2), (1, 2, 130, 3), (
 
 
 def compiled_step() -> Any:
-    """The compiled module (`load_compiled_step` must have answered True)."""
-    return _compiled_step
+    """``native.loaded("step")``: the compiled module (`load_compiled_step` must have answered
+    True)."""
+    return native.loaded("step")
 
 
 def load_compiled_step() -> bool:
-    """Whether the native vector env may take its compiled prologue and epilogue (module
-    docstring); loads and checks them on the first call."""
-    global _compiled_step
-    if _compiled_step is None:
-        _compiled_step = import_checked(
-            "agent_envs.envs.compiled_step",
-            same_as_numpy,
-            "the native vector env steps with numpy calls",
-        )
-    return _compiled_step is not False
+    """``native.available("step")``: whether the native vector env may take its compiled
+    prologue and epilogue (module docstring); loads and checks them on the first call."""
+    return native.available("step")
 
 
 def _same_bits(a: np.ndarray, b: Any) -> bool:
@@ -124,3 +115,6 @@ def same_as_numpy(
             ):
                 return False
     return True
+
+
+native.register_check("step", same_as_numpy, "the native vector env steps with numpy calls")

@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from agent_envs.dynamics.laplacian import check_compiled_threads
+from agent_envs import native
 from agent_envs.envs.episode import (
     EpisodeAttributes,
     EpisodeConfig,
@@ -27,7 +27,6 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
-from agent_envs.integrators.phi_functions import load_compiled_threads
 from agent_envs.validation import check_seed
 
 ENV_ID = "agent_envs/Swarm-v0"
@@ -217,7 +216,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
         self.config = EpisodeConfig.from_kwargs(
             f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
         )
-        threads = check_compiled_threads(num_threads, "num_threads")
+        threads = native.check_compiled_threads(num_threads, "num_threads")
         self.episode = SwarmEpisode(self.config)
         self.episode.model.threads = threads
         self.render_mode = check_render_mode(render_mode)
@@ -256,7 +255,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
             # reset, not in the constructor: Gymnasium's AsyncVectorEnv makes an env in the
             # parent to read its spaces and then forks, and a fork after GNU OpenMP started
             # terminates the children that use it
-            load_compiled_threads(self.num_threads)
+            native.load_compiled_threads(self.num_threads)
         self.episode.reset(self.np_random, **reset_options(options, strict=True))
         if self._renderer is not None:
             self._renderer.reset(0.0, self.episode.mean_positions, self.episode.target)

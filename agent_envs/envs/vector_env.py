@@ -39,8 +39,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from agent_envs import arrays
-from agent_envs.dynamics.laplacian import check_compiled_threads
+from agent_envs import arrays, native
+from agent_envs.envs import fast_step  # noqa: F401  (registers the "step" path's check)
 from agent_envs.envs.episode import (
     EpisodeConfig,
     _CachedLinearizationModel,
@@ -51,7 +51,6 @@ from agent_envs.envs.episode import (
     reset_options,
     start_positions,
 )
-from agent_envs.envs.fast_step import compiled_step, load_compiled_step
 from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import (
     global_observation,
@@ -59,17 +58,9 @@ from agent_envs.envs.observation import (
     observation_space,
 )
 from agent_envs.integrators import EulerMaruyama, Integrator, make_integrator
-from agent_envs.integrators.exponential import GAVE_UP, RosenbrockEuler, fused_step_enabled
-from agent_envs.integrators.phi_functions import (
-    auto_phi_method,
-    load_compiled,
-    load_compiled_threads,
-)
-from agent_envs.simulator import (
-    GeneratorHandles,
-    fill_brownian_increments,
-    load_compiled_noise,
-)
+from agent_envs.integrators.exponential import GAVE_UP, RosenbrockEuler
+from agent_envs.integrators.phi_functions import auto_phi_method
+from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
 from agent_envs.validation import check_seed, real_array
 
 #: Bytes of kernel matrices one block of envs holds at most (numpy passes over the whole batch:
@@ -233,7 +224,7 @@ class SwarmVectorEnv(VectorEnv):
         if tensor_output and backend != "torch":
             raise ValueError("tensor_output=True needs backend='torch' (or a torch device)")
         self.tensor_output = tensor_output
-        self.num_threads = check_compiled_threads(num_threads, "num_threads")
+        self.num_threads = native.check_compiled_threads(num_threads, "num_threads")
         if self.num_threads > 1 and backend != "numpy":
             raise ValueError(
                 "num_threads > 1 needs the numpy backend (its compiled passes run on the "
@@ -286,7 +277,7 @@ class SwarmVectorEnv(VectorEnv):
         self._block_views: list[Any] = []
         self._block_views_of: Any = None
         arrays.prepare_hot_path()
-        load_compiled_noise()  # (numba's load when the env is made, not in its first step)
+        native.available("noise")  # (numba's load when the env is made, not in its first step)
         self.dt = self.config.dt
         rows = action_rows(self.config.action_basis, n)
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(rows * d,), dtype=np.float32)
@@ -499,17 +490,17 @@ class SwarmVectorEnv(VectorEnv):
         ):
             return False
         if self.integrator.needs_jacobian:  # ERB, SERB
-            return config.jacobian == "frozen" and load_compiled()
+            return config.jacobian == "frozen" and native.available("lanczos")
         return True
 
     def _compiled_step_kind(self) -> str | None:
         """Whether this env's steps may take the compiled prologue and epilogue
-        (`agent_envs.envs.compiled_step`): numpy, every pass member by member in one block,
+        (`agent_envs.native.step`): numpy, every pass member by member in one block,
         SERB or ERB with the frozen Jacobian whose phi-action is the Lanczos ("fused": their
         compiled fused step; not with `phi_method` "expm" or "eigh", or "auto" resolving to
         them, as it does for small N) or Euler-Maruyama ("em"), the "agents" or "common"
         action basis ("modes" transforms its actions by numpy), and the module loaded and
-        equal to numpy (`load_compiled_step`)."""
+        equal to numpy (``native.available("step")``, checked by `fast_step.same_as_numpy`)."""
         if (
             self._device is not None
             or len(self._blocks) != 1
@@ -526,16 +517,16 @@ class SwarmVectorEnv(VectorEnv):
             kind = "em"
         else:
             return None
-        return kind if load_compiled_step() else None
+        return kind if native.available("step") else None
 
     def _step_compiled(self, actions: Any) -> tuple[Any, ...] | None:
         """`step` for the common case, where every env steps (no autoreset in this call) and
         the actions are a float32 or float64 numpy array of shape (B, R d) or (B, R, d) (R = N,
         or 1 for the "common" basis), from
         the state whose L(x) the model keeps: the controls, running costs and right-hand sides
-        in one compiled call (`compiled_step.prologue`), the draws, the integrator's fused
+        in one compiled call (`native.step.prologue`), the draws, the integrator's fused
         step (or Euler-Maruyama's update and the kernel pass), and the divergence flags, path
-        means and observation in another compiled call (`compiled_step.epilogue`), the same
+        means and observation in another compiled call (`native.step.epilogue`), the same
         values bit for bit as the numpy step, which is about 30 numpy calls over the batch
         (tests/test_fast_step.py). None, before any draw, where it does not apply (the numpy
         step then runs, and raises for bad actions); a fused step that gives up or does not
@@ -550,14 +541,14 @@ class SwarmVectorEnv(VectorEnv):
         ):
             return None
         kind = self._compiled_kind
-        if kind == "fused" and not fused_step_enabled():
+        if kind == "fused" and not native.available("fused"):
             return None
         model, x = self.model, self._positions
         cached = model.cached_linearization(x)
         if cached is None or not (x.flags.c_contiguous and cached[1].flags.c_contiguous):
             return None
         operator, drift = cached
-        module = compiled_step()
+        module = native.loaded("step")
         controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
         a = np.ascontiguousarray(actions).reshape(b, rows, d)
         params = self.config.params
@@ -683,7 +674,7 @@ class SwarmVectorEnv(VectorEnv):
             # the threaded passes' one-time load (it starts numba's threads) falls in the first
             # reset, not in the constructor, so that a process may fork after making an env
             # (see Threads)
-            load_compiled_threads(self.num_threads)
+            native.load_compiled_threads(self.num_threads)
         options = dict(options or {})
         mask = options.pop("reset_mask", None)
         if mask is None:

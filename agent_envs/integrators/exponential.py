@@ -18,14 +18,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from agent_envs import arrays
+from agent_envs import arrays, native
 from agent_envs.dynamics.laplacian import FrozenLaplacian
 from agent_envs.integrators.base import DriftModel, Integrator
 from agent_envs.integrators.phi_functions import (
     PHI_METHODS,
     frozen_advance,
     frozen_advance_applies,
-    load_compiled,
     phi_action,
 )
 
@@ -46,7 +45,7 @@ class RosenbrockEuler(Integrator):
         self.jacobian = jacobian
         self.phi_method = phi_method
         if phi_method in ("auto", "krylov"):
-            load_compiled()  # the compiled Lanczos's one-time load falls here, not in a step
+            native.available("lanczos")  # its one-time load falls here, not in a step
 
     @property
     def deterministic_order(self) -> float:  # type: ignore[override]
@@ -55,7 +54,7 @@ class RosenbrockEuler(Integrator):
     def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> Any:
         rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
         noise = model.sigma * dW
-        if du_dt is None and dt != 0.0 and _fused[0]:
+        if du_dt is None and dt != 0.0:
             found = self.fused_step(model, lin.matrix, rhs, x, dt, noise)
             if found is GAVE_UP:  # the workspace's P was partly overwritten: L(x) again
                 rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
@@ -87,10 +86,17 @@ class RosenbrockEuler(Integrator):
         noise = sigma dW: x_next, equal bit for bit to the general path's; None where it does
         not apply; `GAVE_UP` when a member's Lanczos did not converge (the model's workspace
         is then discarded and L(x) must be computed again). The native vector env calls it
-        directly (`agent_envs.envs.vector_env`), with rhs from its compiled prologue."""
+        directly (`agent_envs.envs.vector_env`), with rhs from its compiled prologue.
+
+        The compiled path "fused" (``native.use("fused", False)`` switches it off) is asked
+        last: where the step applies, the kernel pass and the Lanczos it needs are loaded
+        already (by the model and this integrator when they were made), so asking loads
+        nothing in a step."""
         relinearize = getattr(model, "fused_relinearization", None)
-        if relinearize is None or not frozen_advance_applies(
-            operator, rhs, x, noise, self.phi_method
+        if (
+            relinearize is None
+            or not frozen_advance_applies(operator, rhs, x, noise, self.phi_method)
+            or not native.available("fused")
         ):
             return None
         target = relinearize(x)
@@ -111,22 +117,20 @@ class RosenbrockEuler(Integrator):
 
 #: returned by `RosenbrockEuler.fused_step` when it wrote part of the model's P and gave up
 GAVE_UP: Any = object()
-#: whether the exponential integrators take the fused step where it applies (`use_fused_step`)
-_fused = [True]
 
 
 def fused_step_enabled() -> bool:
-    """Whether the exponential integrators take the fused step where it applies."""
-    return _fused[0]
+    """Whether the exponential integrators take the fused step where it applies:
+    ``native.available("fused")`` (its switch on, and the compiled kernel pass and Lanczos)."""
+    return native.available("fused")
 
 
 def use_fused_step(enabled: bool) -> bool:
-    """Switch the fused step (the phi-action and the model's next kernel pass in one compiled
-    pass, `phi_functions.frozen_advance`) on or off for this process; returns whether it was
-    on. Both give the same states bit for bit; for comparisons (tests, benchmarks)."""
-    before = _fused[0]
-    _fused[0] = bool(enabled)
-    return before
+    """``native.use("fused", enabled)``: switch the fused step (the phi-action and the model's
+    next kernel pass in one compiled pass, `phi_functions.frozen_advance`) on or off for this
+    process; returns whether its switch was on. Both give the same states bit for bit; for
+    comparisons (tests, benchmarks)."""
+    return native.use("fused", enabled)
 
 
 class ExponentialRosenbrockEuler(RosenbrockEuler):

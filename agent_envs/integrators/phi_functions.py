@@ -42,15 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs import arrays
-from agent_envs.dynamics.laplacian import (
-    FrozenLaplacian,
-    call_on_threads,
-    import_compiled,
-    readonly_view,
-    use_compiled_kernel,
-)
-from agent_envs.dynamics.laplacian import load_compiled_threads as load_compiled_threads_kernel
+from agent_envs import arrays, native
+from agent_envs.dynamics.laplacian import FrozenLaplacian, readonly_view
 
 PHI_METHODS = ("auto", "expm", "eigh", "krylov")
 # Crossovers of "auto" (measured by benchmarks/bench_integrators.py, one BLAS thread).
@@ -60,12 +53,6 @@ _AUTO_EXPM_SINGLE_NONSYMMETRIC_MAX = 128
 _TAYLOR_TERMS = 16
 #: from this n on, Lanczos sums its basis vector by vector (no stacked copy)
 _ACCUMULATE_BASIS_MIN_N = 2**14
-#: the compiled Lanczos module once `load_compiled` found it; False: unavailable or switched off;
-#: None: not tried yet
-_compiled: Any = None
-#: thread counts `load_compiled_threads` has warmed the threaded fused step up for
-_threads_loaded: set[int] = set()
-
 
 _NO_BOUNDS = readonly_view(np.empty(0))
 _NO_EXTRA = readonly_view(np.empty((0, 0, 0)))
@@ -424,7 +411,7 @@ def _error_bounds(lam: Any, first: Any, last: Any, phis: Any, order: int, hi: An
 
     lam, first, last (Z's first and last rows), phis = phi_p(lam): (count, k, m) numpy arrays;
     hi (count,). Returns (count, k). The sum runs over j in order, as the compiled
-    `compiled_lanczos._error_bound` does.
+    `native.lanczos._error_bound` does.
     """
     m = lam.shape[-1]
     hi = np.asarray(hi, dtype=np.float64)[:, None]  # (count, 1)
@@ -896,77 +883,27 @@ def _auto_method(a: Any, v: Any, symmetric: bool) -> str:
 
 
 def load_compiled() -> bool:
-    """Whether the compiled Lanczos (`agent_envs.integrators.compiled_lanczos`, needs numba)
-    serves the numpy frozen L(x); loads it on the first call.
-
-    The first call imports numba and loads (or, the first time in a cache directory, compiles)
-    the machine code by running it once on a tiny problem, so that this cost falls where the
-    call is made (the exponential integrators' constructors) and not in a step. Without numba,
-    or with the environment variable ``AGENT_ENVS_NUMBA=0``, it answers False and the numpy
-    Lanczos runs.
-    """
-    global _compiled
-    if _compiled is None:
-        _compiled = import_compiled("agent_envs.integrators.compiled_lanczos")
-        if _compiled is not False:
-            _warm_up()
-    return _compiled is not False
+    """Whether the compiled Lanczos (`agent_envs.native.lanczos`, needs numba) serves the numpy
+    frozen L(x): ``native.available("lanczos")``, loaded on the first call (the exponential
+    integrators' constructors ask, so that the load falls there and not in a step). Without
+    numba, or with the environment variable ``AGENT_ENVS_NUMBA=0``, False: the numpy Lanczos
+    runs."""
+    return native.available("lanczos")
 
 
 def use_compiled(enabled: bool) -> bool:
-    """Switch the compiled Lanczos and the compiled kernel pass
-    (`agent_envs.dynamics.laplacian.use_compiled_kernel`) on (when numba is installed) or off
-    for this process; returns whether the Lanczos was in use before. For comparisons in one
-    process (benchmarks, tests)."""
-    global _compiled
-    use_compiled_kernel(enabled)
-    before = load_compiled()
-    _compiled = None if enabled else False
-    if enabled:
-        load_compiled()
-    return before
+    """Switch the compiled Lanczos and the compiled kernel pass on (when numba is installed) or
+    off for this process (``native.use`` of "kernel" and "lanczos"); returns whether the
+    Lanczos was in use before. For comparisons in one process (benchmarks, tests)."""
+    native.use("kernel", enabled)
+    return native.use("lanczos", enabled)
 
 
 def load_compiled_threads(threads: int) -> bool:
-    """Whether the compiled kernel pass and the fused exponential Rosenbrock-Euler step
-    (`frozen_advance`) can run on `threads` threads (`agent_envs.dynamics.laplacian.
-    load_compiled_threads`: 1 <= threads <= `max_compiled_threads`, numba loaded); loads their
-    threaded versions with one call each (numba's threading layer starts there), so that this
-    cost falls where this is called and not in a step."""
-    if not load_compiled() or not load_compiled_threads_kernel(threads):
-        return False
-    if threads > 1 and threads not in _threads_loaded:
-        _threads_loaded.add(threads)
-        p = readonly_view(np.full((2, 3, 3), 0.5))
-        s = readonly_view(p.sum(axis=-1))
-        v = readonly_view(np.ones((2, 3, 1)))
-        for extra in (_NO_EXTRA, v):
-            args = (np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((2, 3, 1)),
-                    extra, 1.0, v, 0.1, v, 1.0, 1.0, np.empty((2, 3, 1)), np.empty((2, 3)),
-                    np.empty((2, 3, 1)))  # fmt: skip
-            call_on_threads(_compiled.frozen_advance, _compiled.frozen_advance_threads, args, 2,
-                            threads)  # fmt: skip
-    return True
-
-
-def _warm_up() -> None:
-    """One compiled call with the argument types of the env's calls (a read-only P, as the
-    model's workspace hands out), so that loading the machine code happens here."""
-    p = np.full((1, 3, 3), 0.5)
-    np.fill_diagonal(p[0], 1.0)
-    p = readonly_view(p)
-    s = readonly_view(p.sum(axis=-1))
-    v = readonly_view(np.ones((1, 3, 1)))
-    for extra in (_NO_EXTRA, v):
-        _compiled.frozen_lanczos(
-            p, s, 0.1, v, 1, 1e-10, 3, MAX_CHECK_STEP, _NO_BOUNDS, _NO_BOUNDS, _NO_BOUNDS, 1.0,
-            np.empty((1, 3, 1)), np.empty(1, dtype=bool), extra, 1.0,
-        )  # fmt: skip
-        # `frozen_advance`'s types: P the workspace's writable buffer, the outputs fresh
-        _compiled.frozen_advance(
-            np.array(p), s, 0.1, v, 1e-10, 3, MAX_CHECK_STEP, 1.0, np.empty((1, 3, 1)), extra,
-            1.0, v, 0.1, v, 1.0, 1.0, np.empty((1, 3, 1)), np.empty((1, 3)), np.empty((1, 3, 1)),
-        )  # fmt: skip
+    """Whether the compiled Lanczos is available and the compiled kernel pass and the fused
+    exponential Rosenbrock-Euler step (`frozen_advance`) can run on `threads` threads
+    (``native.load_compiled_threads``, which loads their threaded drivers)."""
+    return native.available("lanczos") and native.load_compiled_threads(threads)
 
 
 def _compiled_frozen_lanczos(
@@ -1007,7 +944,7 @@ def _compiled_frozen_lanczos(
     peak = a.peak if a.peak is not None and a.symmetric else -1.0
     out = np.empty((members, n, k))
     converged = np.empty(members, dtype=bool)
-    _compiled.frozen_lanczos(
+    native.loaded("lanczos").frozen_lanczos(
         readonly_view(matrix.reshape(members, n, n)),
         readonly_view(_contiguous(row_sums).reshape(members, n)), a.scale, _as_members(v, full),
         order, rtol, max_dim, MAX_CHECK_STEP, norms, widths, lows, peak, out, converged, extra,
@@ -1054,7 +991,7 @@ def frozen_advance_applies(a: Any, rhs: Any, x: Any, noise: Any, method: str) ->
         or noise.shape != shape
         or shape[:-1] != a.shape[:-1]
         or not a.current
-        or not load_compiled()
+        or not native.available("lanczos")
     ):
         return False
     return method == "krylov" or auto_phi_method(a.n, math.prod(shape[:-2]), True) == "krylov"
@@ -1078,7 +1015,7 @@ def frozen_advance(
     member's Lanczos did not converge within 100 dimensions (its P is P(x) still, the others'
     P(x_next): the caller discards the workspace and takes the general path).
 
-    `threads` > 1 (`load_compiled_threads` must have answered True for it): the members in
+    `threads` > 1 (`native.load_compiled_threads` must have answered True for it): the members in
     that many spans on numba's threads (`frozen_advance_threads`), the same bits.
 
     e = `extra_scale` (1 / dt for SERB's sigma A dW with sigma != 0; None: no product, ERB).
@@ -1102,8 +1039,9 @@ def frozen_advance(
         extra, 0.0 if extra_scale is None else float(extra_scale), _as_members(x, full),
         float(dt), noise_members, float(weight), float(alpha2), x_next, s_next, drift_next,
     )  # fmt: skip
-    failed = call_on_threads(
-        _compiled.frozen_advance, _compiled.frozen_advance_threads, args, members, threads
+    lanczos = native.loaded("lanczos")
+    failed = native.call_on_threads(
+        lanczos.frozen_advance, lanczos.frozen_advance_threads, args, members, threads
     )
     if failed:
         return None
@@ -1131,7 +1069,7 @@ def _krylov(
         symmetric
         and isinstance(a, FrozenLaplacian)
         and isinstance(v, np.ndarray)
-        and load_compiled()
+        and native.available("lanczos")
     ):
         found = _compiled_frozen_lanczos(a, v, order, rtol, max_dim, bounds, add_product)
         if found is not None:

@@ -1,8 +1,9 @@
 """The Cucker-Smale kernel matrix, its row sums and the drift in one compiled pass (numba).
 
-This module imports numba; `agent_envs.dynamics.laplacian` imports it only through
-`load_compiled_kernel()` there, so the package works without numba (the numpy passes of
-`fill_cucker_smale` and one product P [x | 1] stay, and stay the reference).
+This module imports numba; the package imports it only through `agent_envs.native.loader`
+(path "kernel", `available("kernel")`), so the package works without numba (the numpy passes
+of `agent_envs.dynamics.laplacian.fill_cucker_smale` and one product P [x | 1] stay, and stay
+the reference).
 
 `cucker_smale_drift` computes, for states x (B, N, d) and the symmetric kernel with a scalar
 weight w (`SwarmParams.kernel="symmetric"`),
@@ -75,7 +76,7 @@ def lower_product(p: np.ndarray, q: np.ndarray, w: np.ndarray, n: int) -> None:
     same inputs give the same w bit for bit in every call (the native vector env and its
     single twins agree bit for bit), and w agrees with numpy's product to round-off
     (tests/test_compiled_lanczos.py). Each caller compiles its own copy (the Lanczos of
-    `agent_envs.integrators.compiled_lanczos` for a read-only and for a writable P): their
+    `agent_envs.native.lanczos` for a read-only and for a writable P): their
     equality bit for bit rests on the vectorizer treating them alike, which it does here and
     which the tests of the fused step against the general path check. `contract` fuses each
     multiply-add (one rounding instead of two)."""
@@ -334,7 +335,7 @@ def cucker_smale_drift_threads(
     chunks: int,
 ) -> None:
     """`cucker_smale_drift` of the members in `chunks` contiguous spans, the spans on numba's
-    threads (`prange`; the caller sets how many, `agent_envs.dynamics.laplacian.
+    threads (`prange`; the caller sets how many, `agent_envs.native.loader.
     compiled_threads`). Each span is one call of `cucker_smale_drift` on its slices, whose
     members are computed alone (a member's P, s and drift do not depend on the rest of the
     batch), so the result equals one call over the whole batch bit for bit

@@ -1,7 +1,7 @@
 """The native vector env's step around its fused compiled pass, compiled with numba (optional).
 
-This module imports numba; `agent_envs.envs.fast_step` imports it only through
-`load_compiled_step()` there, so the package works without numba (the env's numpy step runs).
+This module imports numba; the package imports it only through `agent_envs.native.loader`
+(path "step"), so the package works without numba (the env's numpy step runs).
 
 A step of the native vector env at B = 64 envs of one path (N = 100) spent about a third of its
 time outside its compiled passes, in some thirty numpy calls over (B, P, N, d) arrays: the
@@ -21,8 +21,8 @@ the single env (which keeps its numpy calls):
 - a mean over the paths (axis -3, not contiguous) is numpy's order for an outer axis: 0.0 +
   x_0 + x_1 + ... in sequence, divided by P; over one path x + 0.0 (`arrays.mean_axis`).
 
-`agent_envs.envs.fast_step.load_compiled_step` checks all of this against numpy's own calls
-when it loads the module (another numpy could sum in another order) and leaves the compiled
+`agent_envs.envs.fast_step.same_as_numpy` checks all of this against numpy's own calls when
+the loader loads the module (another numpy could sum in another order) and leaves the compiled
 step off, with a warning, where a value differs; tests/test_fast_step.py checks it on many
 shapes and the native env against SyncVectorEnv.
 

@@ -1,8 +1,9 @@
 """The Lanczos phi-action of the frozen L(x), compiled with numba (optional).
 
-This module imports numba; `agent_envs.integrators.phi_functions` imports it only through
-`load()` there, so the package works without numba (the numpy path `_lanczos_numpy` and the
-Array-API reference `_lanczos_action` stay, the latter for torch and autograd).
+This module imports numba; the package imports it only through `agent_envs.native.loader`
+(paths "lanczos" and "fused"), so the package works without numba (the numpy path
+`agent_envs.integrators.phi_functions._lanczos_numpy` and the Array-API reference
+`_lanczos_action` stay, the latter for torch and autograd).
 
 `frozen_lanczos` computes phi_p(c L) V for c L = c (P - diag(s)) / N given as the kernel matrix
 P (B, N, N) and its row sums s (B, N) (`agent_envs.dynamics.laplacian.FrozenLaplacian`), for V
@@ -27,7 +28,7 @@ Z phi(Lambda) Z^T e_1 is formed from the rotations once, at the accepted dimensi
 
 One member at a time keeps its 80 KB kernel matrix (N = 100) in cache for all its Lanczos
 products, and the product reads only P's lower triangle (`_products`:
-`agent_envs.dynamics.compiled_kernel.lower_products`, which the kernel pass uses too for d > 1;
+`agent_envs.native.kernel.lower_products`, which the kernel pass uses too for d > 1;
 P symmetric, each entry used for its row and its column; the kernel pass writes only that
 triangle). With k > 1 columns (d > 1) the k Lanczos iterations run in lockstep, so their
 products at each dimension go two at a time through one pass over P (`lower_product_pair`,
@@ -47,13 +48,13 @@ instead of testing its divisor for zero to raise ZeroDivisionError (numba's erro
 `/`, `//` and `%`; `math.sqrt` and `math.log` test nothing either way). On finite data every
 divisor here is guarded or positive, so the bits are the same without the branches: 2-3 %
 less time per member in a microbenchmark, and the kernel pass this module calls vectorizes its
-divisions only so (`agent_envs.dynamics.compiled_kernel`). Non-finite data never reaches these
+divisions only so (`agent_envs.native.kernel`). Non-finite data never reaches these
 calls from a step: the envs and `simulate` stop a path once its state or drift is not finite.
 
 `cache=True`: the machine code is written next to this file (or to numba's user-wide cache
 directory when that is read-only) the first time and loaded from there in every later process.
 numba keys that cache on this file alone: after an edit of
-`agent_envs.dynamics.compiled_kernel` in a working copy, delete this module's `.nbi`/`.nbc` files
+`agent_envs.native.kernel` in a working copy, delete this module's `.nbi`/`.nbc` files
 in `__pycache__`, or the fused step keeps the old kernel pass (an installed package's files
 change together).
 """
@@ -65,8 +66,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from agent_envs.dynamics.compiled_kernel import cucker_smale_drift
-from agent_envs.dynamics.compiled_kernel import lower_products as _products
+from agent_envs.native.kernel import cucker_smale_drift
+from agent_envs.native.kernel import lower_products as _products
 
 #: Taylor terms of phi_p near 0 (as `phi_functions._TAYLOR_TERMS`)
 TAYLOR_TERMS = 16
@@ -442,7 +443,7 @@ def frozen_advance(
     bounds from s and P_kk), then x_next = x + dt out + noise (the integrator's update, the same
     operations in the same order), then, if the member converged, P(x_next) into p (over
     P(x), which this member no longer needs), s_next = P(x_next) 1 and L(x_next) x_next into
-    drift_next (`agent_envs.dynamics.compiled_kernel.cucker_smale_drift`, the symmetric kernel
+    drift_next (`agent_envs.native.kernel.cucker_smale_drift`, the symmetric kernel
     w / (alpha^2 + |x_k - x_l|^2)). The next pass writes the lower triangle of P that the
     member's Lanczos products just read, while it is in cache (the upper triangle is left to
     `agent_envs.dynamics.laplacian.FrozenLaplacian`, which fills it when asked for the whole
@@ -486,7 +487,7 @@ def frozen_advance_threads(
     chunks: int,
 ) -> int:
     """`frozen_advance` with the members in `chunks` contiguous spans, the spans on numba's
-    threads (`prange`; the caller sets how many, `agent_envs.dynamics.laplacian.
+    threads (`prange`; the caller sets how many, `agent_envs.native.loader.
     compiled_threads`). Each span runs the same member loop (`_members`) on its slices with
     scratch arrays of its own; a member's step does not depend on the other members, so the
     result equals `frozen_advance`'s bit for bit (tests/test_compiled_threads.py)."""

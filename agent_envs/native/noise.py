@@ -1,7 +1,7 @@
 """Standard normals from many numpy generators in one compiled call (numba, optional).
 
-This module imports numba (and llvmlite, which numba brings); `agent_envs.simulator` imports
-it only through `load_compiled_noise()` there, so the package works without numba (each
+This module imports numba (and llvmlite, which numba brings); the package imports it only
+through `agent_envs.native.loader` (path "noise"), so the package works without numba (each
 generator's own `standard_normal(out=...)` then runs, one Python call per generator).
 
 The native vector env draws each env's Brownian increments from that env's own generator, as
@@ -15,10 +15,10 @@ numpy's own algorithm, the 256-step ziggurat of `random_standard_normal` (numpy'
 the same order, with numpy's tables (as numba's port of that function has them,
 `numba.np.random._constants`). So the values are numpy's bit for bit, and the generators'
 states advance exactly as numpy's calls would advance them: a later numpy draw from the same
-generator continues the same stream. `agent_envs.simulator.load_compiled_noise` checks this
-against numpy when it loads the module (a mismatch, say from another numba's tables, switches
-the compiled draws off with a warning), and tests/test_simulator.py checks it on a million
-draws.
+generator continues the same stream. The loader checks this against numpy when it loads the
+module (`agent_envs.simulator._draws_equal_numpys`, the owner's check; a mismatch, say from
+another numba's tables, switches the compiled draws off with a warning), and
+tests/test_simulator.py checks it on a million draws.
 
 numpy's Generator methods hold the bit generator's lock while they draw; these calls do not,
 so the generators must not be used from another thread during a call (`GeneratorHandles`).
