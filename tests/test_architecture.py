@@ -160,3 +160,46 @@ def test_no_function_of_the_training_layer_is_longer_than_80_lines():
                 if lines > MAX_FUNCTION_LINES:
                     too_long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({lines})")
     assert not too_long, too_long
+
+
+def _imported_modules(path: Path) -> list[str]:
+    """The modules `path` imports (every `import` and `from ... import`, nested ones too)."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            found.append(node.module)
+    return found
+
+
+def test_numba_is_imported_only_in_the_native_layer():
+    """`numba` (and llvmlite, which it brings) is imported in `agent_envs.native` only: every
+    compiled path loads through its one loader and switch (pyproject's packages: agent_envs,
+    baselines/ and training/)."""
+    native = ROOT / "agent_envs" / "native"
+    outside = []
+    for folder in ("agent_envs", *MAPPED.values()):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if native in path.parents:
+                continue
+            for name in _imported_modules(path):
+                if name.split(".")[0] in ("numba", "llvmlite"):
+                    outside.append(f"{path.relative_to(ROOT)}: {name}")
+    assert not outside, outside
+    # (the test itself sees the imports: the native modules do import numba)
+    assert any("numba" in _imported_modules(path) for path in native.glob("*.py"))
+
+
+def test_native_leaf_modules_import_nothing_above_them():
+    """The numba modules of `agent_envs.native` import only numpy, numba/llvmlite, the standard
+    library and each other; only the loader is imported by the rest of the package."""
+    native = ROOT / "agent_envs" / "native"
+    above = []
+    for path in sorted(native.glob("*.py")):
+        for name in _imported_modules(path):
+            if name.startswith("agent_envs") and not name.startswith("agent_envs.native"):
+                above.append(f"{path.relative_to(ROOT)}: {name}")
+    assert not above, above
