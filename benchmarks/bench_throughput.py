@@ -214,8 +214,28 @@ def inplace_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
     return step
 
 
+#: where the numba modules of `agent_envs.native` were in trees before it (the workers also
+#: run older checkouts: `--baseline-python`)
+_MODULES_BEFORE_NATIVE = {
+    "kernel": "agent_envs.dynamics.compiled_kernel",
+    "lanczos": "agent_envs.integrators.compiled_lanczos",
+}
+
+
+def compiled_module(name: str) -> Any:
+    """The numba module `agent_envs.native.<name>` ("kernel" or "lanczos"), or, in a tree
+    before the native layer, the module that held it (importing it imports numba)."""
+    import importlib
+
+    try:
+        importlib.import_module("agent_envs.native")
+    except ImportError:
+        return importlib.import_module(_MODULES_BEFORE_NATIVE[name])
+    return importlib.import_module(f"agent_envs.native.{name}")
+
+
 def compiled_kernel_drift(n_paths: int = 20, n: int = 100) -> Callable[[], None] | None:
-    """The same by the compiled kernel pass (`agent_envs.dynamics.compiled_kernel`, what the env
+    """The same by the compiled kernel pass (`agent_envs.native.kernel`, what the env
     runs with numba installed), or None where the tree has none (an older checkout) or numba is
     off."""
     try:
@@ -246,11 +266,11 @@ def matrix_pass(n_paths: int = 20, n: int = 100) -> Callable[[], None]:
         from numba import njit
 
         from agent_envs.arrays import aligned_empty
-        from agent_envs.dynamics.compiled_kernel import lower_product
         from agent_envs.dynamics.laplacian import load_compiled_kernel
 
         compiled = load_compiled_kernel()  # (False with AGENT_ENVS_NUMBA=0: numpy's steps)
-    except ImportError:
+        lower_product = compiled_module("kernel").lower_product if compiled else None
+    except (ImportError, AttributeError):
         compiled = False
     if not compiled:
         rows = np.ones((n_paths, 1, n))
@@ -312,6 +332,21 @@ def _wrap_compiled(times: _CallTimes) -> None:
     the fused step and the native env's prologue and epilogue (what numba runs); nothing in a
     tree without them (numba missing or switched off, or a tree before them: the workers also
     run older checkouts)."""
+    try:  # the native layer: every compiled module through its one loader
+        from agent_envs import native
+    except ImportError:
+        native = None
+    if native is not None:
+        for name, functions in (
+            ("kernel", ("cucker_smale_drift",)),
+            ("lanczos", ("frozen_advance", "frozen_lanczos")),
+            ("step", ("prologue", "epilogue")),
+        ):
+            if native.available(name):
+                for function in functions:
+                    times.wrap(native.loaded(name), function, "compiled", compiled=True)
+        return
+    # trees before the native layer
     try:  # (trees before the workspaces have no laplacian module: nothing compiled)
         from agent_envs.dynamics import laplacian
         from agent_envs.integrators import phi_functions
@@ -724,8 +759,8 @@ def worker_krylov(episodes: int = 2, members: int = 4) -> dict[str, float]:
     if pf.load_compiled():
         from numba import njit
 
-        from agent_envs.dynamics.compiled_kernel import lower_product as product
-        from agent_envs.integrators import compiled_lanczos as cl
+        from agent_envs.native import lanczos as cl
+        from agent_envs.native.kernel import lower_product as product
 
         @njit
         def products(p: Any, q: Any, w: Any, n: int, reps: int) -> None:
@@ -770,7 +805,7 @@ def _pair_speedup(p: np.ndarray, rounds: int = 30, reps: int = 1000) -> float:
     pairs), the median of the per-round ratios over alternating rounds."""
     from numba import njit
 
-    from agent_envs.dynamics.compiled_kernel import lower_product, lower_product_pair
+    from agent_envs.native.kernel import lower_product, lower_product_pair
 
     @njit
     def singles(p: Any, q: Any, w: Any, n: int, reps: int) -> None:
@@ -804,7 +839,7 @@ def _ql_check_runs() -> Callable[..., tuple[int, float]]:
     rotations, the sum of the bounds). Built on first use (numba is imported only here)."""
     from numba import njit
 
-    from agent_envs.integrators import compiled_lanczos as cl
+    from agent_envs.native import lanczos as cl
 
     @njit
     def runs(alphas: Any, betas: Any, m: int, fact: Any, reps: int, with_bound: bool) -> Any:
@@ -831,7 +866,7 @@ def _recurrence_and_checks(tridiagonals: list[tuple[Any, ...]], n: int) -> dict[
     (means over the sampled member-steps)."""
     from numba import njit
 
-    from agent_envs.integrators import compiled_lanczos as cl
+    from agent_envs.native import lanczos as cl
 
     @njit
     def recurrence(w: Any, s: Any, q: Any, qp: Any, n: int, reps: int) -> float:
@@ -873,8 +908,8 @@ def _compiled_bounds(env: Any, early: tuple[Any, ...]) -> dict[str, float]:
     from numba import njit
 
     from agent_envs import arrays
-    from agent_envs.dynamics import compiled_kernel as ck
-    from agent_envs.integrators import compiled_lanczos as cl
+    from agent_envs.native import kernel as ck
+    from agent_envs.native import lanczos as cl
 
     @njit
     def kernel_passes(x: Any, w: float, a2: float, p: Any, s: Any, f: Any, reps: int) -> None:
