@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
@@ -47,11 +48,11 @@ from agent_envs.envs.interface import (
     controls_from_actions,
 )
 from agent_envs.envs.observation import global_observation
+from agent_envs.envs.step_plan import StepPlan, planned_integrator, resolve_step_plan
 from agent_envs.integrators import (
     DEFAULT_INTEGRATOR,
     DEFAULT_JACOBIAN,
     Integrator,
-    make_integrator,
 )
 from agent_envs.params import SwarmParams
 from agent_envs.simulator import (
@@ -248,12 +249,20 @@ class _CachedLinearizationModel(SwarmModel):
     cannot be made read-only: they are cached only with `cache_tensors=True`, which the owner
     (the native vector env) sets because it builds a new state tensor every step and never
     writes into one.
+
+    `fallbacks`: the owning env's ``plan_fallbacks`` (`agent_envs.envs.step_plan`), where
+    `discard_linearization` counts a fused step that gave up ("fused-gave-up").
     """
 
     def __init__(
-        self, params: SwarmParams, linear_operator: str = "auto", cache_tensors: bool = False
+        self,
+        params: SwarmParams,
+        linear_operator: str = "auto",
+        cache_tensors: bool = False,
+        fallbacks: Counter[str] | None = None,
     ) -> None:
         super().__init__(params, linear_operator)
+        self.fallbacks: Counter[str] = Counter() if fallbacks is None else fallbacks
         self._cache_tensors = cache_tensors
         self._cached_state: Any = None
         self._cached_matrix: Any = None
@@ -323,7 +332,11 @@ class _CachedLinearizationModel(SwarmModel):
 
     def discard_linearization(self) -> None:
         """The workspace's P no longer holds the kernel of any state (an integrator wrote part
-        of it): the operators built on it stop being current, and nothing is cached."""
+        of it): the operators built on it stop being current, and nothing is cached. Counted
+        in `fallbacks` as "fused-gave-up" (the only caller is the fused step giving up)."""
+        fallbacks = self.__dict__.get("fallbacks")  # (a model unpickled from before has none)
+        if fallbacks is not None:
+            fallbacks["fused-gave-up"] += 1
         self._workspace.generation += 1
         self._cached_state = self._cached_matrix = None
 
@@ -462,15 +475,21 @@ class SwarmEpisode:
         positions: (n_paths, N, d) current state (read-only array).
         step_index: n, the number of steps taken since reset.
         diverged: True once a step diverged (the episode is then over).
+        plan: the `StepPlan` of a step, resolved here once (`env` names the adapter:
+            "gymnasium" or "pettingzoo"); the integrator is built with its `phi_method`.
+        fallbacks: the mid-step fallbacks counted (`step_plan.FALLBACKS`), a `Counter`.
     """
 
-    def __init__(self, config: EpisodeConfig) -> None:
+    def __init__(self, config: EpisodeConfig, env: str = "gymnasium", threads: int = 1) -> None:
         self.config = config
-        self.integrator: Integrator = make_integrator(
-            config.integrator, jacobian=config.jacobian, phi_method=config.phi_method
-        )
         self.params = config.params
-        self.model: SwarmModel = _CachedLinearizationModel(self.params, config.linear_operator)
+        self.fallbacks: Counter[str] = Counter()
+        self.model: SwarmModel = _CachedLinearizationModel(
+            self.params, config.linear_operator, fallbacks=self.fallbacks
+        )
+        self.model.threads = threads
+        self.plan: StepPlan = resolve_step_plan(config, self.model, env=env, threads=threads)
+        self.integrator: Integrator = planned_integrator(config, self.plan)
         arrays.prepare_hot_path()
         self.dt = config.dt
         self.positions: np.ndarray | None = None
@@ -542,7 +561,11 @@ class SwarmEpisode:
             # target and gamma are cost parameters: a new target keeps the dynamics model
             # (and its kernel); only a change of the dynamics would rebuild it.
             if not same_dynamics(params, self.params):
-                self.model = _CachedLinearizationModel(params, self.config.linear_operator)
+                threads = self.model.threads
+                self.model = _CachedLinearizationModel(
+                    params, self.config.linear_operator, fallbacks=self.fallbacks
+                )
+                self.model.threads = threads
             self.params = params
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
@@ -679,6 +702,22 @@ class EpisodeAttributes:
     @property
     def integrator_name(self) -> str:
         return self.config.integrator
+
+    @property
+    def plan(self) -> StepPlan:
+        """Which code a step runs (`agent_envs.envs.step_plan.StepPlan`), resolved when the
+        env was made."""
+        return self.episode.plan
+
+    @property
+    def plan_fallbacks(self) -> Counter[str]:
+        """The mid-step fallbacks of this env's steps so far, by kind
+        (`agent_envs.envs.step_plan.FALLBACKS`): a `collections.Counter`."""
+        return self.episode.fallbacks
+
+    def _plan_repr(self, name: str) -> str:
+        """``<Class<name> plan>``: the env's name and its step plan."""
+        return f"<{type(self).__name__}<{name}> {self.plan.describe()}>"
 
     @property
     def jacobian(self) -> str:

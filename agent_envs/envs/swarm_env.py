@@ -197,7 +197,9 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     ## Attributes (on `env.unwrapped`)
 
     params, model, max_control, n_steps, n_paths, dt, integrator_name, jacobian, positions
-    (n_paths, N, d), time, step_index, episode (the shared `SwarmEpisode`), num_threads.
+    (n_paths, N, d), time, step_index, episode (the shared `SwarmEpisode`), num_threads, plan
+    (the `StepPlan`: which code a step runs, resolved when the env is made; `repr(env.unwrapped)`
+    shows it), plan_fallbacks (a `Counter` of the mid-step fallbacks so far).
 
     ## Version History
 
@@ -217,8 +219,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
             f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
         )
         threads = native.check_compiled_threads(num_threads, "num_threads")
-        self.episode = SwarmEpisode(self.config)
-        self.episode.model.threads = threads
+        self.episode = SwarmEpisode(self.config, "gymnasium", threads)
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
         n, d = params.n_agents, params.dim
@@ -236,6 +237,10 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
             if self.render_mode is None
             else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
         )
+
+    def __repr__(self) -> str:
+        # (str(env) stays Gymnasium's "<SwarmEnv<id>>", which the wrappers print)
+        return self._plan_repr(ENV_ID if self.spec is None else self.spec.id)
 
     @property
     def num_threads(self) -> int:

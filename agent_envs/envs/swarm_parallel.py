@@ -99,7 +99,9 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     `time` (after the step), `running_cost` (the agent's term |x_k - xbar|^2 + gamma |u_k|^2,
     mean over the paths), `diverged` (bool). `reset` returns the same keys, with `time` and
     `running_cost` 0.0 and `diverged` False. Global quantities (positions of all paths, the
-    control) are on the env: `positions`, `last_control`.
+    control) are on the env: `positions`, `last_control`. Which code a step runs is `plan`
+    (`agent_envs.envs.step_plan.StepPlan`, resolved when the env is made; `repr(env)` shows
+    it), its mid-step fallbacks so far `plan_fallbacks` (a `Counter`).
 
     ## Version History
 
@@ -119,7 +121,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         self.config = EpisodeConfig.from_kwargs(
             f"{type(self).__name__}.__init__", env_kind="pettingzoo", **kwargs
         )
-        self.episode = SwarmEpisode(self.config)
+        self.episode = SwarmEpisode(self.config, "pettingzoo")
         self.render_mode = check_render_mode(render_mode)
         params = self.config.params
         n, d = params.n_agents, params.dim
@@ -146,6 +148,10 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             if self.render_mode is None
             else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
         )
+
+    def __repr__(self) -> str:
+        # (str(env) stays PettingZoo's, the metadata name)
+        return self._plan_repr(self.metadata["name"])
 
     # ------------------------------------------------------------ spaces, rng
     def observation_space(self, agent: str) -> spaces.Box:

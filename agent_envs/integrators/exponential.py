@@ -36,6 +36,12 @@ class RosenbrockEuler(Integrator):
 
     needs_jacobian = True
     stochastic_correction = False
+    #: whether `step` takes the fused step (`fused_step`): None (default) where it applies;
+    #: False never; True where it applies, and a model with a ``fallbacks`` counter (the envs')
+    #: counts a step where it did not ("fused-declined"). The envs set it from their step plan
+    #: (`agent_envs.envs.step_plan.StepPlan.fused`), so that their steps take the path the plan
+    #: shows even where a compiled path was switched after the env was made.
+    fused: bool | None = None
 
     def __init__(self, jacobian: str = "frozen", phi_method: str = "auto") -> None:
         if jacobian not in JACOBIAN_CHOICES:
@@ -54,12 +60,14 @@ class RosenbrockEuler(Integrator):
     def step(self, model: DriftModel, x, u, t, dt, dW, du_dt=None) -> Any:
         rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
         noise = model.sigma * dW
-        if du_dt is None and dt != 0.0:
+        if self.fused is not False and du_dt is None and dt != 0.0:
             found = self.fused_step(model, lin.matrix, rhs, x, dt, noise)
             if found is GAVE_UP:  # the workspace's P was partly overwritten: L(x) again
                 rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
             elif found is not None:
                 return found
+            elif self.fused and getattr(model, "fallbacks", None) is not None:
+                model.fallbacks["fused-declined"] += 1
         scaled = dt * lin.matrix
         kw = {"method": self.phi_method, "symmetric": lin.symmetric}
         if lin.bounds is not None:
