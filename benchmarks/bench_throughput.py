@@ -506,12 +506,20 @@ def worker_vector(batches: list[int], paths: list[int], rounds: int) -> dict[str
                 sync = gym.make_vec(ENV_ID, num_envs=b, vectorization_mode="sync", **kwargs)
                 sync.reset(seed=0)
                 fns["sync"] = lambda sync=sync, actions=actions: sync.step(actions)
-                if getattr(native.unwrapped, "_compiled_kind", None) is not None:
-                    # the same env with its compiled prologue and epilogue off: the numpy step
-                    plain = gym.make_vec(
-                        ENV_ID, num_envs=b, vectorization_mode="vector_entry_point", **kwargs
-                    )
-                    plain.unwrapped._compiled_kind = None
+                plan = getattr(native.unwrapped, "plan", None)  # (older trees: none)
+                if plan is not None and plan.compiled_step:
+                    # the same env made with its compiled prologue and epilogue off: the numpy
+                    # step (its plan's envelope)
+                    from agent_envs import native as agent_native
+
+                    before = agent_native.use("step", False)
+                    try:
+                        plain = gym.make_vec(
+                            ENV_ID, num_envs=b, vectorization_mode="vector_entry_point", **kwargs
+                        )
+                    finally:
+                        agent_native.use("step", before)
+                    assert plain.unwrapped.plan.envelope == "numpy"
                     plain.reset(seed=0)
                     fns["numpy_step"] = lambda plain=plain, actions=actions: plain.step(actions)
             # blocks of about 0.3 s of the slower side, from one timed call of each after a

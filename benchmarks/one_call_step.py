@@ -66,7 +66,7 @@ def step_one_call(env: Any, actions: np.ndarray, marks: list[float]) -> Any:
     compiled step would run (else its own step); `marks` gets the times around the call."""
     model, x = env.model, env._positions
     cached = model.cached_linearization(x)
-    if env._autoreset.any() or cached is None or env._compiled_kind != "fused":
+    if env._autoreset.any() or cached is None or not (env.plan.compiled_step and env.plan.fused):
         return env.step(actions)
     marks.append(time.perf_counter())
     operator, drift = cached
@@ -139,7 +139,7 @@ def main() -> int:
         env.reset(seed=0)
         envs.append(env)
     ref, new = envs[0], envs[1].unwrapped
-    if new._compiled_kind != "fused":
+    if not (new.plan.compiled_step and new.plan.fused):
         raise SystemExit("this env takes no compiled fused step here (numba missing?)")
     actions = np.random.default_rng(1).uniform(-0.5, 0.5, (args.envs, 100)).astype(np.float32)
     marks: list[float] = []

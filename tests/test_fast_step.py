@@ -10,6 +10,9 @@ SyncVectorEnv through the compiled step, its fallbacks and the numpy step.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 from test_vector_env import DIVERGING, native, run_side_by_side
@@ -20,6 +23,17 @@ from agent_envs.native import loader
 pytestmark = pytest.mark.skipif(
     not fast_step.load_compiled_step(), reason="the compiled step needs numba"
 )
+
+
+@contextmanager
+def numpy_step() -> Iterator[None]:
+    """Native envs made inside take the numpy step: the path "step" is off while they are made
+    (their `plan.envelope` is "numpy"), and back as it was after."""
+    before = loader.use("step", False)
+    try:
+        yield
+    finally:
+        loader.use("step", before)
 
 
 @pytest.mark.parametrize(
@@ -76,7 +90,7 @@ def test_a_module_that_differs_is_not_used(monkeypatch):
     monkeypatch.setattr(loader, "import_compiled", importing)
     with pytest.warns(RuntimeWarning, match="differs from numpy"):
         assert not fast_step.load_compiled_step()
-    assert native(2, n_agents=20, integrator="em").unwrapped._compiled_kind is None
+    assert native(2, n_agents=20, integrator="em").unwrapped.plan.envelope == "numpy"
 
 
 def _count_calls(monkeypatch) -> dict[str, int]:
@@ -153,8 +167,11 @@ def test_threads_partial_resets_and_strided_actions_through_the_compiled_step(mo
     calls = _count_calls(monkeypatch)
     threads = 2 if max_compiled_threads() >= 2 else 1
     kwargs = {"n_agents": 100, "n_steps": 8, "n_paths": 2}
-    fast, slow = native(4, num_threads=threads, **kwargs), native(4, **kwargs)
-    slow.unwrapped._compiled_kind = None
+    fast = native(4, num_threads=threads, **kwargs)
+    with numpy_step():
+        slow = native(4, **kwargs)
+    assert fast.unwrapped.plan.envelope == "compiled-step"
+    assert slow.unwrapped.plan.envelope == "numpy"
     fast.reset(seed=9)
     slow.reset(seed=9)
     rng = np.random.default_rng(3)
@@ -185,21 +202,27 @@ def test_an_env_whose_phi_action_is_not_the_lanczos_takes_the_numpy_step(monkeyp
     calls = _count_calls(monkeypatch)
     for kwargs in ({"n_agents": 12}, {"n_agents": 100, "phi_method": "eigh"}):
         env = native(2, n_steps=4, **kwargs)
-        assert env.unwrapped._compiled_kind is None
+        assert env.unwrapped.plan.envelope == "numpy"
+        assert env.unwrapped.plan.phi == ("expm" if "phi_method" not in kwargs else "eigh")
         env.reset(seed=0)
         env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     assert calls["prologue"] == 0
-    assert native(2, n_agents=100).unwrapped._compiled_kind == "fused"
-    assert native(2, n_agents=12, integrator="em").unwrapped._compiled_kind == "em"
-    assert native(2, n_agents=100, action_basis="modes").unwrapped._compiled_kind is None
+    fused = native(2, n_agents=100).unwrapped.plan
+    assert fused.envelope == "compiled-step" and fused.phi == "fused-lanczos"
+    em = native(2, n_agents=12, integrator="em").unwrapped.plan
+    assert em.envelope == "compiled-step" and em.integrator == "em" and em.phi == "none"
+    assert native(2, n_agents=100, action_basis="modes").unwrapped.plan.envelope == "numpy"
 
 
 def test_compiled_and_numpy_steps_give_the_same_bits(monkeypatch):
     """Two native envs from one seed, one with the compiled step switched off."""
     calls = _count_calls(monkeypatch)
     kwargs = {"n_agents": 100, "n_steps": 8, "n_paths": 2}
-    fast, slow = native(3, **kwargs), native(3, **kwargs)
-    slow.unwrapped._compiled_kind = None
+    fast = native(3, **kwargs)
+    with numpy_step():
+        slow = native(3, **kwargs)
+    assert fast.unwrapped.plan.envelope == "compiled-step"
+    assert slow.unwrapped.plan.envelope == "numpy"
     fast.reset(seed=5)
     slow.reset(seed=5)
     rng = np.random.default_rng(1)

@@ -66,7 +66,7 @@ def test_environment_variable_turns_every_path_off_and_the_envs_still_step():
         print(json.dumps({"status": native.status(), "old": old,
                           "finite": bool(np.all(np.isfinite(obs))),
                           "numba": "numba" in sys.modules,
-                          "kind": venv.unwrapped._compiled_kind}))
+                          "plan": venv.unwrapped.plan.as_dict()}))
         """
     )
     env = {"AGENT_ENVS_NUMBA": "0", "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
@@ -77,7 +77,8 @@ def test_environment_variable_turns_every_path_off_and_the_envs_still_step():
     out = json.loads(done.stdout.strip().splitlines()[-1])
     assert out["status"] == dict.fromkeys(NAMES, False)
     assert out["old"] == [False] * 5
-    assert out["finite"] and not out["numba"] and out["kind"] is None
+    assert out["finite"] and not out["numba"]
+    assert out["plan"]["envelope"] == "numpy" and out["plan"]["kernel_pass"] == "numpy"
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -17,7 +17,7 @@ import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
-from agent_envs.envs import ENV_ID, SwarmVectorEnv
+from agent_envs.envs import ENV_ID, SwarmVectorEnv, step_plan
 from agent_envs.envs.vector_env import single_env_phi_method
 from agent_envs.simulator import load_compiled_noise
 
@@ -153,8 +153,8 @@ def test_native_env_in_blocks_matches_sync_vector_env(monkeypatch, kwargs):
     monkeypatch.setattr(vector_env, "BLOCK_BYTES", 8 * kwargs.get("n_paths", 1) * n * n * 2)
     # blocks are for numpy passes over the batch; with numba every pass runs member by member
     # and the env takes one block: forced here, so the blocks are tested with numba too
-    monkeypatch.setattr(SwarmVectorEnv, "_member_by_member", lambda self: False)
-    assert len(SwarmVectorEnv(5, **kwargs)._blocks) == 3
+    monkeypatch.setattr(step_plan, "member_by_member", lambda *args: False)
+    assert SwarmVectorEnv(5, **kwargs).plan.blocks == 3
     terminated, truncated = run_side_by_side(5, 3 * kwargs["n_steps"] + 2, **kwargs)
     assert terminated >= 2
     assert truncated >= 6
@@ -188,19 +188,19 @@ def test_member_by_member_steps_take_one_block(monkeypatch):
 
     monkeypatch.setattr(vector_env, "BLOCK_BYTES", 8 * 100 * 100 * 2)
     compiled = phi_functions.load_compiled()
-    assert len(SwarmVectorEnv(5, n_agents=100)._blocks) == (1 if compiled else 3)
-    assert len(SwarmVectorEnv(5, n_agents=100, integrator="em")._blocks) == (1 if compiled else 3)
-    assert len(SwarmVectorEnv(5, n_agents=100, kernel="nonsymmetric")._blocks) == 3
+    assert SwarmVectorEnv(5, n_agents=100).plan.blocks == (1 if compiled else 3)
+    assert SwarmVectorEnv(5, n_agents=100, integrator="em").plan.blocks == (1 if compiled else 3)
+    assert SwarmVectorEnv(5, n_agents=100, kernel="nonsymmetric").plan.blocks == 3
     before = phi_functions.use_compiled(False)
     try:
-        assert len(SwarmVectorEnv(5, n_agents=100)._blocks) == 3
+        assert SwarmVectorEnv(5, n_agents=100).plan.blocks == 3
     finally:
         phi_functions.use_compiled(before)
     # a batch whose kernel matrices in one block would exceed the dense budget (where the model
     # goes matrix-free) keeps its blocks: each env stays on the dense path, as alone
     four_envs = 4 * 8 * 3 * 100 * 100  # `dense_bytes` of 4 envs of one path, N = 100, d = 1
     monkeypatch.setattr("agent_envs.dynamics.swarm.DENSE_MEMORY_BUDGET_BYTES", four_envs)
-    assert len(SwarmVectorEnv(5, n_agents=100)._blocks) == 3
+    assert SwarmVectorEnv(5, n_agents=100).plan.blocks == 3
 
 
 def test_arnoldi_members_match_exactly():

@@ -30,6 +30,7 @@ compares them on the CPU). Observations, rewards and flags come out as numpy arr
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -57,9 +58,9 @@ from agent_envs.envs.observation import (
     interaction_drift_bound,
     observation_space,
 )
-from agent_envs.integrators import EulerMaruyama, Integrator, make_integrator
-from agent_envs.integrators.exponential import GAVE_UP, RosenbrockEuler
-from agent_envs.integrators.phi_functions import auto_phi_method
+from agent_envs.envs.step_plan import StepPlan, planned_integrator, resolve_step_plan
+from agent_envs.integrators import Integrator
+from agent_envs.integrators.exponential import GAVE_UP
 from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
 from agent_envs.validation import check_seed, real_array
 
@@ -70,7 +71,7 @@ from agent_envs.validation import check_seed, real_array
 #: whole batch's P from memory at every product (N = 100, 20 paths, B = 16: 25.6 MB per product
 #: in one batch). 8 MiB measured best of 1, 2, 4, 8 MiB and one batch on a 32 MiB L3
 #: (benchmarks/bench_throughput.py prints the vector env's figures). Where every pass runs
-#: member by member (`SwarmVectorEnv._member_by_member`), one block.
+#: member by member (`step_plan.member_by_member`), one block (`StepPlan.blocks`).
 BLOCK_BYTES = 2**23
 
 #: Autoreset modes the native env implements (Gymnasium's names).
@@ -80,21 +81,16 @@ SeedArg = int | Sequence[int | None] | None
 
 
 def single_env_phi_method(config: EpisodeConfig) -> str:
-    """The phi strategy a single env with this config uses ("auto" resolved for its P paths).
+    """The phi strategy a single env with this config uses ("auto" resolved for its P paths):
+    its `StepPlan.phi_method` (`agent_envs.envs.step_plan.resolve_phi_method`).
 
     The integrators apply phi to dt L(x) (frozen: N x N, acting on the d columns) or to the
     exact Jacobian (Nd x Nd); "auto" picks by matrix size, symmetry and the number of matrices
-    in the call, which for a single env is its number of paths.
+    in the call, which for a single env is its number of paths ("krylov" on a matrix-free
+    operator).
     """
-    if config.phi_method != "auto" or not make_integrator(config.integrator).needs_jacobian:
-        return config.phi_method
-    model = _CachedLinearizationModel(config.params)
-    symmetric = bool(model.kernel.symmetric)
-    size = config.params.n_agents
-    if config.jacobian == "exact":
-        symmetric = symmetric and bool(getattr(model.kernel, "radial", False))
-        size *= config.params.dim
-    return auto_phi_method(size, config.n_paths, symmetric)
+    model = _CachedLinearizationModel(config.params, config.linear_operator)
+    return resolve_step_plan(config, model).phi_method
 
 
 class SwarmVectorEnv(VectorEnv):
@@ -176,7 +172,10 @@ class SwarmVectorEnv(VectorEnv):
 
     config (`EpisodeConfig`), model, integrator, phi_method (the resolved strategy),
     num_threads, dt, n_steps, n_paths, positions (B, P, N, d), step_index (B,), targets (B, d),
-    np_randoms (one generator per env).
+    np_randoms (one generator per env), plan (the `agent_envs.envs.step_plan.StepPlan`: which
+    code a step runs, its blocks and whether the compiled step applies, resolved when the env is
+    made; `repr(env)` shows it), plan_fallbacks (a `Counter` of the mid-step fallbacks so far:
+    `step_plan.FALLBACKS`).
 
     ## Version History
 
@@ -248,28 +247,38 @@ class SwarmVectorEnv(VectorEnv):
 
         params = self.config.params
         n, d = params.n_agents, params.dim
+        #: the mid-step fallbacks so far (`step_plan.FALLBACKS`), shared by the block models
+        self.plan_fallbacks: Counter[str] = Counter()
         self.model = _CachedLinearizationModel(
-            params, self.config.linear_operator, cache_tensors=True
+            params, self.config.linear_operator, cache_tensors=True, fallbacks=self.plan_fallbacks
         )
-        self.phi_method = single_env_phi_method(self.config)
-        self.integrator: Integrator = make_integrator(
-            self.config.integrator, jacobian=self.config.jacobian, phi_method=self.phi_method
+        # which code a step runs, once: the phi strategy of the single env's P paths, the
+        # blocks (numpy: of about BLOCK_BYTES of kernel matrices, each with its own model, unless
+        # every pass runs member by member; torch: one, a device wants one batch) and whether
+        # the compiled prologue and epilogue apply (`_step_compiled`)
+        self.plan: StepPlan = resolve_step_plan(
+            self.config,
+            self.model,
+            env="vector",
+            backend=backend,
+            device=self.device,
+            threads=self.num_threads,
+            num_envs=self.num_envs,
+            block_bytes=BLOCK_BYTES,
+            same_step_autoreset=mode is AutoresetMode.SAME_STEP,
         )
-        # numpy: the envs in blocks of about BLOCK_BYTES of kernel matrices, each block with its
-        # own model (workspace and cached L(x)), unless every pass over them runs member by
-        # member; torch: one block (a device wants one batch)
-        per_env = 8 * self.config.n_paths * n * n
-        n_blocks = -(-self.num_envs * per_env // BLOCK_BYTES)
-        if self._device is not None or self._member_by_member():
-            n_blocks = 1
-        n_blocks = max(1, min(self.num_envs, n_blocks))
-        envs_per_block = -(-self.num_envs // n_blocks)  # balanced: blocks differ by <= 1 env
+        self.phi_method = self.plan.phi_method
+        self.integrator: Integrator = planned_integrator(self.config, self.plan)
+        envs_per_block = self.plan.envs_per_block
         self._blocks = [
             slice(i, min(i + envs_per_block, self.num_envs))
             for i in range(0, self.num_envs, envs_per_block)
         ]
         self._block_models = [self.model] + [
-            _CachedLinearizationModel(params, self.config.linear_operator) for _ in self._blocks[1:]
+            _CachedLinearizationModel(
+                params, self.config.linear_operator, fallbacks=self.plan_fallbacks
+            )
+            for _ in self._blocks[1:]
         ]
         for model in self._block_models:  # (their threaded passes load in the first reset)
             model.threads = self.num_threads
@@ -291,9 +300,6 @@ class SwarmVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
 
-        #: "fused" (SERB, ERB on the compiled fused step) or "em": the step's compiled
-        #: prologue and epilogue apply (see `_step_compiled`); None: the numpy step only
-        self._compiled_kind = self._compiled_step_kind()
         self._all_rows = np.arange(self.num_envs)
         space = self.single_observation_space
         self._observation_bounds = (
@@ -471,54 +477,6 @@ class SwarmVectorEnv(VectorEnv):
         diverged = np.concatenate([part[2] for part in parts])
         return x_next, drift, diverged
 
-    def _member_by_member(self) -> bool:
-        """Whether every pass of a step over the kernel matrices runs one system at a time:
-        numba's kernel pass (the symmetric Cucker-Smale kernel on the dense workspace, the
-        whole batch within the dense budget), and for an exponential integrator the compiled
-        Lanczos on the frozen L(x). Blocks keep a
-        numpy pass's batch of P in cache; member by member, a system's P is in cache anyway
-        (the fused step writes the next one right after its phi-action read it), and blocks
-        only add each block's Python: one block measured 5 % faster than blocks of 8 MiB at
-        B = 16, 20 paths (`benchmarks/bench_throughput.py`, docs/benchmarks.md)."""
-        config = self.config
-        n, d = config.params.n_agents, config.params.dim
-        # the whole batch as one block (shape only): it must stay on the dense workspace path,
-        # as each env does alone (beyond DENSE_MEMORY_BUDGET_BYTES the model goes matrix-free)
-        like = np.broadcast_to(np.empty(()), (self.num_envs, config.n_paths, n, d))
-        if self.model.compiled_pass_parameters(like) is None or not self.model._uses_workspace(
-            like
-        ):
-            return False
-        if self.integrator.needs_jacobian:  # ERB, SERB
-            return config.jacobian == "frozen" and native.available("lanczos")
-        return True
-
-    def _compiled_step_kind(self) -> str | None:
-        """Whether this env's steps may take the compiled prologue and epilogue
-        (`agent_envs.native.step`): numpy, every pass member by member in one block,
-        SERB or ERB with the frozen Jacobian whose phi-action is the Lanczos ("fused": their
-        compiled fused step; not with `phi_method` "expm" or "eigh", or "auto" resolving to
-        them, as it does for small N) or Euler-Maruyama ("em"), the "agents" or "common"
-        action basis ("modes" transforms its actions by numpy), and the module loaded and
-        equal to numpy (``native.available("step")``, checked by `fast_step.same_as_numpy`)."""
-        if (
-            self._device is not None
-            or len(self._blocks) != 1
-            or self.config.action_basis not in ("agents", "common")
-            or not self._member_by_member()
-        ):
-            return None
-        integrator = self.integrator
-        if isinstance(integrator, RosenbrockEuler) and integrator.jacobian == "frozen":
-            if integrator.phi_method != "krylov":  # (the single env's resolved strategy)
-                return None
-            kind = "fused"
-        elif type(integrator) is EulerMaruyama:
-            kind = "em"
-        else:
-            return None
-        return kind if native.available("step") else None
-
     def _step_compiled(self, actions: Any) -> tuple[Any, ...] | None:
         """`step` for the common case, where every env steps (no autoreset in this call) and
         the actions are a float32 or float64 numpy array of shape (B, R d) or (B, R, d) (R = N,
@@ -530,7 +488,10 @@ class SwarmVectorEnv(VectorEnv):
         values bit for bit as the numpy step, which is about 30 numpy calls over the batch
         (tests/test_fast_step.py). None, before any draw, where it does not apply (the numpy
         step then runs, and raises for bad actions); a fused step that gives up or does not
-        apply takes the numpy step's `_advance` with the same draws."""
+        apply takes the numpy step's `_advance` with the same draws (counted in
+        `plan_fallbacks`). Runs where the plan's envelope is the compiled step (`StepPlan`:
+        numpy, one block, every pass member by member, SERB or ERB on the fused step or
+        Euler-Maruyama, the "agents" or "common" action basis, the path "step" available)."""
         b = self.num_envs
         n, d = self.config.params.n_agents, self.config.params.dim
         rows = action_rows(self.config.action_basis, n)
@@ -540,15 +501,14 @@ class SwarmVectorEnv(VectorEnv):
             or actions.shape not in ((b, rows * d), (b, rows, d))
         ):
             return None
-        kind = self._compiled_kind
-        if kind == "fused" and not native.available("fused"):
-            return None
         model, x = self.model, self._positions
         cached = model.cached_linearization(x)
         if cached is None or not (x.flags.c_contiguous and cached[1].flags.c_contiguous):
             return None
         operator, drift = cached
         module = native.loaded("step")
+        if module is False:  # (the path "step" switched off after the env was made)
+            return None
         controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
         a = np.ascontiguousarray(actions).reshape(b, rows, d)
         params = self.config.params
@@ -560,7 +520,7 @@ class SwarmVectorEnv(VectorEnv):
             self.np_randoms, self._all_rows, np.empty(x.shape), self.dt, self._generator_handles()
         )
         noise = model.sigma * dw
-        if kind == "fused":  # (compiled: no numpy warnings to silence)
+        if self.plan.fused:  # (compiled: no numpy warnings to silence)
             x_next = self.integrator.fused_step(model, operator, rhs, x, self.dt, noise)
         else:  # Euler-Maruyama's x + dt F + sigma dW, then the kernel pass at x_next
             with np.errstate(over="ignore", invalid="ignore"):
@@ -569,6 +529,8 @@ class SwarmVectorEnv(VectorEnv):
                 model.interaction_drift(x_next)
         every = self._all_rows >= 0  # (B,) True
         if x_next is None or x_next is GAVE_UP:
+            if x_next is None:  # (GAVE_UP: counted by the model, `discard_linearization`)
+                self.plan_fallbacks["fused-declined"] += 1
             # the fused step did not apply (say the compiled Lanczos switched off) or a
             # member's Lanczos gave up (its workspace discarded): the numpy step's advance
             # with the same draws (where it gave up, the integrator's general path tries the
@@ -590,7 +552,10 @@ class SwarmVectorEnv(VectorEnv):
             (self.step_index + 1) / self.config.n_steps, low, high, absolute, mean_positions,
             mean_drift, observations, diverged,
         )  # fmt: skip
-        if diverged.any() or not absolute or self.autoreset_mode is not AutoresetMode.NEXT_STEP:
+        numpy_tail = self.plan.envelope != "compiled-step"  # (not "absolute", or SAME_STEP)
+        if numpy_tail or diverged.any():
+            if not numpy_tail:
+                self.plan_fallbacks["numpy-tail"] += 1
             if not absolute:
                 observations = None  # (the numpy observation of the state the step leaves)
             return self._finish_step(
@@ -703,10 +668,11 @@ class SwarmVectorEnv(VectorEnv):
         """Step every env once (NEXT_STEP: the envs that ended last step are reset instead)."""
         if not self._has_reset:
             raise RuntimeError("call reset() before step()")
-        if self._compiled_kind is not None and not self._autoreset.any():
+        if self.plan.compiled_step and not self._autoreset.any():
             found = self._step_compiled(actions)
             if found is not None:
                 return found
+            self.plan_fallbacks["compiled-step-declined"] += 1
         b, p = self.num_envs, self.config.n_paths
         n, d = self.config.params.n_agents, self.config.params.dim
         resetting = self._autoreset.copy()
@@ -825,6 +791,10 @@ class SwarmVectorEnv(VectorEnv):
         info["final_obs"], info["_final_obs"] = final_obs, ended.copy()
         info["final_info"], info["_final_info"] = final_info, ended.copy()
         return info
+
+    def __repr__(self) -> str:
+        """Gymnasium's ``SwarmVectorEnv(id, num_envs=B)`` with the step plan."""
+        return f"{super().__repr__()[:-1]}, plan: {self.plan.describe()})"
 
     def close_extras(self, **kwargs: Any) -> None:
         """Nothing to release (no subprocesses, no renderer)."""
