@@ -253,6 +253,11 @@ def _check_run(run_dir: Path, timesteps: int) -> dict:
     assert summary["timesteps"] >= timesteps
     for name in ("config.json", "env.json", "hyperparams.json", "final_model.zip"):
         assert (run_dir / name).is_file(), name
+    # the step plans: the Gymnasium env's, and the native training env's where it is one
+    description = json.loads((run_dir / "env.json").read_text())
+    assert description["step_plan"].startswith(description["integrator"] + "/")
+    training_plan = summary["training_step_plan"]
+    assert training_plan is None or " envs=" in training_plan
     assert (run_dir / "final_model_vecnormalize.pkl").is_file()
     assert list((run_dir / "checkpoints").glob("rl_model_*_steps.zip"))
     from agent_envs.training.callbacks import read_learning_curve

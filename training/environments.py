@@ -54,7 +54,8 @@ def make_eval_vec_env(env_id: str, env_kwargs: dict[str, Any] | None, n_episodes
 def env_description(
     env_id: str, env_kwargs: dict[str, Any] | None, option: str = "--env-kwargs"
 ) -> dict[str, Any]:
-    """N, d, n_steps, integrator and the full kwargs of the Gymnasium env a run uses.
+    """N, d, n_steps, integrator, the step plan and the full kwargs of the Gymnasium env a run
+    uses.
 
     Builds the env once, so it also validates `env_kwargs` (errors name `option`); for the
     PettingZoo id the PettingZoo env (its interface options) and then its Gymnasium twin.
@@ -81,9 +82,26 @@ def env_description(
             "n_steps": int(base.n_steps),
             "integrator": str(base.integrator_name),
             "max_control": float(base.max_control),
+            # which code its steps run, resolved when the env was made (this process's
+            # compiled paths): `agent_envs.envs.step_plan.StepPlan.describe`
+            "step_plan": base.plan.describe(),
         }
     finally:
         env.close()
+
+
+def training_step_plan(venv: Any) -> str | None:
+    """`plan.describe()` of the native vector env a training VecEnv steps (through SB3's
+    wrappers and `NativeVecEnv`, their ``venv``), or None for another training env
+    (DummyVecEnv, SubprocVecEnv: each sub-env is the env of ``env.json``'s ``step_plan``)."""
+    for _ in range(8):  # (a few wrappers at most)
+        plan = getattr(venv, "plan", None)
+        if plan is not None:
+            return str(plan.describe())
+        venv = getattr(venv, "venv", None)
+        if venv is None:
+            return None
+    return None
 
 
 def _check_pettingzoo_kwargs(env_kwargs: dict[str, Any] | None, option: str) -> None:

@@ -16,7 +16,8 @@ subclass that logs the turnpike controller's cost on the same validation seeds
 A run directory ``{out}/{env}__{algo}__{seed}__{unix time}`` holds:
 
     config.json            the TrainConfig (what --resume reads back)
-    env.json               N, d, n_steps of the env (for loading the policy later)
+    env.json               N, d, n_steps of the env (for loading the policy later), its
+                           step plan (`StepPlan.describe`: which code a step runs)
     hyperparams.json       the SB3 keyword arguments used
     checkpoints/           rl_model_{t}_steps.zip, rl_model_vecnormalize_{t}_steps.pkl,
                            rl_model_replay_buffer_{t}_steps.pkl (off-policy; newest only)
@@ -64,6 +65,7 @@ from agent_envs.training.environments import (
     eval_env_kwargs,
     make_eval_vec_env,
     make_training_env,
+    training_step_plan,
 )
 from agent_envs.training.storage import (
     RunLock,
@@ -383,7 +385,8 @@ def save_checkpoint_of(model: Any, run_dir: Path, off_policy: bool) -> Path:
 
 def _write_summary(config, run_dir: Path, description, model, wall: float, eval_callback) -> None:
     """summary.json: timesteps, swarm steps, training wall time (added over resumes), the last
-    validation result."""
+    validation result, and the native training env's step plan (`training_step_plan`; None
+    for DummyVecEnv or SubprocVecEnv, whose envs are env.json's)."""
     summary_path = run_dir / "summary.json"
     try:
         previous = json.loads(summary_path.read_text()) if summary_path.exists() else {}
@@ -403,6 +406,7 @@ def _write_summary(config, run_dir: Path, description, model, wall: float, eval_
             "last_eval": eval_callback.history[-1]
             if eval_callback and eval_callback.history
             else None,
+            "training_step_plan": training_step_plan(model.get_env()),
         },
     )
 
