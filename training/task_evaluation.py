@@ -391,6 +391,36 @@ def run_tasks_command(config: TasksConfig) -> int:
     return 1 if bad else 0
 
 
+def reference_table_markdown() -> str:
+    """The shipped references of every task as one Markdown table (docs/tasks.md shows it;
+    tests/test_tasks.py recomputes it from the package data)."""
+    lines = [
+        "| task | N, d, m, paths | V | optimal | MPC | proportional | turnpike | zero "
+        "| lower bound / V |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def cell(refs: TaskReferences, name: str) -> str:
+        if name not in refs.costs or not np.all(np.isfinite(refs.costs[name])):
+            return "-"
+        s = float(np.mean(100 * (refs.zero - refs.costs[name]) / (refs.zero - refs.yardstick)))
+        return f"{refs.mean(name):.4g} ({s:.1f})"
+
+    for task in TASK_LIST:
+        refs = load_references(task)
+        ratio = "-"
+        if "lower_bound" in refs.costs and task.yardstick != "lower_bound":
+            r = refs.costs["lower_bound"] / refs.yardstick
+            ratio = f"{r.min():.3f}-{r.max():.3f}"
+        shape = f"{task.n_agents}, {task.dim}, {task.n_steps}, {task.env_kwargs.get('n_paths', 1)}"
+        lines.append(
+            f"| `{task.id}` | {shape} | {task.yardstick} | {cell(refs, 'optimal')} | "
+            f"{cell(refs, 'mpc')} | {cell(refs, 'proportional')} | {cell(refs, 'turnpike')} | "
+            f"{cell(refs, 'zero')} | {ratio} |"
+        )
+    return "\n".join(lines)
+
+
 __all__ = [
     "SCORE_COLUMNS",
     "TasksConfig",
@@ -399,6 +429,7 @@ __all__ = [
     "markdown_table",
     "print_tasks",
     "reference_scores",
+    "reference_table_markdown",
     "run_tasks_command",
     "task_table",
     "write_scores",
