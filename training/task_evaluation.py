@@ -97,6 +97,38 @@ def import_policy(spec: str) -> tuple[Any, bool]:
     return obj, per_agent
 
 
+class RowwisePolicy:
+    """A policy written for one observation, run on the batches `evaluate_policies` passes.
+
+    The training layer's rollouts call ``predict`` the way SB3 calls it on a VecEnv, with a
+    batch of observations; `agent_envs.tasks.score` passes one observation, as a user's loop
+    does. This adapter calls the policy once per row, so it sees what scoring gave it.
+    """
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        obs = np.asarray(observation)
+        if obs.ndim == 1:
+            return self.policy.predict(obs, state, episode_start, deterministic)
+        actions = [
+            np.asarray(self.policy.predict(row, state, episode_start, deterministic)[0])
+            for row in obs
+        ]
+        return np.stack(actions), state
+
+
+def rowwise_factory(obj: Any) -> Any:
+    """A factory ``env -> policy`` for `evaluate_policies` from a user's object (`as_policy`)."""
+    from agent_envs.tasks.scoring import as_policy
+
+    def make(env: Any) -> RowwisePolicy:
+        return RowwisePolicy(as_policy(obj, env))
+
+    return make
+
+
 def _factory(spec: str, baseline_kwargs: Mapping[str, Any]) -> Any:
     """A policy factory ``env -> policy`` for a baseline name, a saved model or an apg run."""
     from agent_envs.training.policies import resolve_policy
@@ -260,7 +292,6 @@ def _report(
     resolved: Mapping[str, tuple[Any, bool]],
 ) -> None:
     """The usual evaluation report on the task env (train extra); per-agent policies left out."""
-    from agent_envs.tasks.scoring import as_policy
     from agent_envs.training.evaluate import evaluate_policies
     from agent_envs.training.report import build_report
 
@@ -270,11 +301,7 @@ def _report(
         if per_agent:
             print(f"{name}: per-agent policy, not in the report (its scores are)")
             continue
-        policies[name] = (
-            (lambda env, obj=obj: as_policy(obj, env))
-            if is_object_spec(specs[name])
-            else specs[name]
-        )
+        policies[name] = rowwise_factory(obj) if is_object_spec(specs[name]) else specs[name]
     task = get_task(task_id)
     results = evaluate_policies(
         policies,
