@@ -328,9 +328,13 @@ class LeaderboardConfig:
     )
 
     def __post_init__(self) -> None:
+        from agent_envs.training.storage import check_output_dir
         from agent_envs.validation import check_int, check_positive
 
-        object.__setattr__(self, "out", Path(self.out))
+        object.__setattr__(self, "out", check_output_dir(self.out, "--out"))
+        if self.table is not None:
+            object.__setattr__(self, "table", Path(self.table))
+            check_output_dir(self.table.parent, "--table")
         ids = self.tasks or tuple(t.id for t in TASK_LIST)
         object.__setattr__(self, "tasks", tuple(get_task(i).id for i in ids))
         for task_id in self.tasks:

@@ -385,9 +385,13 @@ class TasksConfig:
                 continue
             ids = tuple(t.id for t in TASK_LIST) if tuple(ids) == ("all",) else tuple(ids)
             object.__setattr__(self, option, tuple(get_task(i).id for i in ids))
+        from agent_envs.training.storage import check_output_dir
+
         check_int("--verify-seeds", self.verify_seeds, 1, 20)
         check_int("--workers", self.workers, 1, 256)
-        object.__setattr__(self, "work_dir", Path(self.work_dir))
+        object.__setattr__(self, "work_dir", check_output_dir(self.work_dir, "--work-dir"))
+        if self.data_dir is not None:
+            object.__setattr__(self, "data_dir", check_output_dir(self.data_dir, "--data-dir"))
 
 
 def run_tasks_command(config: TasksConfig) -> int:
