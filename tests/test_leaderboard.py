@@ -117,3 +117,11 @@ def test_regenerate_resumes_and_reproduces_the_shipped_costs(tmp_path):
             assert now["costs"][name] == pytest.approx(cost, rel=1e-9), (old["seed"], name)
     refs = load_references(task, tmp_path)
     assert np.allclose(refs.yardstick, load_references(task).yardstick, rtol=1e-9, atol=0)
+
+
+def test_findings_quote_the_stiff_tasks_references():
+    stiff = load_references("agent_envs/StiffSwarm-v0")
+    turnpike, proportional = stiff.mean("turnpike"), stiff.mean("proportional")
+    text = (DOCS / "findings.md").read_text()
+    assert f"{turnpike / proportional:.0f}x cheaper on `StiffSwarm-v0`" in text
+    assert f"({turnpike:.4g} against\n  {proportional:.3g} on average" in text
