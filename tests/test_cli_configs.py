@@ -100,8 +100,8 @@ def test_the_five_hand_written_parsers_keep_their_option_names():
             "--max-control", "--gtol", "--max-iterations", "--no-progress",
         },
         "evaluate": {
-            "--policy", "-p", "--env-id", "--env-kwargs", "--seeds", "--target", "--beta",
-            "--delta", "--out", "--report", "--no-progress",
+            "--policy", "-p", "--task", "--env-id", "--env-kwargs", "--seeds", "--target",
+            "--beta", "--delta", "--out", "--report", "--no-progress",
         },
         "report": {"--out", "--title", "--reference", "--seed-index"},
     }  # fmt: skip

@@ -340,6 +340,22 @@ BATTERY: list[tuple[list[str], str]] = [
     (["compare", "--out", "{out}", "--progress-bar=x"], "--progress-bar"),
     (["compare", "--out", "{out}", "--verbose", "7"], "--verbose"),
     (["compare", "--out", "{out}", "--torch-threads", "-1"], "--torch-threads"),
+    # the benchmark: tasks, evaluate --task, leaderboard
+    (["tasks", "--regenerate", "agent_envs/Nope-v0"], "the tasks are"),
+    (["tasks", "--verify", "agent_envs/StiffSwarm-v9"], "has no version v9"),
+    (["tasks", "--verify", "all", "--verify-seeds", "0"], "--verify-seeds"),
+    (["tasks", "--regenerate", "all", "--workers", "0"], "--workers"),
+    (["tasks", "--regenerate", "all", "--work-dir", "{file}"], "--work-dir"),
+    (["tasks", "--regenerate", "all", "--data-dir", "{file}"], "--data-dir"),
+    (["tasks", "--json=yes"], "--json"),
+    (["evaluate", "--out", "{out}", "--task", "agent_envs/Nope-v0"], "the tasks are"),
+    (["evaluate", "--out", "{out}", "--task", "StiffSwarm-v0", "--target", "0.1"], "--target"),
+    (["leaderboard", "--out", "{file}"], "--out"),
+    (["leaderboard", "--out", "{out}", "--tasks", "Nope-v0"], "the tasks are"),
+    (["leaderboard", "--out", "{out}", "--seeds", "x"], "--seeds"),
+    (["leaderboard", "--out", "{out}", "--workers", "0"], "--workers"),
+    (["leaderboard", "--out", "{out}", "--timesteps-scale", "0"], "--timesteps-scale"),
+    (["leaderboard", "--out", "{out}", "--table", "{file}/t.md"], "--table"),
 ]
 
 

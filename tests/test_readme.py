@@ -1,6 +1,7 @@
 """The README and docs cannot go stale: every `agent-envs ...` command they quote parses with
-the CLI's own parser (nothing runs), and the paper-scale tables (the README's headline table,
-the Results page's sweep tables) agree with the committed result files they come from
+the CLI's own parser (nothing runs), and the published tables agree with the committed result
+files they come from: the README's headline table is the benchmark leaderboard's first task
+(docs/results/leaderboard/episodes.csv), the Results page's paper-scale tables the sweep's
 (docs/results/paper-sweep/*.csv, docs/results/apg/results.json).
 
 A number in the README counts as agreeing when it is the source value rounded to the digits
@@ -219,39 +220,22 @@ def test_paper_sweep_contrast_costs_match_the_result_files():
         assert agrees(_numbers(cell)[0], float(summary[policy]["gap_to_optimal"]), 100.0), cell
 
 
-def test_readme_headline_table_matches_the_result_files():
-    """The README's headline table: every row's mean cost and per-seed gaps against the
-    sweep's files (apg included: it is one of the sweep's learners)."""
-    across = {(r["setting"], r["policy"]): r for r in read_csv("across_seeds.csv")}
-    summary = {r["policy"]: r for r in read_csv("summary.csv")}
-    rows = readme_table("## The headline result: the paper's scale", "policy", ROOT / "README.md")
-    assert [cells[0].split()[0] for cells in rows] == [
-        "optimal",
-        "mpc",
-        "apg",
-        "sac",
-        "ppo",
-        "td3",
-        "proportional",
-        "ppo-modes",
-        "ppo-shared",
-        "zero",
-        "turnpike",
-    ]
-    for cells in rows:
-        policy = cells[0].split()[0]
-        gap_numbers = _numbers(cells[2])
-        assert agrees(cells[1], float(across[("main", policy)]["mean_cost"])), cells
-        if policy in summary:
-            gap = float(summary[policy]["gap_to_optimal"])
-            if gap_numbers[0] in ("0", "-0.00%"):
-                assert abs(gap) < 5e-5, cells
-            else:
-                assert agrees(gap_numbers[0], gap, 100.0), cells
-        else:
-            for printed, seed in zip(gap_numbers, range(3), strict=True):
-                gap = float(summary[f"{policy} (seed {seed})"]["gap_to_optimal"])
-                assert agrees(printed, gap, 100.0), (cells, seed)
+def test_readme_headline_table_is_the_leaderboards_first_task():
+    """The README's headline table: the StiffSwarm-v0 section of the leaderboard, rebuilt from
+    the committed per-episode file (docs/results/leaderboard/episodes.csv)."""
+
+    from agent_envs.training.leaderboard import leaderboard_table, read_episodes
+
+    text = (ROOT / "README.md").read_text()
+    section = text.split("## The headline result: the benchmark's first task", 1)[1]
+    match = re.search(
+        r"<!-- leaderboard-table:start -->\n(.*?)<!-- leaderboard-table:end -->", section, re.S
+    )
+    assert match
+    rows = read_episodes(ROOT / "docs" / "results" / "leaderboard" / "episodes.csv")
+    expected = leaderboard_table(rows, tasks=["agent_envs/StiffSwarm-v0"]).strip()
+    assert match.group(1).strip() == expected
+    assert "| apg " in expected and "| sac " in expected and "| optimal " in expected
 
 
 def test_table_checker_can_fail():

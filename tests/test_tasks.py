@@ -583,3 +583,42 @@ def test_resolving_matches_the_shipped_references():
     assert {r["reference"] for r in rows} >= {"optimal", "mpc"}
     bad = [r for r in rows if not r["ok"]]
     assert not bad, bad
+
+
+@pytest.mark.slow
+def test_cli_report_runs_the_same_episodes(user_dir):
+    """--report (train extra): the usual evaluation on the task env; its costs are the scores'."""
+    pytest.importorskip("pandas")
+    import csv
+
+    done = _cli(
+        [
+            "evaluate",
+            "--task",
+            NOISY,
+            "-p",
+            "third_party:act",
+            "-p",
+            "zero",
+            "--report",
+            "--no-progress",
+            "--out",
+            "out",
+        ],
+        user_dir,
+    )
+    assert done.returncode == 0, done.stderr
+    assert (user_dir / "out" / "report" / "report.html").is_file()
+    with open(user_dir / "out" / "scores.csv") as handle:
+        scored = {
+            (r["policy"], int(r["seed"])): float(r["cost"])
+            for r in csv.DictReader(handle)
+            if r["kind"] == "policy"
+        }
+    with open(user_dir / "out" / "evaluation" / "episodes.csv") as handle:
+        evaluated = {
+            (r["policy"], int(r["seed"])): float(r["total_cost"]) for r in csv.DictReader(handle)
+        }
+    assert evaluated.keys() == scored.keys()
+    for key, cost in scored.items():
+        assert evaluated[key] == pytest.approx(cost, rel=1e-12), key

@@ -354,14 +354,12 @@ def _run_evaluate(config: Any) -> int:
 
 def _objects_as_factories(policies: dict[str, Any]) -> None:
     """``module:attribute`` specs -> factories of `evaluate_policies` (imported here: named)."""
-    from agent_envs.tasks.scoring import as_policy
     from agent_envs.training.evaluate_options import is_object_spec
-    from agent_envs.training.task_evaluation import import_policy
+    from agent_envs.training.task_evaluation import import_policy, rowwise_factory
 
     for name, spec in policies.items():
         if isinstance(spec, str) and is_object_spec(spec):
-            obj, _ = import_policy(spec)
-            policies[name] = lambda env, obj=obj: as_policy(obj, env)
+            policies[name] = rowwise_factory(import_policy(spec)[0])
 
 
 def _run_leaderboard(config: Any) -> int:

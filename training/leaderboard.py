@@ -48,6 +48,11 @@ LEARNERS = ("apg", "sac")
 TRAINING_SEEDS = (0, 1, 2)
 #: Tasks whose learners are not trained there but transferred from another task.
 TRANSFERS = {"agent_envs/LargeSwarm-v0": "agent_envs/StiffSwarm-v0"}
+#: The best simple law in SAC's interface (its fair baseline, docs/env-options.md): the
+#: proportional law on the swarm's centre, u = beta (xbar - c) for every agent, from the
+#: summary observation through the common action basis; scored live (nothing to train).
+CENTRE_LAW = "proportional-common"
+CENTRE_LAW_INTERFACE = {"observation": "summary", "action_basis": "common"}
 #: Columns of a unit's file and of episodes.csv.
 EPISODE_COLUMNS = (
     "task",
@@ -171,6 +176,40 @@ def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
     return path
 
 
+def centre_law(env: Any) -> Any:
+    """`CENTRE_LAW` for `env` (summary observation, common action): a factory ``env -> policy``.
+
+    The summary observation's first d entries are the centre's offset c - xbar; the action is
+    u / max_control with u = beta (xbar - c), beta = 12 (the paper's), clipped to [-1, 1].
+    """
+    from agent_envs.baselines import DEFAULT_BETA
+
+    inner = env.unwrapped
+    d, bound = inner.params.dim, float(inner.max_control)
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        offset = np.asarray(obs, dtype=np.float64)[:d]
+        return np.clip(-DEFAULT_BETA * offset / bound, -1.0, 1.0).astype(np.float32)
+
+    return act
+
+
+def centre_law_rows(task_id: str, out: Path) -> list[dict[str, Any]]:
+    """`CENTRE_LAW`'s episodes on the task (cached in OUT/units)."""
+    from agent_envs.tasks import score
+
+    path = out / "units" / f"{get_task(task_id).file_stem}__{CENTRE_LAW}.csv"
+    if not path.is_file():
+        result = score(centre_law, task_id, name=CENTRE_LAW, interface=CENTRE_LAW_INTERFACE)
+        rows = [
+            {**{k: row[k] for k in EPISODE_COLUMNS if k in row}, "kind": "law", "training_seed": ""}
+            for row in result.rows()
+        ]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(path, _csv(rows))
+    return read_episodes(path)
+
+
 def reference_rows(task_id: str) -> list[dict[str, Any]]:
     """The task's shipped references as episode rows (training seed empty)."""
     from agent_envs.training.task_evaluation import reference_scores
@@ -208,13 +247,14 @@ POLICY_LABELS = {
     "optimal": "optimal (open-loop plan, 20 paths)",
     "mpc": "mpc (re-solve every step)",
     "lower_bound": "lower bound (certified, not a policy)",
-    "proportional": "proportional (12 (xbar - x_k))",
+    "proportional": "proportional (12 (xbar - x_k), per agent)",
+    CENTRE_LAW: "proportional on the centre (12 (xbar - c), common: SAC's interface)",
     "turnpike": "turnpike (the paper's controller)",
     "zero": "zero",
 }
 
 
-def leaderboard_table(rows: list[dict[str, Any]]) -> str:
+def leaderboard_table(rows: list[dict[str, Any]], tasks: Sequence[str] | None = None) -> str:
     """The leaderboard in Markdown from episode rows: one section per task, one row per policy.
 
     Score and gap: mean over the test seeds with a 95% t-interval (a learner: of the per-seed
@@ -224,6 +264,8 @@ def leaderboard_table(rows: list[dict[str, Any]]) -> str:
     out = []
     order = {name: i for i, name in enumerate(POLICY_LABELS)}
     for task in TASK_LIST:
+        if tasks is not None and task.id not in tasks:
+            continue
         task_rows = [r for r in rows if r["task"] == task.id]
         if not task_rows:
             continue
@@ -260,7 +302,10 @@ def collect(out: Path, tasks: Sequence[str]) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for task_id in tasks:
         rows += reference_rows(task_id)
+        rows += centre_law_rows(task_id, out)
     for path in sorted((out / "units").glob("*.csv")):
+        if path.stem.endswith(CENTRE_LAW):
+            continue
         unit_rows = read_episodes(path)
         rows += [r for r in unit_rows if r["task"] in tasks]
     return rows
@@ -283,9 +328,13 @@ class LeaderboardConfig:
     )
 
     def __post_init__(self) -> None:
+        from agent_envs.training.storage import check_output_dir
         from agent_envs.validation import check_int, check_positive
 
-        object.__setattr__(self, "out", Path(self.out))
+        object.__setattr__(self, "out", check_output_dir(self.out, "--out"))
+        if self.table is not None:
+            object.__setattr__(self, "table", Path(self.table))
+            check_output_dir(self.table.parent, "--table")
         ids = self.tasks or tuple(t.id for t in TASK_LIST)
         object.__setattr__(self, "tasks", tuple(get_task(i).id for i in ids))
         for task_id in self.tasks:

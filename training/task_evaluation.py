@@ -97,6 +97,38 @@ def import_policy(spec: str) -> tuple[Any, bool]:
     return obj, per_agent
 
 
+class RowwisePolicy:
+    """A policy written for one observation, run on the batches `evaluate_policies` passes.
+
+    The training layer's rollouts call ``predict`` the way SB3 calls it on a VecEnv, with a
+    batch of observations; `agent_envs.tasks.score` passes one observation, as a user's loop
+    does. This adapter calls the policy once per row, so it sees what scoring gave it.
+    """
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        obs = np.asarray(observation)
+        if obs.ndim == 1:
+            return self.policy.predict(obs, state, episode_start, deterministic)
+        actions = [
+            np.asarray(self.policy.predict(row, state, episode_start, deterministic)[0])
+            for row in obs
+        ]
+        return np.stack(actions), state
+
+
+def rowwise_factory(obj: Any) -> Any:
+    """A factory ``env -> policy`` for `evaluate_policies` from a user's object (`as_policy`)."""
+    from agent_envs.tasks.scoring import as_policy
+
+    def make(env: Any) -> RowwisePolicy:
+        return RowwisePolicy(as_policy(obj, env))
+
+    return make
+
+
 def _factory(spec: str, baseline_kwargs: Mapping[str, Any]) -> Any:
     """A policy factory ``env -> policy`` for a baseline name, a saved model or an apg run."""
     from agent_envs.training.policies import resolve_policy
@@ -260,7 +292,6 @@ def _report(
     resolved: Mapping[str, tuple[Any, bool]],
 ) -> None:
     """The usual evaluation report on the task env (train extra); per-agent policies left out."""
-    from agent_envs.tasks.scoring import as_policy
     from agent_envs.training.evaluate import evaluate_policies
     from agent_envs.training.report import build_report
 
@@ -270,11 +301,7 @@ def _report(
         if per_agent:
             print(f"{name}: per-agent policy, not in the report (its scores are)")
             continue
-        policies[name] = (
-            (lambda env, obj=obj: as_policy(obj, env))
-            if is_object_spec(specs[name])
-            else specs[name]
-        )
+        policies[name] = rowwise_factory(obj) if is_object_spec(specs[name]) else specs[name]
     task = get_task(task_id)
     results = evaluate_policies(
         policies,
@@ -358,9 +385,13 @@ class TasksConfig:
                 continue
             ids = tuple(t.id for t in TASK_LIST) if tuple(ids) == ("all",) else tuple(ids)
             object.__setattr__(self, option, tuple(get_task(i).id for i in ids))
+        from agent_envs.training.storage import check_output_dir
+
         check_int("--verify-seeds", self.verify_seeds, 1, 20)
         check_int("--workers", self.workers, 1, 256)
-        object.__setattr__(self, "work_dir", Path(self.work_dir))
+        object.__setattr__(self, "work_dir", check_output_dir(self.work_dir, "--work-dir"))
+        if self.data_dir is not None:
+            object.__setattr__(self, "data_dir", check_output_dir(self.data_dir, "--data-dir"))
 
 
 def run_tasks_command(config: TasksConfig) -> int:
@@ -391,6 +422,36 @@ def run_tasks_command(config: TasksConfig) -> int:
     return 1 if bad else 0
 
 
+def reference_table_markdown() -> str:
+    """The shipped references of every task as one Markdown table (docs/tasks.md shows it;
+    tests/test_tasks.py recomputes it from the package data)."""
+    lines = [
+        "| task | N, d, m, paths | V | optimal | MPC | proportional | turnpike | zero "
+        "| lower bound / V |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+
+    def cell(refs: TaskReferences, name: str) -> str:
+        if name not in refs.costs or not np.all(np.isfinite(refs.costs[name])):
+            return "-"
+        s = float(np.mean(100 * (refs.zero - refs.costs[name]) / (refs.zero - refs.yardstick)))
+        return f"{refs.mean(name):.4g} ({s:.1f})"
+
+    for task in TASK_LIST:
+        refs = load_references(task)
+        ratio = "-"
+        if "lower_bound" in refs.costs and task.yardstick != "lower_bound":
+            r = refs.costs["lower_bound"] / refs.yardstick
+            ratio = f"{r.min():.3f}-{r.max():.3f}"
+        shape = f"{task.n_agents}, {task.dim}, {task.n_steps}, {task.env_kwargs.get('n_paths', 1)}"
+        lines.append(
+            f"| `{task.id}` | {shape} | {task.yardstick} | {cell(refs, 'optimal')} | "
+            f"{cell(refs, 'mpc')} | {cell(refs, 'proportional')} | {cell(refs, 'turnpike')} | "
+            f"{cell(refs, 'zero')} | {ratio} |"
+        )
+    return "\n".join(lines)
+
+
 __all__ = [
     "SCORE_COLUMNS",
     "TasksConfig",
@@ -399,6 +460,7 @@ __all__ = [
     "markdown_table",
     "print_tasks",
     "reference_scores",
+    "reference_table_markdown",
     "run_tasks_command",
     "task_table",
     "write_scores",

@@ -65,6 +65,13 @@ def parallel_env(task_id: str, **interface: Any) -> SwarmParallelEnv:
     return SwarmParallelEnv(**kwargs)
 
 
+def aec_env(task_id: str, **interface: Any) -> Any:
+    """The task's PettingZoo AEC env: PettingZoo's `parallel_to_aec` of `parallel_env`."""
+    from pettingzoo.utils.conversions import parallel_to_aec
+
+    return parallel_to_aec(parallel_env(task_id, **interface))
+
+
 def register_tasks() -> None:
     """Register every task id with Gymnasium (idempotent)."""
     for task in TASK_LIST:
@@ -79,4 +86,4 @@ def register_tasks() -> None:
         )
 
 
-__all__ = ["make_task_env", "make_task_vector_env", "parallel_env", "register_tasks"]
+__all__ = ["aec_env", "make_task_env", "make_task_vector_env", "parallel_env", "register_tasks"]
