@@ -125,3 +125,14 @@ def test_findings_quote_the_stiff_tasks_references():
     text = (DOCS / "findings.md").read_text()
     assert f"{turnpike / proportional:.0f}x cheaper on `StiffSwarm-v0`" in text
     assert f"({turnpike:.4g} against\n  {proportional:.3g} on average" in text
+
+
+def test_leaderboard_prose_quotes_the_table():
+    """Every gap with two decimals in "What it says" is one of the table's own cells."""
+    page = (DOCS / "leaderboard.md").read_text()
+    prose = page.split("## What it says", 1)[1].split("<!-- leaderboard-table:start -->")[0]
+    table = _between(page, "leaderboard-table")
+    quoted = re.findall(r"\+\d+\.\d\d%", prose)
+    assert len(quoted) >= 5
+    for number in quoted:
+        assert f"| {number} [" in table, number

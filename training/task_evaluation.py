@@ -426,7 +426,7 @@ def reference_table_markdown() -> str:
     """The shipped references of every task as one Markdown table (docs/tasks.md shows it;
     tests/test_tasks.py recomputes it from the package data)."""
     lines = [
-        "| task | N, d, m, paths | V | optimal | MPC | proportional | turnpike | zero "
+        "| task | N, d, m, paths | V: mean | optimal | MPC | proportional | turnpike | zero "
         "| lower bound / V |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
@@ -445,7 +445,8 @@ def reference_table_markdown() -> str:
             ratio = f"{r.min():.3f}-{r.max():.3f}"
         shape = f"{task.n_agents}, {task.dim}, {task.n_steps}, {task.env_kwargs.get('n_paths', 1)}"
         lines.append(
-            f"| `{task.id}` | {shape} | {task.yardstick} | {cell(refs, 'optimal')} | "
+            f"| `{task.id}` | {shape} | {task.yardstick}: {float(np.mean(refs.yardstick)):.4g} | "
+            f"{cell(refs, 'optimal')} | "
             f"{cell(refs, 'mpc')} | {cell(refs, 'proportional')} | {cell(refs, 'turnpike')} | "
             f"{cell(refs, 'zero')} | {ratio} |"
         )

@@ -212,8 +212,9 @@ TASK_LIST: tuple[TaskSpec, ...] = (
         _seeds(23_000),
         "optimal",
         _REFERENCES,
-        card="The paper's Fig. 7 setting: p(x_k, x_l) = 1/(eps_l (alpha^2 + |x_k - x_l|^2)) "
-        "with eps_l from 0.01 to 0.1 linear in l, target 2.3, otherwise the stiff task.",
+        card="The paper's non-symmetric experiment (fig:test2_cheap_stiff_nonsymm): "
+        "p(x_k, x_l) = 1/(eps_l (alpha^2 + |x_k - x_l|^2)) with eps_l from 0.01 to 0.1 linear "
+        "in l, target 2.3, otherwise the stiff task.",
     ),
     TaskSpec(
         "LargeSwarm",
