@@ -43,6 +43,21 @@ def episode(task_id: str, name: str, seed: int) -> tuple[float, float]:
     return cost, largest
 
 
+def design_table(rows: list[dict]) -> str:
+    """The Markdown table of the rows (docs/tasks.md shows it; a test re-renders it)."""
+    lines = [
+        "| task | seed | optimal max \\|u\\| | proportional max \\|u\\| | MPC / open loop |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        ratio = f"{r['mpc_cost'] / r['optimal_cost']:.3f}" if "mpc_cost" in r else "-"
+        lines.append(
+            f"| `{r['task']}` | {r['seed']} | {r['optimal_max_u']:.2f} | "
+            f"{r['proportional_max_u']:.2f} | {ratio} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1000, 1001])
@@ -63,14 +78,7 @@ def main(argv: list[str] | None = None) -> int:
                 row[f"{name}_cost"], row[f"{name}_max_u"] = episode(task.id, name, seed)
             rows.append(row)
             print(json.dumps(row), flush=True)
-    print("\n| task | seed | optimal max |u| | proportional max |u| | MPC / open loop |")
-    print("|---|---|---|---|---|")
-    for r in rows:
-        ratio = f"{r['mpc_cost'] / r['optimal_cost']:.3f}" if "mpc_cost" in r else "-"
-        print(
-            f"| {r['task']} | {r['seed']} | {r['optimal_max_u']:.2f} | "
-            f"{r['proportional_max_u']:.2f} | {ratio} |"
-        )
+    print("\n" + design_table(rows))
     if args.out:
         with open(args.out, "w") as handle:
             json.dump(rows, handle, indent=1)
