@@ -25,7 +25,6 @@ written; ``--table`` rebuilds the table from an episodes file alone (no training
 from __future__ import annotations
 
 import csv
-import io
 import json
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -39,6 +38,7 @@ from agent_envs.tasks import TASK_LIST, TaskSpec, get_task, load_references
 from agent_envs.tasks.scores import summarize
 from agent_envs.training.config import option_field
 from agent_envs.training.storage import write_text_atomic
+from agent_envs.training.task_evaluation import SCORE_COLUMNS, csv_text
 
 #: The learners of the leaderboard, by their name in the paper preset: `apg` (a per-agent
 #: feedback law trained through SERB) and SAC with the summary observation and one common
@@ -53,20 +53,8 @@ TRANSFERS = {"agent_envs/LargeSwarm-v0": "agent_envs/StiffSwarm-v0"}
 #: summary observation through the common action basis; scored live (nothing to train).
 CENTRE_LAW = "proportional-common"
 CENTRE_LAW_INTERFACE = {"observation": "summary", "action_basis": "common"}
-#: Columns of a unit's file and of episodes.csv.
-EPISODE_COLUMNS = (
-    "task",
-    "policy",
-    "kind",
-    "training_seed",
-    "seed",
-    "cost",
-    "value",
-    "zero_cost",
-    "gap",
-    "score",
-    "diverged",
-)
+#: Columns of a unit's file and of episodes.csv: scores.csv's with the training seed.
+EPISODE_COLUMNS = (*SCORE_COLUMNS[:3], "training_seed", *SCORE_COLUMNS[3:])
 
 
 @dataclass(frozen=True)
@@ -135,12 +123,7 @@ def _train(unit: Unit, out: Path, timesteps_scale: float) -> Path:
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(EPISODE_COLUMNS), lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
-    return buffer.getvalue()
+    return csv_text(rows, EPISODE_COLUMNS)
 
 
 def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:

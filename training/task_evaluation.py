@@ -178,7 +178,8 @@ def _summary_row(result: TaskScore, kind: str) -> dict[str, Any]:
     }
 
 
-def _csv(rows: list[dict[str, Any]], columns: tuple[str, ...] | list[str]) -> str:
+def csv_text(rows: list[dict[str, Any]], columns: tuple[str, ...] | list[str]) -> str:
+    """`rows` as CSV text with `columns` (floats written with repr: every digit kept)."""
     out = io.StringIO()
     writer = csv.DictWriter(out, fieldnames=list(columns), lineterminator="\n")
     writer.writeheader()
@@ -216,8 +217,8 @@ def write_scores(
     episodes += [dict(row, kind="policy") for r in results for row in r.rows()]
     summary = [_summary_row(r, "policy") for r in results]
     summary += [_summary_row(r, "reference") for r in refs]
-    write_text_atomic(out / "scores.csv", _csv(episodes, SCORE_COLUMNS))
-    write_text_atomic(out / "summary.csv", _csv(summary, list(summary[0])))
+    write_text_atomic(out / "scores.csv", csv_text(episodes, SCORE_COLUMNS))
+    write_text_atomic(out / "summary.csv", csv_text(summary, list(summary[0])))
     task = references.task
     text = (
         f"# Scores on {task.id}\n\n{task.tests}.\n\nV = {task.yardstick} (per test seed); "
@@ -456,6 +457,7 @@ def reference_table_markdown() -> str:
 __all__ = [
     "SCORE_COLUMNS",
     "TasksConfig",
+    "csv_text",
     "evaluate_task",
     "import_policy",
     "markdown_table",
