@@ -241,8 +241,8 @@ def leaderboard_table(rows: list[dict[str, Any]], tasks: Sequence[str] | None = 
     """The leaderboard in Markdown from episode rows: one section per task, one row per policy.
 
     Score and gap: mean over the test seeds with a 95% t-interval (a learner: of the per-seed
-    mean over its training seeds), IQM over every episode; a learner's mean score per training
-    seed is listed too.
+    mean over its training seeds), IQM over every episode; a learner's mean score and mean gap
+    per training seed are listed too.
     """
     out = []
     order = {name: i for i, name in enumerate(POLICY_LABELS)}
@@ -257,7 +257,7 @@ def leaderboard_table(rows: list[dict[str, Any]], tasks: Sequence[str] | None = 
         out.append(f"### {task.id}{note}\n\n{task.tests}. V = {task.yardstick}.\n")
         out.append(
             "| policy | score [95% CI] | IQM | gap to V [95% CI] | score by training seed "
-            "| mean cost |\n|---|---|---|---|---|---|"
+            "| gap by training seed | mean cost |\n|---|---|---|---|---|---|---|"
         )
         names = sorted({r["policy"] for r in task_rows}, key=lambda n: (order.get(n, 99), n))
         for name in names:
@@ -269,12 +269,16 @@ def leaderboard_table(rows: list[dict[str, Any]], tasks: Sequence[str] | None = 
             gaps = np.array([[cell[(t, s)]["gap"] for s in seeds] for t in runs])
             costs = np.array([[cell[(t, s)]["cost"] for s in seeds] for t in runs])
             s, g = summarize(scores), summarize(gaps)
-            by_seed = ", ".join(f"{v:.2f}" for v in scores.mean(axis=1)) if runs != [""] else "-"
+            has_runs = runs != [""]
+            by_seed = ", ".join(f"{v:.2f}" for v in scores.mean(axis=1)) if has_runs else "-"
+            gap_by_seed = (
+                ", ".join(f"{100 * v:+.2f}%" for v in gaps.mean(axis=1)) if has_runs else "-"
+            )
             out.append(
                 f"| {POLICY_LABELS.get(name, name)} | {s.mean:.2f} [{s.mean_low:.2f}, "
                 f"{s.mean_high:.2f}] | {s.iqm:.2f} | {100 * g.mean:+.2f}% "
                 f"[{100 * g.mean_low:+.2f}%, {100 * g.mean_high:+.2f}%] | {by_seed} "
-                f"| {costs.mean():.5g} |"
+                f"| {gap_by_seed} | {costs.mean():.5g} |"
             )
         out.append("")
     return "\n".join(out)
