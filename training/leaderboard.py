@@ -34,11 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.tasks import TASK_LIST, TaskSpec, get_task, load_references
+from agent_envs.tasks import TASK_LIST, TaskScore, TaskSpec, get_task, load_references, score
 from agent_envs.tasks.scores import summarize
 from agent_envs.training.config import option_field
 from agent_envs.training.storage import write_text_atomic
-from agent_envs.training.task_evaluation import SCORE_COLUMNS, csv_text
+from agent_envs.training.task_evaluation import SCORE_COLUMNS, csv_text, reference_scores
 
 #: The learners of the leaderboard, by their name in the paper preset: `apg` (a per-agent
 #: feedback law trained through SERB) and SAC with the summary observation and one common
@@ -126,11 +126,27 @@ def _csv(rows: list[dict[str, Any]]) -> str:
     return csv_text(rows, EPISODE_COLUMNS)
 
 
+def episode_rows(result: TaskScore, kind: str, training_seed: int | str = "") -> list[dict]:
+    """A `TaskScore`'s per-seed rows as episodes.csv rows (`EPISODE_COLUMNS`)."""
+    return [
+        {
+            **{k: row[k] for k in EPISODE_COLUMNS if k in row},
+            "kind": kind,
+            "training_seed": training_seed,
+        }
+        for row in result.rows()
+    ]
+
+
+def _write_unit(path: Path, rows: list[dict[str, Any]]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, _csv(rows))
+
+
 def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
     """Train and score one unit; write and return its file."""
     from threadpoolctl import threadpool_limits
 
-    from agent_envs.tasks import score
     from agent_envs.training.experiment import evaluation_spec
     from agent_envs.training.policies import resolve_policy
 
@@ -145,17 +161,8 @@ def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
             return resolve_policy(spec, env)[0]
 
         result = score(make, unit.task, name=unit.learner)
-    rows = [
-        {
-            **{k: row[k] for k in EPISODE_COLUMNS if k in row},
-            "kind": "learner",
-            "training_seed": unit.seed,
-        }
-        for row in result.rows()
-    ]
     path = out / "units" / f"{unit.stem}.csv"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(path, _csv(rows))
+    _write_unit(path, episode_rows(result, "learner", unit.seed))
     return path
 
 
@@ -179,35 +186,18 @@ def centre_law(env: Any) -> Any:
 
 def centre_law_rows(task_id: str, out: Path) -> list[dict[str, Any]]:
     """`CENTRE_LAW`'s episodes on the task (cached in OUT/units)."""
-    from agent_envs.tasks import score
 
     path = out / "units" / f"{get_task(task_id).file_stem}__{CENTRE_LAW}.csv"
     if not path.is_file():
         result = score(centre_law, task_id, name=CENTRE_LAW, interface=CENTRE_LAW_INTERFACE)
-        rows = [
-            {**{k: row[k] for k in EPISODE_COLUMNS if k in row}, "kind": "law", "training_seed": ""}
-            for row in result.rows()
-        ]
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(path, _csv(rows))
+        _write_unit(path, episode_rows(result, "law"))
     return read_episodes(path)
 
 
 def reference_rows(task_id: str) -> list[dict[str, Any]]:
     """The task's shipped references as episode rows (training seed empty)."""
-    from agent_envs.training.task_evaluation import reference_scores
-
-    rows = []
-    for result in reference_scores(load_references(task_id)):
-        for row in result.rows():
-            rows.append(
-                {
-                    **{k: row[k] for k in EPISODE_COLUMNS if k in row},
-                    "kind": "reference",
-                    "training_seed": "",
-                }
-            )
-    return rows
+    results = reference_scores(load_references(task_id))
+    return [row for result in results for row in episode_rows(result, "reference")]
 
 
 def read_episodes(path: Path) -> list[dict[str, Any]]:

@@ -73,20 +73,17 @@ class CallablePolicy:
 
 def as_policy(obj: Any, env: Any) -> Any:
     """An object with ``predict`` from a policy, a factory (called with `env`) or a callable."""
-    if is_factory(obj):
-        made = obj(env)
-        if hasattr(made, "predict"):
-            return made
-        if callable(made):
-            return CallablePolicy(made)
+    factory = is_factory(obj)
+    made = obj(env) if factory else obj
+    if hasattr(made, "predict"):
+        return made
+    if callable(made):
+        return CallablePolicy(made)
+    if factory:
         raise TypeError(
             f"a policy factory must return an object with predict(...) or a callable, got "
             f"{type(made).__name__}"
         )
-    if hasattr(obj, "predict"):
-        return obj
-    if callable(obj):
-        return CallablePolicy(obj)
     raise TypeError(
         f"a policy must have predict(obs, ...), be a callable obs -> action or a factory "
         f"env -> policy; got {type(obj).__name__}"
@@ -188,8 +185,8 @@ class TaskScore:
         }
 
     def __repr__(self) -> str:
-        s = self.summary()["score"]
-        g = self.summary()["gap"]
+        summary = self.summary()
+        s, g = summary["score"], summary["gap"]
         return (
             f"TaskScore({self.policy} on {self.task.id}: score {s.mean:.2f} "
             f"[{s.mean_low:.2f}, {s.mean_high:.2f}], IQM {s.iqm:.2f}, gap {100 * g.mean:+.2f}% "
