@@ -4,7 +4,8 @@
     python docs/make_animation.py --n-agents 20 --seed 3 --out /tmp/swarm.gif
 
 Each panel is the env's own ``render_mode="rgb_array"`` frame (`agent_envs.envs.rendering`:
-every agent's path-mean position against time, the target dashed) after each step of
+every agent's path-mean position against time, a dot at its current position, the target
+dashed; the first frame shows the start) after each step of
 `agent_envs/Swarm-v0` on the same seed, under
 
 - the optimal open-loop control (`agent_envs.baselines.OptimalController`: the plan solved

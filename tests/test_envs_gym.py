@@ -385,6 +385,20 @@ def test_rgb_array_frames(dim):
     env.close()
 
 
+def test_the_first_frame_shows_the_initial_positions():
+    # at t = 0 there is no trace yet (a line of one point draws nothing): the frame must still
+    # show where the agents start, as dots in the agents' colour (an animation's first frame)
+    blue = np.array([31, 119, 180])  # matplotlib's tab:blue
+    counts = []
+    for n_agents in (3, 12):
+        env = SwarmEnv(dim=1, render_mode="rgb_array", n_agents=n_agents, n_steps=10)
+        env.reset(seed=0)
+        frame = env.render().astype(int)
+        env.close()
+        counts.append(int((np.abs(frame - blue).sum(axis=-1) < 60).sum()))
+    assert counts[0] > 0 and counts[1] > counts[0]  # more agents, more dots
+
+
 def test_human_mode_with_a_non_interactive_backend_is_silent():
     env = SwarmEnv(render_mode="human", **SMALL)
     with warnings.catch_warnings():

@@ -3,7 +3,8 @@
 The renderer records the path-mean positions E x^n (a copy of (N, d) per step, only when a
 render mode is set) and draws on demand:
 
-- d = 1: every agent's mean position against time up to now, the target as a dashed line;
+- d = 1: every agent's mean position against time up to now, a dot at its current position (so
+  the first frame, at t = 0, shows the initial positions), the target as a dashed line;
 - d >= 2: a scatter of the first two coordinates at the current time, the target as a cross.
 
 ``"rgb_array"`` draws with the Agg canvas on a private `Figure` (no pyplot state) and returns
@@ -85,8 +86,14 @@ class SwarmRenderer:
         times = np.asarray(self._times)
         if history.shape[-1] == 1:
             ax.plot(times, history[..., 0], color="tab:blue", linewidth=0.6, alpha=0.6)
+            # the agents now, as dots at the front of their traces: at t = 0 (no trace yet)
+            # the frame shows the initial positions instead of empty axes
+            now = history[-1, :, 0]
+            ax.scatter(
+                np.full(now.shape, times[-1]), now, s=12, color="tab:blue", label="agents", zorder=3
+            )
             ax.axhline(target[0], color="tab:red", linestyle="--", label="target")
-            ax.set_xlim(0.0, self.horizon)
+            ax.set_xlim(-0.03 * self.horizon, self.horizon)  # room for the dots at t = 0
             ax.set_xlabel("t")
             ax.set_ylabel("E x_k(t)")
         else:
