@@ -102,7 +102,7 @@ def test_bare_layer_imports_are_banned():
     ruff = shutil.which("ruff", path=os.path.dirname(sys.executable)) or shutil.which("ruff")
     if ruff is None:
         pytest.skip("ruff is not installed (it comes with the dev extra)")
-    probe = "from baselines import TurnpikeController\nimport training.train\n"
+    probe = "from baselines import TurnpikeController\nimport training.commands.train\n"
     proc = subprocess.run(
         [
             ruff,
@@ -129,7 +129,7 @@ def test_cli_builds_light_subcommands_without_torch():
     uncontrolled runs and `evaluate --help` need neither torch nor SB3."""
     code = (
         "import sys\n"
-        "from agent_envs.training import cli\n"
+        "from agent_envs.training.commands import cli\n"
         "for name in ('reproduce-uncontrolled', 'evaluate', 'report'):\n"
         "    cli.build_parser(name)\n"
         "import agent_envs.training.experiments.uncontrolled\n"

@@ -159,7 +159,7 @@ def test_measure_rows_satisfy_the_corrected_bound_and_refute_the_lemma_at_the_ta
 
 def test_tiny_run_writes_the_table_the_figure_and_the_contraction(tmp_path):
     pytest.importorskip("torch")
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     out = tmp_path / "ccb"
     argv = [

@@ -50,7 +50,7 @@ TRAIN_EXTRA_MODULES = frozenset(
 #: ``cli.parse_seeds`` and ``cli.parse_policy_specs`` were defined here before.
 _MOVED = {
     "parse_seeds": "agent_envs.training.defaults",
-    "parse_policy_specs": "agent_envs.training.evaluate_options",
+    "parse_policy_specs": "agent_envs.training.commands.evaluate_options",
     "MAX_SEEDS": "agent_envs.training.defaults",
 }
 
@@ -299,7 +299,7 @@ def _run_cheap_control_bound(config: Any) -> int:
 
 def _print_statistics_sources(meta: dict[str, Any]) -> None:
     """Which VecNormalize statistics each saved model was evaluated with, and why."""
-    from agent_envs.training.policies import STATISTICS_SOURCES
+    from agent_envs.training.learners.policies import STATISTICS_SOURCES
 
     for name, desc in meta["policies"].items():
         if desc.get("kind") == "sb3":
@@ -314,7 +314,7 @@ def _print_statistics_sources(meta: dict[str, Any]) -> None:
 
 def _run_evaluate(config: Any) -> int:
     if config.task is not None:  # the benchmark: core install only for callable policies
-        from agent_envs.training.task_evaluation import evaluate_task
+        from agent_envs.training.commands.task_evaluation import evaluate_task
 
         return evaluate_task(config)
     from agent_envs.training.storage import check_output_dir
@@ -323,9 +323,9 @@ def _run_evaluate(config: Any) -> int:
     config.check_models()  # the file, its algorithm, its statistics (nothing unpickled)
     import pandas as pd
 
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.report import build_report, display_table
-    from agent_envs.training.results import summarize
+    from agent_envs.training.commands.evaluate import evaluate_policies
+    from agent_envs.training.results.report import build_report, display_table
+    from agent_envs.training.results.tables import summarize
 
     policies: dict[str, Any] = dict(config.policy_specs())
     _objects_as_factories(policies)
@@ -354,8 +354,8 @@ def _run_evaluate(config: Any) -> int:
 
 def _objects_as_factories(policies: dict[str, Any]) -> None:
     """``module:attribute`` specs -> factories of `evaluate_policies` (imported here: named)."""
-    from agent_envs.training.evaluate_options import is_object_spec
-    from agent_envs.training.task_evaluation import import_policy, rowwise_factory
+    from agent_envs.training.commands.evaluate_options import is_object_spec
+    from agent_envs.training.commands.task_evaluation import import_policy, rowwise_factory
 
     for name, spec in policies.items():
         if isinstance(spec, str) and is_object_spec(spec):
@@ -363,13 +363,13 @@ def _objects_as_factories(policies: dict[str, Any]) -> None:
 
 
 def _run_leaderboard(config: Any) -> int:
-    from agent_envs.training.leaderboard import run_leaderboard
+    from agent_envs.training.commands.leaderboard import run_leaderboard
 
     return run_leaderboard(config)
 
 
 def _run_tasks(config: Any) -> int:
-    from agent_envs.training.task_evaluation import run_tasks_command
+    from agent_envs.training.commands.task_evaluation import run_tasks_command
 
     return run_tasks_command(config)
 
@@ -380,8 +380,12 @@ def _run_report(config: Any) -> int:
     check_output_dir(config.out)
     import pandas as pd
 
-    from agent_envs.training.report import build_report, display_table
-    from agent_envs.training.results import DEFAULT_REFERENCE, EvaluationResults, merge_results
+    from agent_envs.training.results.report import build_report, display_table
+    from agent_envs.training.results.tables import (
+        DEFAULT_REFERENCE,
+        EvaluationResults,
+        merge_results,
+    )
 
     loaded = [EvaluationResults.load(path) for path in config.results]
     merged = merge_results(loaded)
@@ -409,8 +413,8 @@ def _run_report(config: Any) -> int:
 
 
 def _run_train(options: dict[str, Any]) -> int:
-    from agent_envs.training.apg_policy import is_apg_run
-    from agent_envs.training.train import config_from_options, train
+    from agent_envs.training.commands.train import config_from_options, train
+    from agent_envs.training.learners.apg_policy import is_apg_run
 
     if options.get("algo") == "apg" or (
         options.get("resume") and is_apg_run(options["resume"]) and "algo" not in options
@@ -431,7 +435,7 @@ def _run_train(options: dict[str, Any]) -> int:
 
 def _run_train_apg(options: dict[str, Any]) -> int:
     """`agent-envs train --algo apg` (and --resume of an apg run): `apg.train_apg`."""
-    from agent_envs.training.apg import from_train_options, train_apg
+    from agent_envs.training.learners.apg import from_train_options, train_apg
 
     config, run_dir, resume = from_train_options(options)
     summary = train_apg(config, run_dir, resume=resume)
@@ -445,7 +449,7 @@ def _run_train_apg(options: dict[str, Any]) -> int:
 
 
 def _run_compare(config: Any) -> int:
-    from agent_envs.training.compare import compare
+    from agent_envs.training.commands.compare import compare
 
     try:  # compare() validates every option, the learners' configs and both envs first
         compare(config)
@@ -456,14 +460,14 @@ def _run_compare(config: Any) -> int:
 
 
 def _run_tune(config: Any) -> int:
-    from agent_envs.training.tune import tune_learner
+    from agent_envs.training.commands.tune import tune_learner
 
     tune_learner(config)
     return 0
 
 
 def _run_sweep(config: Any) -> int:
-    from agent_envs.training.sweep import sweep
+    from agent_envs.training.commands.sweep import sweep
 
     try:
         sweep(config)

@@ -1,15 +1,15 @@
 """Evaluate policies on a swarm env over a fixed list of seeds: rollouts.
 
-    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.commands.evaluate import evaluate_policies
     results = evaluate_policies(
         {"turnpike": "turnpike", "zero": "zero", "ppo": "runs/x/best_model.zip"},
         env_id="agent_envs/Swarm-v0", env_kwargs={"n_agents": 20}, seeds=range(10),
     )
     results.save("eval_out")            # episodes.csv/.json, meta.json, trajectories/*.npz
 
-Policies are resolved by `agent_envs.training.policies.resolve_policy` (a PolicyPredictor, a
-baseline name, a saved SB3 model, or a factory); results are
-`agent_envs.training.results.EvaluationResults`.
+Policies are resolved by `agent_envs.training.learners.policies.resolve_policy` (a PolicyPredictor,
+a baseline name, a saved SB3 model, or a factory); results are
+`agent_envs.training.results.tables.EvaluationResults`.
 
 Every policy runs on the same seeds (and the same `reset_options`), one fresh env per policy.
 Per episode it records: total cost (minus the sum of rewards, i.e. the discrete cost functional
@@ -31,15 +31,20 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from agent_envs.training.commands.evaluate_options import EvaluateConfig, parse_policy_specs
 from agent_envs.training.defaults import (
     DEFAULT_TEST_SEEDS,
     GYM_ENV_ID,
     check_env_id,
     is_multiagent,
 )
-from agent_envs.training.evaluate_options import EvaluateConfig, parse_policy_specs
-from agent_envs.training.policies import PolicySpec, resolve_policy
-from agent_envs.training.results import EPISODE_COLUMNS, Episode, EvaluationResults, stack_episodes
+from agent_envs.training.learners.policies import PolicySpec, resolve_policy
+from agent_envs.training.results.tables import (
+    EPISODE_COLUMNS,
+    Episode,
+    EvaluationResults,
+    stack_episodes,
+)
 from agent_envs.training.storage import check_output_dir
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agent_envs.training.commands.presets import EnvSetting, Learner, Preset
 from agent_envs.training.config import (
     VEC_ENV_CHOICES,
     TrainConfig,
@@ -36,13 +37,12 @@ from agent_envs.training.config import (
     option_field,
 )
 from agent_envs.training.defaults import DEFAULT_TEST_SEED, is_multiagent, parse_env_kwargs
-from agent_envs.training.presets import EnvSetting, Learner, Preset
 from agent_envs.validation import MAX_SEED, check_int
 
 LEARNER = "learner"
 REFERENCE = "reference"
-#: the learner trained by analytic policy gradients (`agent_envs.training.apg`); every other
-#: learner's algo is a Stable-Baselines3 one
+#: the learner trained by analytic policy gradients (`agent_envs.training.learners.apg`); every
+#: other learner's algo is a Stable-Baselines3 one
 APG = "apg"
 #: keys of an apg trial's training dict that are not `APGConfig` fields
 APG_RUN_KEYS = ("algo", "env_id", "out", "run_name")
@@ -308,8 +308,8 @@ def apg_trial(
     and the fields of its validated `apg.APGConfig` (the learner's `hyperparams` over the
     defaults, `iterations` = its budget times the scale; validation every 25 iterations and a
     checkpoint every 50, or at the end of a shorter run)."""
-    from agent_envs.training.apg import APGConfig
     from agent_envs.training.defaults import GYM_ENV_ID
+    from agent_envs.training.learners.apg import APGConfig
 
     values = {
         "eval_freq": min(25, iterations),
@@ -424,7 +424,7 @@ def check_envs(trials: Sequence[Trial], option: str = "--env-kwargs") -> None:
     """Build every distinct training and evaluation env of `trials` once, so that bad env
     kwargs are a ValueError naming `option` before anything trains (`env_description`)."""
     from agent_envs.training.defaults import GYM_ENV_ID
-    from agent_envs.training.environments import env_description
+    from agent_envs.training.learners.environments import env_description
 
     seen: set[str] = set()
     for trial in trials:
@@ -512,7 +512,7 @@ def train_learner(config: TrainConfig, *, retrain: bool = False) -> Path:
     unfinished one continues from its last checkpoint (`train --resume`); `retrain` starts a
     new run whatever is there.
     """
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
 
     existing = None if retrain else find_run(config)
     if existing is None:
@@ -528,7 +528,7 @@ def train_learner(config: TrainConfig, *, retrain: bool = False) -> Path:
 def _apg_run(config: Any, out: Path, run_name_: str | None) -> tuple[Path, bool] | None:
     """The newest apg run in `out` (or `out/run_name_`) with `config`'s settings (`progress`
     and `threads` aside): (run dir, finished with enough iterations)."""
-    from agent_envs.training.apg_policy import is_apg_run
+    from agent_envs.training.learners.apg_policy import is_apg_run
 
     wanted = {k: v for k, v in config.to_dict().items() if k not in ("progress", "threads")}
     wanted = json.loads(json.dumps(wanted))
@@ -554,7 +554,7 @@ def _apg_run(config: Any, out: Path, run_name_: str | None) -> tuple[Path, bool]
 
 def train_apg_trial(train: dict[str, Any], *, retrain: bool = False) -> Path:
     """Train the apg learner of a training dict (`apg_trial`), or reuse / resume its run."""
-    from agent_envs.training.apg import APGConfig, default_run_dir, train_apg
+    from agent_envs.training.learners.apg import APGConfig, default_run_dir, train_apg
 
     config = APGConfig.from_dict({k: v for k, v in train.items() if k not in APG_RUN_KEYS})
     out = Path(train["out"])
@@ -592,8 +592,8 @@ def budget(train: dict[str, Any]) -> str:
 def evaluation_spec(run_dir: Path) -> str:
     """What `evaluate_policies` loads for a trained run: an apg run folder as it is, an SB3
     run's best model on the validation seeds (else its final one)."""
-    from agent_envs.training.apg_policy import is_apg_run
-    from agent_envs.training.checkpoints import best_model_path
+    from agent_envs.training.learners.apg_policy import is_apg_run
+    from agent_envs.training.learners.checkpoints import best_model_path
 
     return str(run_dir) if is_apg_run(run_dir) else str(best_model_path(run_dir))
 

@@ -55,7 +55,13 @@ import numpy as np
 import torch
 
 from agent_envs.envs.episode import EpisodeConfig
-from agent_envs.training.apg_policy import (
+from agent_envs.training.defaults import (
+    DEFAULT_EVAL_SEED,
+    GYM_ENV_ID,
+    parse_env_kwargs,
+    parse_json_object,
+)
+from agent_envs.training.learners.apg_policy import (
     BEST_LAW,
     FINAL_LAW,
     LAW_DESCRIPTION,
@@ -66,15 +72,13 @@ from agent_envs.training.apg_policy import (
     load_apg_policy,
     save_law,
 )
-from agent_envs.training.apg_rollout import ClosedLoop, EpisodeNoise, with_env_kwargs
-from agent_envs.training.callbacks import mean_ci95, read_learning_curve, write_learning_curve
-from agent_envs.training.defaults import (
-    DEFAULT_EVAL_SEED,
-    GYM_ENV_ID,
-    parse_env_kwargs,
-    parse_json_object,
+from agent_envs.training.learners.apg_rollout import ClosedLoop, EpisodeNoise, with_env_kwargs
+from agent_envs.training.learners.callbacks import (
+    mean_ci95,
+    read_learning_curve,
+    write_learning_curve,
 )
-from agent_envs.training.environments import env_description
+from agent_envs.training.learners.environments import env_description
 from agent_envs.training.storage import (
     RunLock,
     RunManifest,
@@ -448,7 +452,7 @@ class _Trainer:
         if self.reference_costs or not self.config.references:
             return self.reference_costs
         from agent_envs.baselines import make_baseline
-        from agent_envs.training.evaluate import make_swarm_env, rollout
+        from agent_envs.training.commands.evaluate import make_swarm_env, rollout
 
         env = make_swarm_env(GYM_ENV_ID, self.config.env_kwargs)
         try:
