@@ -14,7 +14,6 @@ torch = pytest.importorskip("torch")
 import agent_envs  # noqa: E402  (registers the env ids)
 from agent_envs import swarm_v0  # noqa: E402
 from agent_envs.envs.episode import EpisodeConfig  # noqa: E402
-from agent_envs.training.commands.evaluate import rollout  # noqa: E402
 from agent_envs.training.learners.apg import (  # noqa: E402
     APGConfig,
     is_apg_run,
@@ -31,6 +30,7 @@ from agent_envs.training.learners.apg_policy import (  # noqa: E402
     save_law,
 )
 from agent_envs.training.learners.apg_rollout import ClosedLoop, EpisodeNoise  # noqa: E402
+from agent_envs.training.results.rollout import rollout  # noqa: E402
 
 TINY = {
     "n_agents": 4,

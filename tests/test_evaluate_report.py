@@ -13,7 +13,7 @@ import agent_envs  # noqa: F401
 from agent_envs.baselines import TurnpikeController, ZeroController
 from agent_envs.training.commands.cli import main as cli_main
 from agent_envs.training.commands.cli import parse_policy_specs, parse_seeds
-from agent_envs.training.commands.evaluate import evaluate_policies, rollout
+from agent_envs.training.commands.evaluate import evaluate_policies
 from agent_envs.training.defaults import parse_env_kwargs
 from agent_envs.training.learners.policies import (
     ModelSpec,
@@ -23,6 +23,7 @@ from agent_envs.training.learners.policies import (
     own_run_candidates,
 )
 from agent_envs.training.results.report import ReportSection, build_report
+from agent_envs.training.results.rollout import rollout
 from agent_envs.training.results.tables import (
     EvaluationResults,
     mean_confidence_interval,

@@ -505,18 +505,18 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "tasks": Subcommand(
         "the benchmark's tasks: list them (id, what it tests, N, d, m, V), regenerate or "
         "verify their reference data",
-        _T + "task_evaluation:TasksConfig",
+        _T + "commands.task_evaluation:TasksConfig",
         _run_tasks,
     ),
     "evaluate": Subcommand(
         "run policies on an env over fixed seeds, store results; --task ID scores them on a "
         "benchmark task against its shipped references",
-        _T + "evaluate_options:EvaluateConfig",
+        _T + "commands.evaluate_options:EvaluateConfig",
         _run_evaluate,
     ),
     "report": Subcommand(
         "write a Markdown/HTML report with plots from results",
-        _T + "report:ReportConfig",
+        _T + "results.report:ReportConfig",
         _run_report,
     ),
     "train": Subcommand(
@@ -530,7 +530,7 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     ),
     "compare": Subcommand(
         "train learners and compare them with the turnpike controller",
-        _T + "compare:CompareConfig",
+        _T + "commands.compare:CompareConfig",
         _run_compare,
         description="Train the preset's learners (PPO and SAC on the single-controller env, "
         "parameter-shared PPO on the PettingZoo env) and compare them with the turnpike, "
@@ -540,7 +540,7 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "sweep": Subcommand(
         "a grid of learners x training seeds x env settings on Ray Tune, with across-seed "
         "statistics",
-        _T + "sweep:SweepConfig",
+        _T + "commands.sweep:SweepConfig",
         _run_sweep,
         description="Run a grid of (learner x training seed x env setting) as Ray Tune trials "
         "(each one train + evaluation on the held-out test seeds) and write "
@@ -550,12 +550,12 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     "leaderboard": Subcommand(
         "every benchmark task x every policy we ship (apg, SAC, the references), scored on the "
         "tasks' test seeds; resumable in parts",
-        _T + "leaderboard:LeaderboardConfig",
+        _T + "commands.leaderboard:LeaderboardConfig",
         _run_leaderboard,
     ),
     "tune": Subcommand(
         "hyperparameter search for one learner of a preset (Ray Tune + Optuna)",
-        _T + "tune:TuneConfig",
+        _T + "commands.tune:TuneConfig",
         _run_tune,
         description="Search the hyperparameters of one learner of a preset with Optuna's TPE "
         "sampler on Ray Tune (rl-zoo3's search spaces; ASHA or median early stopping on the "

@@ -136,7 +136,7 @@ def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_pat
     import gymnasium as gym
 
     import agent_envs  # noqa: F401
-    from agent_envs.training.commands.evaluate import rollout
+    from agent_envs.training.results.rollout import rollout
 
     env = gym.make(GYM_ENV_ID, **run.env_kwargs(n_agents, n_steps, n_paths))
     try:

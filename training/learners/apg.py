@@ -452,7 +452,7 @@ class _Trainer:
         if self.reference_costs or not self.config.references:
             return self.reference_costs
         from agent_envs.baselines import make_baseline
-        from agent_envs.training.commands.evaluate import make_swarm_env, rollout
+        from agent_envs.training.results.rollout import make_swarm_env, rollout
 
         env = make_swarm_env(GYM_ENV_ID, self.config.env_kwargs)
         try:
