@@ -50,7 +50,8 @@ import torch
 from agent_envs.training.commands.evaluate import evaluate_policies
 from agent_envs.training.commands.presets import PAPER_ENV
 from agent_envs.training.defaults import DEFAULT_TEST_SEED
-from agent_envs.training.learners.apg import APGConfig, load_apg_policy, train_apg
+from agent_envs.training.learners.apg import load_apg_policy, train_apg
+from agent_envs.training.learners.apg_config import APGConfig
 from agent_envs.training.results.tables import EvaluationResults
 
 QUICK_ENV = {**PAPER_ENV, "n_agents": 10, "n_steps": 20}

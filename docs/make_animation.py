@@ -45,7 +45,8 @@ def apg_controller(env: gym.Env) -> object:
     """An `apg` law trained for this env (its N and m; 150 iterations, seed 0), as a policy."""
     import tempfile
 
-    from agent_envs.training.learners.apg import APGConfig, train_apg
+    from agent_envs.training.learners.apg import train_apg
+    from agent_envs.training.learners.apg_config import APGConfig
     from agent_envs.training.learners.apg_policy import load_apg_policy
 
     base = env.unwrapped

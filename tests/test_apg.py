@@ -15,11 +15,11 @@ import agent_envs  # noqa: E402  (registers the env ids)
 from agent_envs import swarm_v0  # noqa: E402
 from agent_envs.envs.episode import EpisodeConfig  # noqa: E402
 from agent_envs.training.learners.apg import (  # noqa: E402
-    APGConfig,
     is_apg_run,
     load_apg_policy,
     train_apg,
 )
+from agent_envs.training.learners.apg_config import APGConfig  # noqa: E402
 from agent_envs.training.learners.apg_policy import (  # noqa: E402
     BEST_LAW,
     FINAL_LAW,

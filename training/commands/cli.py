@@ -435,7 +435,8 @@ def _run_train(options: dict[str, Any]) -> int:
 
 def _run_train_apg(options: dict[str, Any]) -> int:
     """`agent-envs train --algo apg` (and --resume of an apg run): `apg.train_apg`."""
-    from agent_envs.training.learners.apg import from_train_options, train_apg
+    from agent_envs.training.learners.apg import train_apg
+    from agent_envs.training.learners.apg_config import from_train_options
 
     config, run_dir, resume = from_train_options(options)
     summary = train_apg(config, run_dir, resume=resume)

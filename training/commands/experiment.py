@@ -305,11 +305,11 @@ def apg_trial(
     name: str | None,
 ) -> dict[str, Any]:
     """The training dict of an `apg` learner trial: ``algo``, ``env_id``, ``out``, ``run_name``
-    and the fields of its validated `apg.APGConfig` (the learner's `hyperparams` over the
+    and the fields of its validated `apg_config.APGConfig` (the learner's `hyperparams` over the
     defaults, `iterations` = its budget times the scale; validation every 25 iterations and a
     checkpoint every 50, or at the end of a shorter run)."""
     from agent_envs.training.defaults import GYM_ENV_ID
-    from agent_envs.training.learners.apg import APGConfig
+    from agent_envs.training.learners.apg_config import APGConfig
 
     values = {
         "eval_freq": min(25, iterations),
@@ -554,7 +554,8 @@ def _apg_run(config: Any, out: Path, run_name_: str | None) -> tuple[Path, bool]
 
 def train_apg_trial(train: dict[str, Any], *, retrain: bool = False) -> Path:
     """Train the apg learner of a training dict (`apg_trial`), or reuse / resume its run."""
-    from agent_envs.training.learners.apg import APGConfig, default_run_dir, train_apg
+    from agent_envs.training.learners.apg import train_apg
+    from agent_envs.training.learners.apg_config import APGConfig, default_run_dir
 
     config = APGConfig.from_dict({k: v for k, v in train.items() if k not in APG_RUN_KEYS})
     out = Path(train["out"])
