@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from agent_envs.training.commands.cli import SUBCOMMANDS, add_dataclass_arguments, build_parser
+from agent_envs.training.commands.cli import SUBCOMMANDS, build_parser
+from agent_envs.training.commands.parser import add_dataclass_arguments
 from agent_envs.training.defaults import DEFAULT_TEST_SEEDS, MAX_SEEDS, parse_seeds
 from agent_envs.validation import MAX_SEED
 
