@@ -9,7 +9,7 @@ runs one training seed (``--seed``, default the preset's first) of one env setti
 default the main one) in process; the runs come from the experiment builder
 (`agent_envs.training.commands.experiment`), as the sweep's do.
 
-Steps: (1) train every learner of the preset (`experiment.train_learner`; a finished run
+Steps: (1) train every learner of the preset (`learner_runs.train_from_dict`; a finished run
 of the same configuration in ``OUT/runs`` is reused, an interrupted one resumed from its last
 checkpoint); (2) evaluate the learners' best models (chosen on the validation seeds) and the
 turnpike, proportional and zero controllers on the same held-out test seeds
@@ -43,13 +43,11 @@ from agent_envs.training.commands.experiment import (
     ExperimentOptions,
     GridArguments,
     Trial,
-    budget,
     build_trials,
     check_envs,
-    evaluation_spec,
     select,
-    train_from_dict,
 )
+from agent_envs.training.commands.learner_runs import budget, evaluation_spec, train_from_dict
 from agent_envs.training.commands.presets import OPTIMUM_POLICIES, PRESETS, Learner, get_preset
 from agent_envs.training.config import command_line, json_field, option_field
 from agent_envs.training.defaults import (

@@ -15,7 +15,7 @@ the task's shipped data: nothing is re-solved.
 
 Resumable in parts: each unit writes ``OUT/units/TASK__LEARNER__SEED.csv`` (its per-episode
 scores) when it is done, and a unit whose file exists is skipped; training itself reuses a
-finished run and resumes an interrupted one (`experiment.train_from_dict`). ``--tasks`` runs
+finished run and resumes an interrupted one (`learner_runs.train_from_dict`). ``--tasks`` runs
 part of the grid; ``--workers`` runs units in parallel processes (one torch and BLAS thread
 each). When every unit of the selected tasks is done, ``OUT/episodes.csv`` (every unit and the
 references, one row per policy x training seed x test seed) and ``OUT/leaderboard.md`` are
@@ -103,11 +103,8 @@ def units(tasks: Sequence[str], seeds: Sequence[int] = TRAINING_SEEDS) -> list[U
 
 def _train(unit: Unit, out: Path, timesteps_scale: float) -> Path:
     """Train (or reuse) the unit's learner on its source task; the run directory."""
-    from agent_envs.training.commands.experiment import (
-        ExperimentOptions,
-        learner_config,
-        train_from_dict,
-    )
+    from agent_envs.training.commands.experiment import ExperimentOptions, learner_config
+    from agent_envs.training.commands.learner_runs import train_from_dict
     from agent_envs.training.config import TrainConfig
 
     source = get_task(unit.source)
@@ -147,7 +144,7 @@ def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
     """Train and score one unit; write and return its file."""
     from threadpoolctl import threadpool_limits
 
-    from agent_envs.training.commands.experiment import evaluation_spec
+    from agent_envs.training.commands.learner_runs import evaluation_spec
     from agent_envs.training.learners.policies import resolve_policy
 
     with threadpool_limits(1):

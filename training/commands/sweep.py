@@ -58,13 +58,13 @@ from agent_envs.training.commands.experiment import (
     ExperimentOptions,
     GridArguments,
     Trial,
-    budget,
     build_trials,
     check_envs,
     evaluation_dir,
     learner_run_dir,
     split_names,
 )
+from agent_envs.training.commands.learner_runs import budget
 from agent_envs.training.commands.presets import PRESETS, get_preset
 from agent_envs.training.config import command_line, option_field
 from agent_envs.training.defaults import parse_seeds
@@ -178,7 +178,7 @@ def _finished_evaluation(folder: Path, trial: Trial) -> bool:
 
 def train_trial(trial: Trial, out: Path) -> Path:
     """Train the learner of `trial` (or continue its interrupted run); return the run folder."""
-    from agent_envs.training.commands.experiment import train_from_dict
+    from agent_envs.training.commands.learner_runs import train_from_dict
 
     return train_from_dict({**trial.train, "out": str(out / "runs")})
 
@@ -200,7 +200,7 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
     ``sweep_trial.log`` in its evaluation folder.
     """
     from agent_envs.training.commands.evaluate import evaluate_policies
-    from agent_envs.training.commands.experiment import evaluation_spec
+    from agent_envs.training.commands.learner_runs import evaluation_spec
     from agent_envs.training.defaults import GYM_ENV_ID
     from agent_envs.training.results.tables import EvaluationResults
 
