@@ -12,8 +12,8 @@ import pytest
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.params import SwarmParams
 from agent_envs.simulator import brownian_increments, simulate
-from agent_envs.training.experiments.cheap_control_bound import (
-    CheapControlBoundConfig,
+from agent_envs.training.experiments.cheap_control_config import CheapControlBoundConfig
+from agent_envs.training.experiments.cheap_control_formulas import (
     StartStatistics,
     centre_control,
     corrected_upper_bound,
@@ -22,11 +22,11 @@ from agent_envs.training.experiments.cheap_control_bound import (
     disagreement_sums,
     fiedler_bound,
     fit_exponent,
-    measure,
     noise_floor,
     paper_rhs,
     sample_floor,
 )
+from agent_envs.training.experiments.cheap_control_measurements import measure
 from agent_envs.training.experiments.turnpike_property import cheap_constant, kernel_bound
 
 TINY = {

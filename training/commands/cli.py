@@ -82,7 +82,7 @@ SUBCOMMANDS: dict[str, Subcommand] = {
     ),
     "reproduce-cheap-control-bound": Subcommand(
         "lem:cheap measured: its counterexamples, the noise floor, a corrected bound, L^n",
-        _T + "experiments.cheap_control_bound:CheapControlBoundConfig",
+        _T + "experiments.cheap_control_config:CheapControlBoundConfig",
         runners.run_cheap_control_bound,
     ),
     "tasks": Subcommand(
