@@ -39,7 +39,7 @@ bad = sorted(m for m in ("torch", "stable_baselines3", "pandas") if m in sys.mod
 assert not bad, bad
 
 # The command line: the core-only subcommand works, the others say which extra to install.
-cli = [sys.executable, "-m", "agent_envs.training.cli"]
+cli = [sys.executable, "-m", "agent_envs.training.commands.cli"]
 with tempfile.TemporaryDirectory() as tmp:
     done = subprocess.run(
         [*cli, "reproduce", "uncontrolled", "--n-agents", "3", "--n-paths", "1", "--out", "u"],

@@ -354,6 +354,110 @@ def _initial_controls(initial_controls: Any, shape: tuple[int, ...], bound: floa
     return np.clip(arr, -bound, bound)
 
 
+def _check_solver_options(
+    seed: Any, max_control: float, gtol: float, max_iterations: int, memory: int, threads: Any
+) -> tuple[float, float, int, int, int | None]:
+    """The solver's own options checked: (bound, gtol, max_iterations, memory, threads).
+
+    The seed must be an int (not a generator): every evaluation draws the same increments.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(
+            f"seed must be an int (the same increments are drawn on every evaluation), got {seed!r}"
+        )
+    bound = check_positive("max_control", max_control)
+    gtol = check_positive("gtol", gtol)
+    max_iterations = check_int("max_iterations", max_iterations, 1)
+    memory = check_int("memory", memory, 1)
+    if threads is not None:
+        threads = check_int("threads", threads, 1)
+    return bound, gtol, max_iterations, memory, threads
+
+
+def _start_positions(
+    params: SwarmParams,
+    integrator: str,
+    jacobian: str,
+    phi_method: str | None,
+    n_steps: int,
+    seed: int,
+    initial_positions: Any,
+) -> np.ndarray:
+    """x^0 (N, d): `initial_positions`, or drawn uniform on [-1, 1]^d from the seed.
+
+    The numpy simulate (one path) validates everything else with its own messages (params,
+    integrator, jacobian, phi_method, n_steps, seed, initial_positions) and draws x^0 if needed.
+    """
+    probe = simulate(
+        params,
+        integrator,
+        jacobian=jacobian,
+        phi_method=phi_method,
+        n_steps=n_steps,
+        n_paths=1,
+        seed=seed,
+        initial_positions=initial_positions,
+    )
+    return probe.positions[0, 0]
+
+
+def _evaluate_controls(
+    params: SwarmParams,
+    integrator: str,
+    jacobian: str,
+    phi_method: str | None,
+    n_steps: int,
+    n_paths: int,
+    seed: int,
+    x0: np.ndarray,
+    controls: np.ndarray,
+) -> tuple[Any, float]:
+    """(trajectory, cost) of the controls u (m, N, d) on the solver's K paths, with numpy.
+
+    The cost is the sample mean over the K paths of `eq:discrete_cost_functional` with
+    tau = T / m, on the caller's `phi_method` (the returned trajectory's contract).
+    """
+    final = simulate(
+        params,
+        integrator,
+        jacobian=jacobian,
+        phi_method=phi_method,
+        n_steps=n_steps,
+        n_paths=n_paths,
+        seed=seed,
+        initial_positions=x0,
+        control=controls,
+    )
+    cost = float(
+        np.mean(
+            discrete_cost(
+                final.positions,
+                final.controls,
+                params.target_vector,
+                params.gamma,
+                params.horizon / n_steps,
+            )
+        )
+    )
+    return final, cost
+
+
+def _warn_not_converged(relative: float, gtol: float, failure: str | None, result: Any) -> None:
+    """A RuntimeWarning naming why the solve stopped (attributed to solve_optimal_control's
+    caller, as before this was a function: stacklevel 3)."""
+    why = (
+        f"relative projected gradient norm {relative:.3g} > gtol = {gtol:g}"
+        if failure is None
+        else f"failed: {failure}"
+    )
+    warnings.warn(
+        f"solve_optimal_control did not converge: {why} after {result.nit} iterations "
+        f"({result.message})",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+
+
 def solve_optimal_control(
     params: SwarmParams,
     integrator: str = DEFAULT_INTEGRATOR,
@@ -397,29 +501,12 @@ def solve_optimal_control(
     Returns:
         an `OptimalControlResult`.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(
-            f"seed must be an int (the same increments are drawn on every evaluation), got {seed!r}"
-        )
-    bound = check_positive("max_control", max_control)
-    gtol = check_positive("gtol", gtol)
-    max_iterations = check_int("max_iterations", max_iterations, 1)
-    memory = check_int("memory", memory, 1)
-    if threads is not None:
-        threads = check_int("threads", threads, 1)
-    # The numpy simulate validates everything else with its own messages (params, integrator,
-    # jacobian, phi_method, n_steps, n_paths, seed, initial_positions) and draws x^0 if needed.
-    probe = simulate(
-        params,
-        integrator,
-        jacobian=jacobian,
-        phi_method=phi_method,
-        n_steps=n_steps,
-        n_paths=1,
-        seed=seed,
-        initial_positions=initial_positions,
+    bound, gtol, max_iterations, memory, threads = _check_solver_options(
+        seed, max_control, gtol, max_iterations, memory, threads
     )
-    x0 = probe.positions[0, 0]
+    x0 = _start_positions(
+        params, integrator, jacobian, phi_method, n_steps, seed, initial_positions
+    )
     shape = (n_steps, params.n_agents, params.dim)
     start = _initial_controls(initial_controls, shape, bound)
     began = time.perf_counter()
@@ -440,44 +527,15 @@ def solve_optimal_control(
     failure = run.failure
     controls = np.clip(result.x, -bound, bound).reshape(shape)
     wall = time.perf_counter() - began
-    final = simulate(
-        params,
-        integrator,
-        jacobian=jacobian,
-        phi_method=phi_method,
-        n_steps=n_steps,
-        n_paths=n_paths,
-        seed=seed,
-        initial_positions=x0,
-        control=controls,
-    )
-    cost = float(
-        np.mean(
-            discrete_cost(
-                final.positions,
-                final.controls,
-                params.target_vector,
-                params.gamma,
-                params.horizon / n_steps,
-            )
-        )
+    final, cost = _evaluate_controls(
+        params, integrator, jacobian, phi_method, n_steps, n_paths, seed, x0, controls
     )
     # a diverged final state makes the objective return its penalty with a zero gradient
     if failure is None and (final.diverged or not np.isfinite(cost)):
         failure = "the final simulation diverged (non-finite or exploding state)"
     converged = bool(relative <= gtol) and failure is None
     if not converged and warn:
-        why = (
-            f"relative projected gradient norm {relative:.3g} > gtol = {gtol:g}"
-            if failure is None
-            else f"failed: {failure}"
-        )
-        warnings.warn(
-            f"solve_optimal_control did not converge: {why} after {result.nit} iterations "
-            f"({result.message})",
-            RuntimeWarning,
-            stacklevel=2,
-        )
+        _warn_not_converged(relative, gtol, failure, result)
     return OptimalControlResult(
         controls=controls,
         positions=final.positions,

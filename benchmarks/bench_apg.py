@@ -47,11 +47,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from agent_envs.training.apg import APGConfig, load_apg_policy, train_apg
+from agent_envs.training.commands.evaluate import evaluate_policies
+from agent_envs.training.commands.presets import PAPER_ENV
 from agent_envs.training.defaults import DEFAULT_TEST_SEED
-from agent_envs.training.evaluate import evaluate_policies
-from agent_envs.training.presets import PAPER_ENV
-from agent_envs.training.results import EvaluationResults
+from agent_envs.training.learners.apg import load_apg_policy, train_apg
+from agent_envs.training.learners.apg_config import APGConfig
+from agent_envs.training.results.tables import EvaluationResults
 
 QUICK_ENV = {**PAPER_ENV, "n_agents": 10, "n_steps": 20}
 PARTS = (
@@ -206,8 +207,8 @@ def gradient_norms(args) -> dict:
     """|dJ/dtheta| at the initial (proportional) law on one training episode (4 paths), per
     integrator and eps: where the gradient through the integrator is usable."""
     from agent_envs.envs.episode import EpisodeConfig
-    from agent_envs.training.apg_policy import SwarmFeedbackLaw
-    from agent_envs.training.apg_rollout import ClosedLoop, EpisodeNoise
+    from agent_envs.training.learners.apg_policy import SwarmFeedbackLaw
+    from agent_envs.training.learners.apg_rollout import ClosedLoop, EpisodeNoise
 
     rows = []
     for eps in (0.05, 1.0):

@@ -600,10 +600,10 @@ def worker_ppo(timesteps: int, threads: int = 1) -> dict[str, float]:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agent_envs.training.config import GYM_ENV_ID, TrainConfig, resolve_hyperparams
-    from agent_envs.training.native_vec_env import NativeVecEnv
+    from agent_envs.training.learners.native_vec_env import NativeVecEnv
 
     try:  # the presets' module (its name before the presets were shared: sweep_grid)
-        from agent_envs.training.presets import PAPER_ENV
+        from agent_envs.training.commands.presets import PAPER_ENV
     except ImportError:
         from agent_envs.training.sweep_grid import PAPER_ENV
 

@@ -115,8 +115,8 @@ def ppo_steps_per_second(
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from agent_envs.training.commands.train import make_training_env, resolve_hyperparams
     from agent_envs.training.config import GYM_ENV_ID, TrainConfig
-    from agent_envs.training.train import make_training_env, resolve_hyperparams
 
     config = TrainConfig(env_id=GYM_ENV_ID, n_envs=n_envs, vec_env=vec_env, seed=0)
     kwargs, n_envs, normalize_kwargs, policy = resolve_hyperparams(config)

@@ -30,7 +30,7 @@ import numpy as np
 
 import agent_envs  # noqa: F401  (registers the env)
 from agent_envs.baselines import make_baseline
-from agent_envs.training.presets import PAPER_ENV
+from agent_envs.training.commands.presets import PAPER_ENV
 
 #: The env of the figures: the paper's, with --env-kwargs over it.
 SETTING = dict(PAPER_ENV)

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from agent_envs.training.evaluate import evaluate_policies
-from agent_envs.training.presets import PAPER_ENV
+from agent_envs.training.commands.evaluate import evaluate_policies
+from agent_envs.training.commands.presets import PAPER_ENV
 
 REFERENCES = ("proportional", "zero")
 

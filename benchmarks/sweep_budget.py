@@ -31,11 +31,11 @@ import tempfile
 import time
 from collections import defaultdict
 
+from agent_envs.training.commands.evaluate import evaluate_policies
+from agent_envs.training.commands.experiment import LEARNER, ExperimentOptions, build_trials
+from agent_envs.training.commands.presets import PRESETS
+from agent_envs.training.commands.train import train
 from agent_envs.training.config import TrainConfig
-from agent_envs.training.evaluate import evaluate_policies
-from agent_envs.training.experiment import LEARNER, ExperimentOptions, build_trials
-from agent_envs.training.presets import PRESETS
-from agent_envs.training.train import train
 
 #: short-run timesteps per learner (PPO: two rollouts; SAC/TD3: 1500 steps of gradient updates)
 SHORT = {"ppo": 8192, "ppo-swarm": 8192, "sac": 1500, "td3": 1500, "ppo-shared": 8000}

@@ -10,7 +10,7 @@ dashed; the first frame shows the start) after each step of
 
 - the optimal open-loop control (`agent_envs.baselines.OptimalController`: the plan solved
   from the episode's start, then replayed; needs torch, the ``train`` extra),
-- `apg`, the learned feedback law (`agent_envs.training.apg`, trained here on the env's own
+- `apg`, the learned feedback law (`agent_envs.training.learners.apg`, trained here on the env's own
   kwargs for 150 iterations, seed 0: some 20 s on one core),
 - the proportional controller beta (xbar - E x_k) until the turnpike time, then 0,
 - the paper's turnpike controller (the cheap control `eq:cheap_ctr`, which also cancels the
@@ -46,8 +46,9 @@ def apg_controller(env: gym.Env) -> object:
     """An `apg` law trained for this env (its N and m; 150 iterations, seed 0), as a policy."""
     import tempfile
 
-    from agent_envs.training.apg import APGConfig, train_apg
-    from agent_envs.training.apg_policy import load_apg_policy
+    from agent_envs.training.learners.apg import train_apg
+    from agent_envs.training.learners.apg_config import APGConfig
+    from agent_envs.training.learners.apg_policy import load_apg_policy
 
     base = env.unwrapped
     kwargs = {"n_agents": base.params.n_agents, "n_steps": base.n_steps}

@@ -14,13 +14,13 @@ torch = pytest.importorskip("torch")
 import agent_envs  # noqa: E402  (registers the env ids)
 from agent_envs import swarm_v0  # noqa: E402
 from agent_envs.envs.episode import EpisodeConfig  # noqa: E402
-from agent_envs.training.apg import (  # noqa: E402
-    APGConfig,
+from agent_envs.training.learners.apg import (  # noqa: E402
     is_apg_run,
     load_apg_policy,
     train_apg,
 )
-from agent_envs.training.apg_policy import (  # noqa: E402
+from agent_envs.training.learners.apg_config import APGConfig  # noqa: E402
+from agent_envs.training.learners.apg_policy import (  # noqa: E402
     BEST_LAW,
     FINAL_LAW,
     LawSpec,
@@ -29,8 +29,8 @@ from agent_envs.training.apg_policy import (  # noqa: E402
     load_law,
     save_law,
 )
-from agent_envs.training.apg_rollout import ClosedLoop, EpisodeNoise  # noqa: E402
-from agent_envs.training.evaluate import rollout  # noqa: E402
+from agent_envs.training.learners.apg_rollout import ClosedLoop, EpisodeNoise  # noqa: E402
+from agent_envs.training.results.rollout import rollout  # noqa: E402
 
 TINY = {
     "n_agents": 4,
@@ -277,7 +277,7 @@ def test_bad_observations_and_paths(tmp_path):
 
 
 def test_evaluate_policies_loads_an_apg_run_by_its_folder(tmp_path):
-    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.commands.evaluate import evaluate_policies
 
     run = tmp_path / "run"
     train_apg(_tiny_config(iterations=2), run)
@@ -292,7 +292,7 @@ def test_evaluate_policies_loads_an_apg_run_by_its_folder(tmp_path):
 
 
 def test_ctrl_c_saves_the_last_whole_iteration(tmp_path, monkeypatch):
-    from agent_envs.training import apg
+    from agent_envs.training.learners import apg
 
     config = _tiny_config(iterations=4, eval_freq=3, checkpoint_freq=4)
     train_apg(config, tmp_path / "whole")
@@ -322,8 +322,8 @@ def test_training_beats_the_proportional_controller_at_the_quick_setting(tmp_pat
     """The learner learns: at N = 10, m = 20 (the quick setting; +0.07% to +0.16% of the optimum
     after 300 iterations in benchmarks/bench_apg.py) 100 iterations already cost less than 0.8x
     the proportional controller (0.75x after 300)."""
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.presets import PAPER_ENV
+    from agent_envs.training.commands.evaluate import evaluate_policies
+    from agent_envs.training.commands.presets import PAPER_ENV
 
     quick = {**PAPER_ENV, "n_agents": 10, "n_steps": 20}
     config = APGConfig(env_kwargs=quick, iterations=100, progress=False, references=())
@@ -366,7 +366,7 @@ def test_train_algo_apg_from_the_command_line_trains_resumes_and_evaluates(tmp_p
     run without --algo, and `evaluate -p apg=RUN`: the CLI routes to the apg learner."""
     import json
 
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     env = '{"n_agents": 4, "n_steps": 5}'
     hyper = '{"iterations": 2, "eval_freq": 1, "hidden": 2}'

@@ -220,7 +220,7 @@ def test_evaluate_policy_on_dummy_vec_env_with_different_seeds():
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from agent_envs.training.evaluate import rollout
+    from agent_envs.training.results.rollout import rollout
 
     # env 0 is truncated after 5 of its 8 steps, so the two envs reset at different times.
     venv = DummyVecEnv([lambda: small_env(max_episode_steps=5), lambda: small_env(target=-0.3)])

@@ -12,8 +12,8 @@ import pytest
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.params import SwarmParams
 from agent_envs.simulator import brownian_increments, simulate
-from agent_envs.training.experiments.cheap_control_bound import (
-    CheapControlBoundConfig,
+from agent_envs.training.experiments.cheap_control_config import CheapControlBoundConfig
+from agent_envs.training.experiments.cheap_control_formulas import (
     StartStatistics,
     centre_control,
     corrected_upper_bound,
@@ -22,11 +22,11 @@ from agent_envs.training.experiments.cheap_control_bound import (
     disagreement_sums,
     fiedler_bound,
     fit_exponent,
-    measure,
     noise_floor,
     paper_rhs,
     sample_floor,
 )
+from agent_envs.training.experiments.cheap_control_measurements import measure
 from agent_envs.training.experiments.turnpike_property import cheap_constant, kernel_bound
 
 TINY = {
@@ -159,7 +159,7 @@ def test_measure_rows_satisfy_the_corrected_bound_and_refute_the_lemma_at_the_ta
 
 def test_tiny_run_writes_the_table_the_figure_and_the_contraction(tmp_path):
     pytest.importorskip("torch")
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     out = tmp_path / "ccb"
     argv = [

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from agent_envs.training.cli import SUBCOMMANDS, add_dataclass_arguments, build_parser
+from agent_envs.training.commands.cli import SUBCOMMANDS, build_parser
+from agent_envs.training.commands.parser import add_dataclass_arguments
 from agent_envs.training.defaults import DEFAULT_TEST_SEEDS, MAX_SEEDS, parse_seeds
 from agent_envs.validation import MAX_SEED
 
@@ -114,10 +115,10 @@ def test_the_five_hand_written_parsers_keep_their_option_names():
 
 
 def test_namespace_becomes_the_validated_config(tmp_path):
-    from agent_envs.training.evaluate import EvaluateConfig
+    from agent_envs.training.commands.evaluate import EvaluateConfig
     from agent_envs.training.experiments.turnpike_controlled import TurnpikeReproductionConfig
     from agent_envs.training.experiments.turnpike_property import TurnpikePropertyConfig
-    from agent_envs.training.report import ReportConfig
+    from agent_envs.training.results.report import ReportConfig
 
     def parse(name: str, argv: list[str]):
         command = SUBCOMMANDS[name]
@@ -147,11 +148,11 @@ def test_namespace_becomes_the_validated_config(tmp_path):
 
 
 def test_configs_validate_as_library_objects():
-    from agent_envs.training.evaluate import EvaluateConfig
+    from agent_envs.training.commands.evaluate import EvaluateConfig
     from agent_envs.training.experiments.turnpike_controlled import TurnpikeReproductionConfig
     from agent_envs.training.experiments.turnpike_property import TurnpikePropertyConfig
     from agent_envs.training.experiments.uncontrolled import UncontrolledConfig
-    from agent_envs.training.report import ReportConfig
+    from agent_envs.training.results.report import ReportConfig
 
     bad = [
         (UncontrolledConfig, {"n_agents": 0}, "--n-agents"),

@@ -19,7 +19,7 @@ from pathlib import Path
 import gymnasium as gym
 import pytest
 
-from agent_envs.training.cli import SUBCOMMANDS, build_parser, main
+from agent_envs.training.commands.cli import SUBCOMMANDS, build_parser, main
 from agent_envs.training.config import TrainConfig
 
 SMALL = {"n_agents": 4, "n_steps": 4}
@@ -40,7 +40,7 @@ def files(tmp_path_factory) -> dict[str, Path]:
     """The files the battery refers to: a plain file, models, damaged models, results."""
     from stable_baselines3 import PPO
 
-    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.commands.evaluate import evaluate_policies
 
     root = tmp_path_factory.mktemp("battery")
     paths = {"root": root, "file": root / "a_file.txt"}
@@ -413,7 +413,7 @@ def test_the_script_prints_one_line_too(tmp_path):
     """Out of process (imports of torch and SB3 included, no pytest capture): still one line."""
     argv = ["train", "--device", "foo", "--out", str(tmp_path / "o")]
     done = subprocess.run(
-        [sys.executable, "-m", "agent_envs.training.cli", *argv],
+        [sys.executable, "-m", "agent_envs.training.commands.cli", *argv],
         capture_output=True,
         text=True,
         timeout=300,

@@ -153,7 +153,7 @@ def _cli_hook():
 
 
 def test_cli_reference_covers_every_subcommand():
-    from agent_envs.training.cli import SUBCOMMANDS
+    from agent_envs.training.commands.cli import SUBCOMMANDS
 
     hook = _cli_hook()
     text = hook.cli_reference_markdown()

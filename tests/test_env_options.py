@@ -196,7 +196,7 @@ def test_vector_env_equals_sync_vector_env_with_options(observation, basis):
 
 
 def test_interface_policy_acts_on_the_default_env_as_in_its_own():
-    from agent_envs.training.policies import InterfacePolicy
+    from agent_envs.training.learners.policies import InterfacePolicy
 
     kwargs = {**SMALL, "n_paths": 1}
     own = gym.make(ENV, **kwargs, observation="summary", action_basis="common")

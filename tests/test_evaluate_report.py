@@ -11,19 +11,24 @@ import pytest
 
 import agent_envs  # noqa: F401
 from agent_envs.baselines import TurnpikeController, ZeroController
-from agent_envs.training.cli import main as cli_main
-from agent_envs.training.cli import parse_policy_specs, parse_seeds
+from agent_envs.training.commands.cli import main as cli_main
+from agent_envs.training.commands.cli import parse_policy_specs, parse_seeds
+from agent_envs.training.commands.evaluate import evaluate_policies
 from agent_envs.training.defaults import parse_env_kwargs
-from agent_envs.training.evaluate import evaluate_policies, rollout
-from agent_envs.training.policies import (
+from agent_envs.training.learners.policies import (
     ModelSpec,
     PerAgentPolicy,
     detect_algo,
     find_statistics,
     own_run_candidates,
 )
-from agent_envs.training.report import ReportSection, build_report
-from agent_envs.training.results import EvaluationResults, mean_confidence_interval, summarize
+from agent_envs.training.results.report import ReportSection, build_report
+from agent_envs.training.results.rollout import rollout
+from agent_envs.training.results.tables import (
+    EvaluationResults,
+    mean_confidence_interval,
+    summarize,
+)
 
 ENV_ID = "agent_envs/Swarm-v0"
 SMALL = {"n_agents": 5, "n_steps": 6, "n_paths": 2}
@@ -418,7 +423,7 @@ def test_ratio_is_not_reported_when_episodes_diverged():
     """A diverged episode has a partial cost; its ratio to the reference would flatter it."""
     import pandas as pd
 
-    from agent_envs.training.results import summarize
+    from agent_envs.training.results.tables import summarize
 
     rows = []
     for seed in range(3):
@@ -461,7 +466,7 @@ def test_ratio_is_not_reported_when_episodes_diverged():
 def test_gap_to_optimal_is_paired_per_seed_and_hidden_for_diverged():
     import pandas as pd
 
-    from agent_envs.training.report import display_table, summarize
+    from agent_envs.training.results.report import display_table, summarize
 
     costs = {"optimal": [1.0, 2.0, 4.0], "mpc": [0.99, 2.0, 3.96], "twice": [2.0, 4.0, 8.0]}
     rows = [

@@ -78,7 +78,14 @@ def test_tiny_training_run_scores_end_to_end(tmp_path):
     assert saved.is_file() and "-p cleanrl=examples.cleanrl_ppo_swarm:policy" in out.stdout
 
     scores = tmp_path / "scores"
-    evaluate = [sys.executable, "-m", "agent_envs.training.cli", "evaluate", "--task", TASK]
+    evaluate = [
+        sys.executable,
+        "-m",
+        "agent_envs.training.commands.cli",
+        "evaluate",
+        "--task",
+        TASK,
+    ]
     out = subprocess.run(
         [*evaluate, "-p", "cleanrl=examples.cleanrl_ppo_swarm:policy", "--out", str(scores)],
         cwd=ROOT,

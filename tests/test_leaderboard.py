@@ -22,7 +22,7 @@ def _between(text: str, marker: str) -> str:
 
 
 def test_tasks_page_shows_the_shipped_references():
-    from agent_envs.training.task_evaluation import reference_table_markdown
+    from agent_envs.training.commands.task_evaluation import reference_table_markdown
 
     page = (DOCS / "tasks.md").read_text()
     assert _between(page, "reference-table") == reference_table_markdown()
@@ -41,7 +41,7 @@ def test_tasks_page_figures_hold():
 
 
 def test_leaderboard_page_is_its_episodes_file():
-    from agent_envs.training.leaderboard import leaderboard_table, read_episodes
+    from agent_envs.training.commands.leaderboard import leaderboard_table, read_episodes
 
     rows = read_episodes(EPISODES)
     page = (DOCS / "leaderboard.md").read_text()
@@ -50,7 +50,7 @@ def test_leaderboard_page_is_its_episodes_file():
 
 def test_leaderboard_file_is_complete_and_consistent():
     from agent_envs.tasks.scores import gap, normalized_score
-    from agent_envs.training.leaderboard import LEARNERS, TRAINING_SEEDS, read_episodes
+    from agent_envs.training.commands.leaderboard import LEARNERS, TRAINING_SEEDS, read_episodes
 
     rows = read_episodes(EPISODES)
     for task in TASK_LIST:
@@ -79,8 +79,12 @@ def test_leaderboard_smoke_run_and_table(tmp_path):
     """The whole command on one task, one training seed, 1% budgets: every unit, the centre
     law, the references, the episodes file and the table rebuilt from it."""
     pytest.importorskip("torch")
-    from agent_envs.training.cli import main
-    from agent_envs.training.leaderboard import CENTRE_LAW, leaderboard_table, read_episodes
+    from agent_envs.training.commands.cli import main
+    from agent_envs.training.commands.leaderboard import (
+        CENTRE_LAW,
+        leaderboard_table,
+        read_episodes,
+    )
 
     out = tmp_path / "lb"
     args = ["leaderboard", "--out", str(out), "--tasks", "agent_envs/NoisySwarm-v0"]
@@ -101,7 +105,7 @@ def test_regenerate_resumes_and_reproduces_the_shipped_costs(tmp_path):
     import json
 
     from agent_envs.tasks.references import data_dir, recorded_hashes, sha256_hex
-    from agent_envs.training.task_references import regenerate
+    from agent_envs.training.commands.task_references import regenerate
 
     task = get_task("agent_envs/NoisySwarm-v0")
     shipped = json.loads((data_dir() / "NoisySwarm-v0.json").read_text())

@@ -1,5 +1,6 @@
-"""The SB3 adapter over the native vector env (`agent_envs.training.native_vec_env`) against
-SB3's DummyVecEnv: same observations, rewards, dones and infos; PPO learns the same parameters.
+"""The SB3 adapter over the native vector env (`agent_envs.training.learners.native_vec_env`)
+against SB3's DummyVecEnv: same observations, rewards, dones and infos; PPO learns the same
+parameters.
 
 Skipped without the `train` extra (stable-baselines3); the vector env's own tests are in
 tests/test_vector_env.py and run without it.
@@ -21,8 +22,8 @@ def dummy_and_native(n_envs: int, seed: int, horizon_as_termination: bool, **kwa
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from agent_envs.training.native_vec_env import NativeVecEnv
-    from agent_envs.training.wrappers import HorizonAsTermination
+    from agent_envs.training.learners.native_vec_env import NativeVecEnv
+    from agent_envs.training.learners.wrappers import HorizonAsTermination
 
     dummy = make_vec_env(
         ENV_ID,

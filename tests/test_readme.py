@@ -60,7 +60,7 @@ def test_commands_are_found():
 
 def parse(command: str) -> None:
     """Parse `command` as `agent-envs` would (`cli.main` up to running the job)."""
-    from agent_envs.training import cli
+    from agent_envs.training.commands import cli
 
     argv = cli._normalise(shlex.split(command, comments=True)[1:])
     selected = next((a for a in argv if a in cli.SUBCOMMANDS), None)
@@ -70,7 +70,7 @@ def parse(command: str) -> None:
 
 @pytest.mark.parametrize("command", _cases())
 def test_quoted_command_parses(command):
-    from agent_envs.training import cli
+    from agent_envs.training.commands import cli
 
     words = command.split()
     if words[1].startswith("{"):  # a synopsis: agent-envs {reproduce uncontrolled|evaluate|...}
@@ -102,7 +102,7 @@ def test_quoted_command_parses(command):
 def test_the_gap_table_command_parses_and_the_old_quote_did_not():
     """The quote of issue 24 (`--env-kwargs n_agents=10 n_steps=20`) is rejected by the parser
     (`--env-kwargs` takes one JSON object), so the test above would catch it."""
-    from agent_envs.training import cli
+    from agent_envs.training.commands import cli
 
     with pytest.raises(cli.UsageError):
         parse("agent-envs evaluate --env-kwargs n_agents=10 n_steps=20 -p optimal --out e")
@@ -224,7 +224,7 @@ def test_readme_headline_table_is_the_leaderboards_first_task():
     """The README's headline table: the StiffSwarm-v0 section of the leaderboard, rebuilt from
     the committed per-episode file (docs/results/leaderboard/episodes.csv)."""
 
-    from agent_envs.training.leaderboard import leaderboard_table, read_episodes
+    from agent_envs.training.commands.leaderboard import leaderboard_table, read_episodes
 
     text = (ROOT / "README.md").read_text()
     section = text.split("## The headline result: the benchmark's first task", 1)[1]

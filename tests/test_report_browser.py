@@ -86,7 +86,7 @@ def browser() -> str:
 @pytest.fixture(scope="module")
 def small_report(tmp_path_factory) -> Path:
     """A smoke-preset compare (PPO at half the smoke budget, 2 test episodes, no optimum)."""
-    from agent_envs.training import cli
+    from agent_envs.training.commands import cli
 
     out = tmp_path_factory.mktemp("compare-browser")
     argv = [

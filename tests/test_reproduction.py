@@ -2,7 +2,7 @@
 
 import json
 
-from agent_envs.training.cli import main
+from agent_envs.training.commands.cli import main
 
 
 def test_reproduce_uncontrolled_writes_table_and_figures(tmp_path):

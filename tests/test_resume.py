@@ -4,8 +4,8 @@ second concurrent resume refused by the run's lock, a sweep's learner trial cont
 and a sweep resumed with another preset.
 
 Through the public entry points where they exist (`agent-envs train --resume`,
-`agent_envs.training.train.train`, `agent-envs sweep`); the sweep's learner trial goes
-through `agent_envs.training.sweep.train_learner` (what the Tune trainable calls). The runs
+`agent_envs.training.commands.train.train`, `agent-envs sweep`); the sweep's learner trial goes
+through `agent_envs.training.commands.sweep.train_learner` (what the Tune trainable calls). The runs
 are tiny (N = 5, m = 10, a few hundred timesteps) and marked slow.
 """
 
@@ -30,7 +30,7 @@ TINY_HYPERPARAMS = {
 
 
 def tiny_run(tmp_path: Path, algo: str, timesteps: int = 200, verbose: int = 0) -> Path:
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
 
     config = TrainConfig(
         algo=algo,
@@ -58,8 +58,8 @@ def resume_config(run_dir: Path, timesteps: int) -> TrainConfig:
 
 @pytest.mark.slow
 def test_resume_without_a_manifest_is_refused_before_anything_is_written(tmp_path, capsys):
-    from agent_envs.training.cli import main
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.cli import main
+    from agent_envs.training.commands.train import train
 
     run_dir = tiny_run(tmp_path, "ppo")
     (run_dir / "manifest.json").unlink()
@@ -79,7 +79,7 @@ def test_resume_without_a_manifest_is_refused_before_anything_is_written(tmp_pat
 def test_off_policy_resume_without_its_replay_buffer_starts_it_empty(algo, tmp_path, capsys):
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
 
     run_dir = tiny_run(tmp_path, algo)
     buffers = sorted((run_dir / "checkpoints").glob("*_replay_buffer_*_steps.pkl"))
@@ -109,8 +109,8 @@ def test_off_policy_resume_without_its_replay_buffer_starts_it_empty(algo, tmp_p
 
 @pytest.mark.slow
 def test_a_second_concurrent_resume_is_refused_by_the_lock(tmp_path):
+    from agent_envs.training.commands.train import train
     from agent_envs.training.storage import RunDirectoryBusy, RunLock
-    from agent_envs.training.train import train
 
     run_dir = tiny_run(tmp_path, "ppo")
     summary = (run_dir / "summary.json").read_text()
@@ -130,10 +130,10 @@ def test_a_sweep_learner_trial_continues_its_interrupted_run(tmp_path):
     trial's budget, keeping its history, instead of starting anew or failing on the folder."""
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from agent_envs.training import sweep
-    from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.sweep import SweepConfig, _load_or_save_grid, learner_run_dir
-    from agent_envs.training.train import train
+    from agent_envs.training.commands import sweep
+    from agent_envs.training.commands.sweep import SweepConfig, _load_or_save_grid, learner_run_dir
+    from agent_envs.training.commands.train import train
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     # what the Tune trainable calls for a learner trial (train_trial after the CLI refactor)
     train_learner = getattr(sweep, "train_learner", None) or sweep.train_trial
@@ -164,8 +164,8 @@ def test_a_sweep_learner_trial_continues_its_interrupted_run(tmp_path):
 
 
 def test_a_sweep_resumed_with_another_preset_is_refused(tmp_path, capsys):
-    from agent_envs.training.cli import main
-    from agent_envs.training.sweep import SweepConfig, _load_or_save_grid
+    from agent_envs.training.commands.cli import main
+    from agent_envs.training.commands.sweep import SweepConfig, _load_or_save_grid
 
     out = tmp_path / "sweep"
     _load_or_save_grid(SweepConfig(preset="smoke", out=str(out)), out)
@@ -189,7 +189,7 @@ def test_training_without_tensorboard_leaves_no_folder_in_the_temp_dir(
     temp = tmp_path / "tmp"
     temp.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(temp))
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
 
     run_dir = tiny_run(tmp_path, "ppo", timesteps=128, verbose=verbose)
     train(dataclasses.replace(resume_config(run_dir, 256), verbose=verbose))

@@ -172,8 +172,8 @@ def _model_with_statistics():
 
 
 def test_statistics_of_a_run_are_used_only_while_they_match_the_manifest(tmp_path):
-    from agent_envs.training.checkpoints import save_model_with_statistics
-    from agent_envs.training.policies import ModelSpec, find_statistics
+    from agent_envs.training.learners.checkpoints import save_model_with_statistics
+    from agent_envs.training.learners.policies import ModelSpec, find_statistics
 
     model = _model_with_statistics()
     run = tmp_path / "run"
@@ -195,7 +195,7 @@ def test_statistics_of_a_run_are_used_only_while_they_match_the_manifest(tmp_pat
 
 
 def test_rl_zoo3_layout_statistics_are_found(tmp_path):
-    from agent_envs.training.policies import ModelSpec, find_statistics
+    from agent_envs.training.learners.policies import ModelSpec, find_statistics
 
     model = _model_with_statistics()
     run = tmp_path / "ppo" / "agent_envs-Swarm-v0_1"
@@ -223,7 +223,7 @@ _WITHOUT_TRAIN_EXTRA = """
 import sys
 for name in ("torch", "stable_baselines3", "pandas", "tqdm", "supersuit", "tensorboard", "rich"):
     sys.modules[name] = None  # `import name` now fails as if the extra were not installed
-from agent_envs.training.cli import main
+from agent_envs.training.commands.cli import main
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -272,7 +272,7 @@ _TINY_TRAIN = [
 def test_two_trains_started_at_once_never_share_a_run_directory(tmp_path):
     argv = ["train", "--out", str(tmp_path), "--run-name", "same", "--timesteps", "32"]
     argv += ["--checkpoint-freq", "16", *_TINY_TRAIN]
-    command = [sys.executable, "-m", "agent_envs.training.cli", *argv]
+    command = [sys.executable, "-m", "agent_envs.training.commands.cli", *argv]
     procs = [
         subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         for _ in range(2)
@@ -304,7 +304,7 @@ def _truncate(path: Path) -> None:
 
 @pytest.mark.slow
 def test_resume_skips_truncated_checkpoints_and_rewrites_nothing_before(tmp_path, capsys):
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     argv = ["train", "--out", str(tmp_path), "--run-name", "r", "--checkpoint-freq", "16"]
     assert main([*argv, "--timesteps", "64", *_TINY_TRAIN]) == 0
@@ -353,9 +353,9 @@ def test_evaluate_uses_the_statistics_of_an_rl_zoo3_run(tmp_path, capsys):
     import pandas as pd
     from stable_baselines3 import PPO
 
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
+    from agent_envs.training.commands.evaluate import evaluate_policies
     from agent_envs.training.config import hyperparams_file
-    from agent_envs.training.evaluate import evaluate_policies
 
     command = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", GYM_ENV_ID]
     command += ["--gym-packages", "agent_envs", "--conf-file", str(hyperparams_file("ppo"))]

@@ -1,5 +1,5 @@
-"""Across-seed statistics (`agent_envs.training.seed_statistics`) on hand-computable examples
-and against rliable (skipped without the `sweep` extra, which installs rliable)."""
+"""Across-seed statistics (`agent_envs.training.results.seed_statistics`) on hand-computable
+examples and against rliable (skipped without the `sweep` extra, which installs rliable)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("rliable")
 
-from agent_envs.training.seed_statistics import (
+from agent_envs.training.results.seed_statistics import (
     PolicyScores,
     across_seed_table,
     improvement_interval,
@@ -90,7 +90,7 @@ def test_batched_improvement_used_by_the_bootstrap_agrees_with_rliable():
     Mann-Whitney based value (integer scores, so ties occur)."""
     from rliable import metrics
 
-    from agent_envs.training.seed_statistics import _pairwise_improvement_batched
+    from agent_envs.training.results.seed_statistics import _pairwise_improvement_batched
 
     rng = np.random.default_rng(3)
     for runs_x, runs_y in ((3, 1), (2, 4), (5, 5)):
@@ -103,7 +103,7 @@ def test_batched_improvement_used_by_the_bootstrap_agrees_with_rliable():
 def test_batched_iqm_used_by_the_bootstrap_agrees_with_rliable():
     from rliable import metrics
 
-    from agent_envs.training.seed_statistics import _trimmed_mean_batched
+    from agent_envs.training.results.seed_statistics import _trimmed_mean_batched
 
     batch = np.random.default_rng(4).normal(size=(5, 3, 7))  # 5 resamples of (3 runs, 7 tasks)
     expected = [float(metrics.aggregate_iqm(b)) for b in batch]

@@ -300,8 +300,8 @@ def test_the_compiled_steps_fallbacks_are_counted():
 # ---------------------------------------------------------------------- run metadata
 def test_a_runs_env_description_records_the_plan():
     pytest.importorskip("stable_baselines3")
-    from agent_envs.training.environments import env_description, training_step_plan
-    from agent_envs.training.native_vec_env import NativeVecEnv
+    from agent_envs.training.learners.environments import env_description, training_step_plan
+    from agent_envs.training.learners.native_vec_env import NativeVecEnv
 
     kwargs = {"n_agents": 10, "n_steps": 5}
     description = env_description(ENV_ID, kwargs)

@@ -17,15 +17,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from agent_envs.training.config import VEC_ENV_CHOICES, TrainConfig, read_hyperparams_file
-from agent_envs.training.experiment import (
+from agent_envs.training.commands.experiment import (
     LEARNER,
     REFERENCE,
     ExperimentOptions,
     Trial,
     build_trials,
 )
-from agent_envs.training.presets import PRESETS
+from agent_envs.training.commands.presets import PRESETS
+from agent_envs.training.config import VEC_ENV_CHOICES, TrainConfig, read_hyperparams_file
 
 # ------------------------------------------------------------------------------- the grid
 
@@ -184,7 +184,7 @@ def test_zoo_pendulum_file_holds_rl_zoo3_pendulum_entries(algo):
 
 
 def test_sweep_dry_run_lists_the_trials(capsys):
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     assert main(["sweep", "--preset", "smoke", "--dry-run"]) == 0
     out = capsys.readouterr().out
@@ -192,14 +192,14 @@ def test_sweep_dry_run_lists_the_trials(capsys):
 
 
 def test_sweep_bad_seeds_is_a_clean_error(capsys):
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     assert main(["sweep", "--preset", "smoke", "--dry-run", "--seeds", "a,b"]) == 2
     assert "--seeds" in capsys.readouterr().err
 
 
 def test_resume_needs_a_started_sweep_and_a_second_start_needs_resume(tmp_path):
-    from agent_envs.training.sweep import SweepConfig, _load_or_save_grid
+    from agent_envs.training.commands.sweep import SweepConfig, _load_or_save_grid
 
     out = tmp_path / "sw"
     with pytest.raises(ValueError, match="--resume"):
@@ -223,9 +223,9 @@ def test_resume_needs_a_started_sweep_and_a_second_start_needs_resume(tmp_path):
 def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
     pytest.importorskip("ray")
     pytest.importorskip("rliable")
-    from agent_envs.training.cli import main
-    from agent_envs.training.results import EvaluationResults
-    from agent_envs.training.seed_statistics import iqm
+    from agent_envs.training.commands.cli import main
+    from agent_envs.training.results.seed_statistics import iqm
+    from agent_envs.training.results.tables import EvaluationResults
 
     out = tmp_path / "sweep"
     args = ["sweep", "--preset", "smoke", "--out", str(out), "--num-cpus", "2"]
@@ -403,9 +403,9 @@ def _free_port() -> int:
 def test_reference_trial_without_ray_evaluates_once_then_reuses(tmp_path):
     """`execute_trial` (what each Tune trial runs) evaluates the reference on the test seeds
     into its folder; run again (a resumed trial), it reuses the finished evaluation."""
-    from agent_envs.training.experiment import TRIAL_LOG, evaluation_dir
-    from agent_envs.training.results import EvaluationResults
-    from agent_envs.training.sweep import execute_trial
+    from agent_envs.training.commands.experiment import TRIAL_LOG, evaluation_dir
+    from agent_envs.training.commands.sweep import execute_trial
+    from agent_envs.training.results.tables import EvaluationResults
 
     trial = next(t for t in build_trials(PRESETS["smoke"]) if t.policy == "turnpike")
     first = execute_trial(trial, tmp_path)
@@ -464,9 +464,9 @@ def test_trial_saved_before_policy_kwargs_existed_loads_with_none():
 def test_reference_trial_builds_its_controller_with_the_trial_kwargs(tmp_path):
     """`execute_trial` builds a reference with its `policy_kwargs`: the noise-free MPC plans
     one path (its repr says so) and its evaluation differs from no controller at all."""
-    from agent_envs.training.experiment import TRIAL_LOG, evaluation_dir
-    from agent_envs.training.results import EvaluationResults
-    from agent_envs.training.sweep import execute_trial
+    from agent_envs.training.commands.experiment import TRIAL_LOG, evaluation_dir
+    from agent_envs.training.commands.sweep import execute_trial
+    from agent_envs.training.results.tables import EvaluationResults
 
     env = {"n_agents": 4, "n_steps": 4}
     trial = Trial(
@@ -496,7 +496,7 @@ def test_compare_runs_one_seed_of_the_sweeps_grid():
     """`compare --preset paper` and `sweep --preset paper` mean the same setting: compare's
     learner configs are the sweep's main-setting configs of its seed, but for the run folder
     naming (compare finds finished runs by their configuration) and compare's progress bar."""
-    from agent_envs.training.compare import CompareConfig
+    from agent_envs.training.commands.compare import CompareConfig
 
     compare = [t for t in CompareConfig(preset="paper", out="x").trials() if t.kind == LEARNER]
     sweep = [
@@ -518,7 +518,7 @@ def test_compare_runs_one_seed_of_the_sweeps_grid():
 
 
 def test_compare_references_are_the_presets_with_optimum_chosen():
-    from agent_envs.training.compare import CompareConfig
+    from agent_envs.training.commands.compare import CompareConfig
 
     def references(**kw):
         return [t.policy for t in CompareConfig(out="x", **kw).trials() if t.kind == REFERENCE]
@@ -532,7 +532,7 @@ def test_compare_references_are_the_presets_with_optimum_chosen():
 
 
 def test_no_two_presets_share_a_name_and_unknown_names_say_the_known_ones():
-    from agent_envs.training.presets import get_preset
+    from agent_envs.training.commands.presets import get_preset
 
     with pytest.raises(ValueError, match="smoke, quick, paper"):
         get_preset("paper-sweep")
@@ -541,7 +541,7 @@ def test_no_two_presets_share_a_name_and_unknown_names_say_the_known_ones():
 
 
 def test_training_table_counts_validations_above_twice_the_first():
-    from agent_envs.training.sweep_report import _env_options, rising_evaluations
+    from agent_envs.training.commands.sweep_report import _env_options, rising_evaluations
 
     curve = [{"cost_mean": c} for c in (0.5, 0.9, 1.2, 0.3, 1.01)]
     assert rising_evaluations(curve) == 2  # 1.2 and 1.01 exceed 2 x 0.5; 0.9 does not

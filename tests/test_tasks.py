@@ -414,7 +414,7 @@ def test_bad_predict_return_and_objects():
 
 def _cli(args, cwd, env=None):
     return subprocess.run(
-        [sys.executable, "-m", "agent_envs.training.cli", *args],
+        [sys.executable, "-m", "agent_envs.training.commands.cli", *args],
         cwd=cwd,
         capture_output=True,
         text=True,
@@ -554,7 +554,7 @@ def test_scoring_needs_neither_torch_nor_pandas(user_dir):
                     raise ModuleNotFoundError(f"No module named {name!r}", name=name)
 
         sys.meta_path.insert(0, Blocked())
-        from agent_envs.training.cli import main
+        from agent_envs.training.commands.cli import main
         code = main(["evaluate", "--task", "agent_envs/NoisySwarm-v0", "-p", "third_party:act",
                      "-p", "proportional", "--out", "core"])
         assert code == 0, code
@@ -577,7 +577,7 @@ def test_resolving_matches_the_shipped_references():
     """The optimum, MPC and the bound re-solved on two noisy-task seeds and one stiff-task seed
     match the shipped numbers to 1e-5 relative (`agent-envs tasks --verify`)."""
     pytest.importorskip("torch")
-    from agent_envs.training.task_references import verify
+    from agent_envs.training.commands.task_references import verify
 
     rows = verify(NOISY, 2) + verify(STIFF, 1)
     assert {r["reference"] for r in rows} >= {"optimal", "mpc"}

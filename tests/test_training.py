@@ -58,14 +58,14 @@ def tiny_config(tmp_path: Path, algo: str = "ppo", env_id: str = GYM_ENV_ID, **o
 
 
 def _subcommands():
-    from agent_envs.training.cli import SUBCOMMANDS
+    from agent_envs.training.commands.cli import SUBCOMMANDS
 
     return sorted(SUBCOMMANDS)
 
 
 @pytest.mark.parametrize("name", _subcommands())
 def test_every_subcommand_help_exits_zero(name, capsys):
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     with pytest.raises(SystemExit) as exc:
         main([name, "--help"])
@@ -74,7 +74,7 @@ def test_every_subcommand_help_exits_zero(name, capsys):
 
 
 def test_top_level_help_and_reproduce_alias_help():
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     for argv in (["--help"], ["reproduce", "turnpike", "--help"]):
         with pytest.raises(SystemExit) as exc:
@@ -85,7 +85,7 @@ def test_top_level_help_and_reproduce_alias_help():
 def test_train_help_documents_every_config_field(capsys):
     from dataclasses import fields
 
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     with pytest.raises(SystemExit):
         main(["train", "--help"])
@@ -122,7 +122,7 @@ def test_malformed_hyperparams_names_the_option():
 
 
 def test_bad_env_kwarg_value_fails_before_training(tmp_path):
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
 
     for bad in ({"n_agents": 1}, {"n_agent": 5}, {"n_agents": "five"}):
         with pytest.raises(ValueError, match="n_agent"):
@@ -131,7 +131,7 @@ def test_bad_env_kwarg_value_fails_before_training(tmp_path):
 
 
 def test_cli_env_kwargs_typo_is_a_clean_error(tmp_path, capsys):
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     out = str(tmp_path / "runs")
     assert main(["train", "--env-kwargs", '{"n_agent": 5}', "--out", out]) == 2
@@ -142,7 +142,7 @@ def test_horizon_end_is_terminal_for_the_learner():
     import gymnasium as gym
 
     import agent_envs  # noqa: F401
-    from agent_envs.training.wrappers import HorizonAsTermination
+    from agent_envs.training.learners.wrappers import HorizonAsTermination
 
     env = HorizonAsTermination(gym.make(GYM_ENV_ID, **TINY_ENV))
     env.reset(seed=0)
@@ -152,7 +152,7 @@ def test_horizon_end_is_terminal_for_the_learner():
 
 
 def test_cli_reports_bad_options_with_exit_code_2(capsys):
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     assert main(["train", "--algo", "ppo", "--env-kwargs", "{oops"]) == 2
     assert "--env-kwargs" in capsys.readouterr().err
@@ -165,7 +165,7 @@ def test_cli_reports_bad_options_with_exit_code_2(capsys):
 
 
 def test_cli_resume_refuses_to_change_the_run(tmp_path, capsys):
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     run_dir = tmp_path / "run"
     run_dir.mkdir()
@@ -191,7 +191,7 @@ def test_shipped_yaml_is_what_train_uses(algo):
     for env_id, entry in raw.items():
         assert default_hyperparams(algo, env_id) == entry
         assert entry["gamma"] == 0.9 and entry["normalize"] is True
-        assert entry["env_wrapper"] == "agent_envs.training.wrappers.HorizonAsTermination"
+        assert entry["env_wrapper"] == "agent_envs.training.learners.wrappers.HorizonAsTermination"
         kwargs = {k: v for k, v in entry.items() if k not in ZOO_KEYS}
         check_hyperparams(algo, kwargs, entry["policy"])
     if algo in ("ppo", "a2c"):
@@ -201,7 +201,7 @@ def test_shipped_yaml_is_what_train_uses(algo):
 
 
 def test_run_name_follows_cleanrl_pattern():
-    from agent_envs.training.train import default_run_name
+    from agent_envs.training.commands.train import default_run_name
 
     name = default_run_name(TrainConfig(algo="sac", seed=3))
     env, algo, seed, stamp = name.split("__")
@@ -215,8 +215,8 @@ def test_run_name_follows_cleanrl_pattern():
 def test_seeded_evaluation_is_deterministic():
     """The same policy on the same validation seeds gives the same costs, seed by seed."""
     from agent_envs.baselines import TurnpikeController
-    from agent_envs.training.callbacks import run_seeded_episodes
-    from agent_envs.training.environments import make_eval_vec_env
+    from agent_envs.training.learners.callbacks import run_seeded_episodes
+    from agent_envs.training.learners.environments import make_eval_vec_env
 
     venv = make_eval_vec_env(GYM_ENV_ID, TINY_ENV, 4)
     policy = TurnpikeController(venv.envs[0])
@@ -230,9 +230,9 @@ def test_seeded_evaluation_is_deterministic():
 
 def test_seeded_evaluation_matches_training_evaluate():
     """Sub-env i with seed s + i runs the episode `evaluate_policies` runs with seed s + i."""
-    from agent_envs.training.callbacks import run_seeded_episodes
-    from agent_envs.training.environments import make_eval_vec_env
-    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.commands.evaluate import evaluate_policies
+    from agent_envs.training.learners.callbacks import run_seeded_episodes
+    from agent_envs.training.learners.environments import make_eval_vec_env
 
     venv = make_eval_vec_env(GYM_ENV_ID, TINY_ENV, 3)
     from agent_envs.baselines import ProportionalController
@@ -260,7 +260,7 @@ def _check_run(run_dir: Path, timesteps: int) -> dict:
     assert training_plan is None or " envs=" in training_plan
     assert (run_dir / "final_model_vecnormalize.pkl").is_file()
     assert list((run_dir / "checkpoints").glob("rl_model_*_steps.zip"))
-    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     curve = read_learning_curve(run_dir / "learning_curve.csv")
     assert curve and curve[-1]["timesteps"] == summary["timesteps"]
@@ -273,8 +273,8 @@ def _check_run(run_dir: Path, timesteps: int) -> dict:
 @pytest.mark.slow
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_smoke_single_controller(algo, tmp_path):
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.evaluate import evaluate_policies
+    from agent_envs.training.commands.train import train
 
     run_dir = train(tiny_config(tmp_path, algo))
     assert run_dir.name.startswith(f"agent_envs_Swarm-v0__{algo}__0__")
@@ -282,8 +282,8 @@ def test_smoke_single_controller(algo, tmp_path):
     if algo in ("sac", "td3"):  # the newest replay buffer only (they are large)
         buffers = list((run_dir / "checkpoints").glob("rl_model_replay_buffer_*_steps.pkl"))
         assert [p.name for p in buffers] == ["rl_model_replay_buffer_200_steps.pkl"]
-    # the saved model is a policy `agent_envs.training.evaluate` loads (VecNormalize found next to
-    # it)
+    # the saved model is a policy `agent_envs.training.commands.evaluate` loads (VecNormalize found
+    # next to it)
     results = evaluate_policies(
         {"learned": str(run_dir / "final_model.zip"), "zero": "zero"},
         env_kwargs=TINY_ENV,
@@ -302,10 +302,10 @@ def test_smoke_parameter_shared_ppo(tmp_path):
     """PettingZoo + SuperSuit training; the shared policy scores the same on both envs."""
     import gymnasium as gym
 
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.multiagent import evaluate_per_agent
-    from agent_envs.training.policies import load_sb3_policy
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.evaluate import evaluate_policies
+    from agent_envs.training.commands.train import train
+    from agent_envs.training.learners.multiagent import evaluate_per_agent
+    from agent_envs.training.learners.policies import load_sb3_policy
 
     config = tiny_config(tmp_path, "ppo", PETTINGZOO_ENV_ID, timesteps=500, eval_freq=250)
     config.hyperparams["batch_size"] = 40  # a rollout holds n_steps * N = 80 agent-steps
@@ -332,8 +332,8 @@ def test_smoke_parameter_shared_ppo(tmp_path):
 
 @pytest.mark.slow
 def test_training_is_reproducible_with_a_fixed_seed(tmp_path):
-    from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     curves = []
     for i in range(2):
@@ -352,7 +352,7 @@ def test_env_threads_reach_the_native_training_env(tmp_path):
     """--env-threads builds the native training env on that many threads."""
     if not _two_threads_allowed():
         pytest.skip("numba allows one thread here")
-    from agent_envs.training.environments import make_training_env
+    from agent_envs.training.learners.environments import make_training_env
 
     venv = make_training_env(tiny_config(tmp_path, env_threads=2).validate(), 3)
     assert venv.venv.num_threads == 2
@@ -366,8 +366,8 @@ def test_training_on_env_threads_learns_the_same(tmp_path):
     same bit for bit on any number of threads)."""
     if not _two_threads_allowed():
         pytest.skip("numba allows one thread here")
-    from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     curves = []
     for threads in (1, 2):
@@ -423,10 +423,10 @@ def _capture_start_parameters():
 def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
     import torch
 
-    from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.checkpoints import latest_checkpoint
+    from agent_envs.training.commands.train import train
     from agent_envs.training.defaults import algorithm_class
-    from agent_envs.training.train import train
+    from agent_envs.training.learners.callbacks import read_learning_curve
+    from agent_envs.training.learners.checkpoints import latest_checkpoint
 
     config = tiny_config(tmp_path, algo, timesteps=400, eval_freq=100, checkpoint_freq=100)
     with pytest.raises(KeyboardInterrupt):
@@ -447,7 +447,7 @@ def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
     # the VecNormalize statistics come back with the checkpoint (not rebuilt from scratch)
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from agent_envs.training.checkpoints import checkpoint_file
+    from agent_envs.training.learners.checkpoints import checkpoint_file
 
     saved_stats = VecNormalize.load(
         str(checkpoint_file(run_dir, "vecnormalize", steps)),
@@ -498,7 +498,7 @@ def test_interrupted_run_resumes_from_its_last_checkpoint(algo, tmp_path):
 @pytest.mark.slow
 def test_compare_quick_preset_smoke(tmp_path):
     """The main job end to end on a tiny budget: trains, evaluates on shared seeds, reports."""
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     out = tmp_path / "cmp"
     argv = [
@@ -594,8 +594,8 @@ def test_a_policy_trained_with_env_options_acts_alike_on_the_default_env(tmp_pat
     with another N it is refused (its shapes do not fit its recorded interface)."""
     import gymnasium as gym
 
-    from agent_envs.training.policies import InterfacePolicy, resolve_policy
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
+    from agent_envs.training.learners.policies import InterfacePolicy, resolve_policy
 
     options = {"observation": "summary", "action_basis": "common"}
     config = tiny_config(
@@ -631,10 +631,10 @@ def test_a_shared_policy_with_the_swarm_layout_is_evaluated_in_its_layout(tmp_pa
 
     import gymnasium as gym
 
-    from agent_envs.training.checkpoints import best_model_path
-    from agent_envs.training.compare import per_agent_table
-    from agent_envs.training.policies import PerAgentPolicy, resolve_policy
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.compare import per_agent_table
+    from agent_envs.training.commands.train import train
+    from agent_envs.training.learners.checkpoints import best_model_path
+    from agent_envs.training.learners.policies import PerAgentPolicy, resolve_policy
 
     options = {"observation": "swarm", "agent_reward": "team"}
     config = tiny_config(

@@ -7,8 +7,8 @@ import importlib.util
 
 import pytest
 
-from agent_envs.training.presets import PRESETS
-from agent_envs.training.tune import (
+from agent_envs.training.commands.presets import PRESETS
+from agent_envs.training.commands.tune import (
     TuneConfig,
     agents_per_copy,
     search_space,
@@ -80,7 +80,7 @@ def test_tiny_search_writes_the_summary_and_a_usable_yaml(tmp_path):
         pytest.skip("optuna comes with the zoo extra")
     import yaml
 
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
     from agent_envs.training.config import TrainConfig
 
     out = tmp_path / "tune"

@@ -55,7 +55,7 @@ def test_theorem_sides_on_a_state_at_the_static_pair():
 
 def test_tiny_run_writes_figure_and_table(tmp_path):
     pytest.importorskip("torch")
-    from agent_envs.training.cli import main
+    from agent_envs.training.commands.cli import main
 
     out = tmp_path / "tp"
     argv = [

@@ -126,7 +126,7 @@ class TrainConfig:
     algo: str = option_field(
         "ppo",
         "Stable-Baselines3 algorithm, or apg (a feedback law trained by backpropagation "
-        "through the core's integrator, agent_envs.training.apg: its settings go in "
+        "through the core's integrator, agent_envs.training.learners.apg: its settings go in "
         "--hyperparams, e.g. '{\"iterations\": 300}'; --timesteps, --n-envs and the other "
         "SB3 options do not apply)",
         choices=(*ALGORITHMS, "apg"),
@@ -186,7 +186,7 @@ class TrainConfig:
     vec_env: str = option_field(
         "native",
         "vectorization of the training envs: native (all envs stepped as one batch, "
-        "agent_envs.training.native_vec_env; the Gymnasium env only, the PettingZoo env "
+        "agent_envs.training.learners.native_vec_env; the Gymnasium env only, the PettingZoo env "
         "ignores it), dummy (one env after the other, in process) or subproc",
         choices=VEC_ENV_CHOICES,
     )

@@ -216,7 +216,7 @@ def parse_seeds(
 
 #: The env kwargs that set the learner's interface (`agent_envs.envs.interface`), not the
 #: dynamics: a policy trained with them is evaluated on the default interface through
-#: `agent_envs.training.policies.InterfacePolicy` / `PerAgentPolicy`.
+#: `agent_envs.training.learners.policies.InterfacePolicy` / `PerAgentPolicy`.
 INTERFACE_OPTIONS = ("observation", "action_basis", "agent_reward")
 
 

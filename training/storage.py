@@ -11,8 +11,8 @@ the run manifest of SHA-256 hashes.
 - `RunManifest`: ``RUN/manifest.json`` records the SHA-256 and size of every model, statistics
   and replay-buffer file the run saves (`save_recorded`). Pickles are code: a statistics file is
   unpickled only when the user named it, or when the manifest of the run that wrote it records
-  its hash (`agent_envs.training.policies`), and ``--resume`` uses only checkpoints whose files
-  match their hashes (`agent_envs.training.checkpoints`).
+  its hash (`agent_envs.training.learners.policies`), and ``--resume`` uses only checkpoints whose
+  files match their hashes (`agent_envs.training.learners.checkpoints`).
 
 Standard library only: the core-only subcommands use it without the ``train`` extra.
 """

@@ -1,8 +1,8 @@
 """The reference data shipped with each task: per test seed, what the references cost.
 
 One JSON file per task version in the package (``agent_envs/tasks/data/Name-vN.json``), written
-by `agent-envs tasks --regenerate ID` (`agent_envs.training.task_references`), and one line per
-file in ``data/SHA256SUMS`` (``sha256sum`` format): the hash recorded in the package. Every
+by `agent-envs tasks --regenerate ID` (`agent_envs.training.commands.task_references`), and one line
+per file in ``data/SHA256SUMS`` (``sha256sum`` format): the hash recorded in the package. Every
 load recomputes the file's SHA-256 and refuses a file that does not match, so a score is never
 computed against edited or corrupted references. Scoring reads these numbers and never
 re-solves anything (numpy only, no torch).

@@ -2,7 +2,7 @@
 
 `docs/cli.md` holds the marker ``<!-- cli-reference -->``; at build time this hook replaces it
 with the ``--help`` of ``agent-envs`` and of every subcommand in
-`agent_envs.training.cli.SUBCOMMANDS`, as `build_parser(name)` builds them (the same parser
+`agent_envs.training.commands.cli.SUBCOMMANDS`, as `build_parser(name)` builds them (the same parser
 the command runs). The help is formatted at a fixed width, so the page does not depend on the
 terminal of whoever builds it. `cli_reference_markdown()` is importable on its own (the tests
 call it).
@@ -41,7 +41,7 @@ def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentP
 
 def cli_reference_markdown() -> str:
     """One section per subcommand, each its `--help` as `agent-envs NAME --help` prints it."""
-    from agent_envs.training import cli
+    from agent_envs.training.commands import cli
 
     with _columns(HELP_WIDTH):
         sections = ["## agent-envs\n", "```text", cli.build_parser().format_help().rstrip(), "```"]

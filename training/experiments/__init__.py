@@ -11,7 +11,7 @@
 Each module has a frozen config dataclass (one field per option of `agent-envs reproduce NAME`,
 validated on construction) and ``reproduce(out_dir, ...)`` (writes tables and figures); the
 command line is `agent-envs reproduce uncontrolled|turnpike|turnpike-property|cheap-control-bound`
-(`agent_envs.training.cli`).
+(`agent_envs.training.commands.cli`).
 """
 
 from __future__ import annotations

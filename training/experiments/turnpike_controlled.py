@@ -48,7 +48,7 @@ from agent_envs.baselines import CheapClosedLoopModel, TurnpikeController, turnp
 from agent_envs.training.config import option_field
 from agent_envs.training.defaults import DEFAULT_BETA, DEFAULT_DELTA, GYM_ENV_ID, parse_seeds
 from agent_envs.training.experiments import check_sizes
-from agent_envs.training.results import Episode
+from agent_envs.training.results.tables import Episode
 
 #: The paper's stiffness of the symmetric kernel (Section 5.2).
 EPSILON = 0.05
@@ -136,7 +136,7 @@ def run_env_mode(run: TurnpikeRun, seed: int, n_agents: int, n_steps: int, n_pat
     import gymnasium as gym
 
     import agent_envs  # noqa: F401
-    from agent_envs.training.evaluate import rollout
+    from agent_envs.training.results.rollout import rollout
 
     env = gym.make(GYM_ENV_ID, **run.env_kwargs(n_agents, n_steps, n_paths))
     try:

@@ -35,7 +35,7 @@ from agent_envs.costs import discrete_cost
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.episode import EpisodeConfig
 from agent_envs.simulator import brownian_increments, simulate, uniform_positions
-from agent_envs.training.apg_policy import SwarmFeedbackLaw
+from agent_envs.training.learners.apg_policy import SwarmFeedbackLaw
 
 
 class LinearizationCache(SwarmModel):

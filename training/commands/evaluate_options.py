@@ -1,15 +1,15 @@
 """The options of `agent-envs evaluate` (`EvaluateConfig`) and its policy specs.
 
-Kept apart from the rollouts (`agent_envs.training.evaluate`, which needs pandas) so that
+Kept apart from the rollouts (`agent_envs.training.commands.evaluate`, which needs pandas) so that
 `agent-envs evaluate --task ID -p module:attribute` runs on the core install: numpy, no torch,
-no pandas (`agent_envs.training.task_evaluation`).
+no pandas (`agent_envs.training.commands.task_evaluation`).
 
 Policy specs (``-p [NAME=]SPEC``, `parse_policy_specs`):
 
 - a baseline name: turnpike, proportional, zero, optimal, mpc;
 - a saved SB3 model ``[ALGO:]PATH.zip[:STATS.pkl]``, or an apg run folder;
 - ``module:attribute`` (`is_object_spec`): a Python object the user names, imported from the
-  working directory or PYTHONPATH (`agent_envs.training.task_evaluation.import_policy`): a
+  working directory or PYTHONPATH (`agent_envs.training.commands.task_evaluation.import_policy`): a
   callable ``obs -> action``, an object with SB3's ``predict``, or a factory ``env -> policy``
   (`agent_envs.tasks.scoring`); ``per-agent:module:attribute`` marks a parameter-shared
   per-agent law, scored on the task's PettingZoo twin (``--task`` only).
@@ -35,7 +35,7 @@ from agent_envs.training.defaults import (
     parse_env_kwargs,
     parse_seeds,
 )
-from agent_envs.training.policies import ModelSpec, check_model
+from agent_envs.training.learners.policies import ModelSpec, check_model
 from agent_envs.validation import TARGET_RANGE, check_positive, check_real
 
 #: ``module:attribute`` (dotted names), optionally after ``per-agent:``.
@@ -205,7 +205,7 @@ class EvaluateConfig:
         ]
         if not files:
             return  # nothing to check: no torch needed
-        from agent_envs.training.apg_policy import is_apg_run
+        from agent_envs.training.learners.apg_policy import is_apg_run
 
         for spec in files:
             if not is_apg_run(spec):

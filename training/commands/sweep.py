@@ -16,13 +16,13 @@ Ray's own session logs go to its temp dir (``/tmp/ray`` by default), Tune's expe
 ``OUT/tune`` (`RunConfig(storage_path=OUT)`), never to the working directory.
 
 Trials (one `tune.grid_search` over the trials of `experiment.build_trials`, for the preset of
-`agent_envs.training.presets`, the same presets `agent-envs compare` takes):
+`agent_envs.training.commands.presets`, the same presets `agent-envs compare` takes):
 
-- a learner trial runs `agent_envs.training.train.train` into ``OUT/runs/{setting}__{learner}__
-  {seed}`` (config, checkpoints, learning curve, TensorBoard in ``tb/``: the usual run folder), with
-  its stdout/stderr in ``{run folder}.sweep_trial.log`` beside it, then evaluates the best model (on
-  the validation seeds) on the held-out test seeds (`agent_envs.training.evaluate`) into the run
-  folder's ``test_evaluation/``;
+- a learner trial runs `agent_envs.training.commands.train.train` into
+  ``OUT/runs/{setting}__{learner}__{seed}`` (config, checkpoints, learning curve, TensorBoard in
+  ``tb/``: the usual run folder), with its stdout/stderr in ``{run folder}.sweep_trial.log`` beside
+  it, then evaluates the best model (on the validation seeds) on the held-out test seeds
+  (`agent_envs.training.commands.evaluate`) into the run folder's ``test_evaluation/``;
 - a reference trial evaluates one reference controller on the same test seeds into
   ``OUT/references/{setting}/{name}/``.
 
@@ -33,11 +33,11 @@ and Ray stops the trials at an interrupt without the checkpoint that `train` wri
 a finished training or evaluation is not repeated. The grid is the one saved in
 ``OUT/sweep.json`` at the start.
 
-Report. When every trial has finished, `agent_envs.training.sweep_report` writes
+Report. When every trial has finished, `agent_envs.training.commands.sweep_report` writes
 ``OUT/report/report.md`` and ``.html``: the report of `agent-envs compare` (per-policy table,
 plots) for the main setting, the across-seed statistics (IQM, stratified-bootstrap CIs,
-probability of improvement; `agent_envs.training.seed_statistics`), the learning curves with a
-band over seeds, and a section per contrast setting.
+probability of improvement; `agent_envs.training.results.seed_statistics`), the learning curves with
+a band over seeds, and a section per contrast setting.
 """
 
 from __future__ import annotations
@@ -52,22 +52,22 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from agent_envs.training.config import command_line, option_field
-from agent_envs.training.defaults import parse_seeds
-from agent_envs.training.experiment import (
+from agent_envs.training.commands.experiment import (
     LEARNER,
     TRIAL_LOG,
     ExperimentOptions,
     GridArguments,
     Trial,
-    budget,
     build_trials,
     check_envs,
     evaluation_dir,
     learner_run_dir,
     split_names,
 )
-from agent_envs.training.presets import PRESETS, get_preset
+from agent_envs.training.commands.learner_runs import budget
+from agent_envs.training.commands.presets import PRESETS, get_preset
+from agent_envs.training.config import command_line, option_field
+from agent_envs.training.defaults import parse_seeds
 from agent_envs.validation import MAX_SEED, check_int
 
 #: what `OUT/sweep.json` holds: the options and the expanded grid of the first start
@@ -178,7 +178,7 @@ def _finished_evaluation(folder: Path, trial: Trial) -> bool:
 
 def train_trial(trial: Trial, out: Path) -> Path:
     """Train the learner of `trial` (or continue its interrupted run); return the run folder."""
-    from agent_envs.training.experiment import train_from_dict
+    from agent_envs.training.commands.learner_runs import train_from_dict
 
     return train_from_dict({**trial.train, "out": str(out / "runs")})
 
@@ -199,10 +199,10 @@ def execute_trial(trial: Trial, out: Path) -> dict[str, Any]:
     (`train` creates the run folder itself, exclusively), a reference trial to
     ``sweep_trial.log`` in its evaluation folder.
     """
+    from agent_envs.training.commands.evaluate import evaluate_policies
+    from agent_envs.training.commands.learner_runs import evaluation_spec
     from agent_envs.training.defaults import GYM_ENV_ID
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.experiment import evaluation_spec
-    from agent_envs.training.results import EvaluationResults
+    from agent_envs.training.results.tables import EvaluationResults
 
     started = time.perf_counter()
     folder = evaluation_dir(trial, out)
@@ -382,7 +382,7 @@ def describe_trials(trials: list[Trial]) -> str:
 
 def sweep(config: SweepConfig) -> dict[str, Any]:
     """Run the sweep of `config` and write its report; returns paths and tables."""
-    from agent_envs.training.sweep_report import write_sweep_report
+    from agent_envs.training.commands.sweep_report import write_sweep_report
 
     started = time.perf_counter()
     built = None if config.resume else config.trials()  # built (and validated) once

@@ -1,6 +1,6 @@
 """The training loop: `train(TrainConfig)` trains a Stable-Baselines3 agent on a swarm env.
 
-The command line is `agent-envs train` (`agent_envs.training.cli`):
+The command line is `agent-envs train` (`agent_envs.training.commands.cli`):
 
     agent-envs train --algo ppo --env-id agent_envs/Swarm-v0 \\
         --env-kwargs '{"n_agents": 10, "n_steps": 20}' --timesteps 50000 --seed 0 --out runs
@@ -11,7 +11,7 @@ Everything is SB3's own machinery: vectorized envs (`make_vec_env`, or SuperSuit
 PettingZoo env), `VecNormalize` (statistics saved with every checkpoint and the model, frozen at
 evaluation), `CheckpointCallback` (model + VecNormalize + replay buffer), an `EvalCallback`
 subclass that logs the turnpike controller's cost on the same validation seeds
-(`agent_envs.training.callbacks.SwarmEvalCallback`), TensorBoard and the progress bar.
+(`agent_envs.training.learners.callbacks.SwarmEvalCallback`), TensorBoard and the progress bar.
 
 A run directory ``{out}/{env}__{algo}__{seed}__{unix time}`` holds:
 
@@ -59,7 +59,7 @@ from agent_envs.training.defaults import (
     interface_of,
     is_multiagent,
 )
-from agent_envs.training.environments import (
+from agent_envs.training.learners.environments import (
     env_description,
     eval_env_id,
     eval_env_kwargs,
@@ -106,8 +106,8 @@ def train(
     the run holds its lock (`agent_envs.training.storage.RunLock`) while it trains.
 
     With `config.resume` set to a run directory, the run continues from its newest verified
-    checkpoint (`agent_envs.training.checkpoints.resumable_checkpoint`; damaged newer ones are
-    skipped with a message): its config.json defines the run, except `RESUME_OVERRIDES`,
+    checkpoint (`agent_envs.training.learners.checkpoints.resumable_checkpoint`; damaged newer ones
+    are skipped with a message): its config.json defines the run, except `RESUME_OVERRIDES`,
     which are taken from `config`. `callbacks` are extra SB3 callbacks appended to the run's own;
     `on_evaluation` is called with every validation row (`callbacks.SwarmEvalCallback`).
     """
@@ -175,7 +175,7 @@ def _train_in(
 ) -> Path:
     """Train in `run_dir` (created and locked by `train`): resume point, run files, model,
     callbacks, learning, final checkpoint and summary."""
-    from agent_envs.training.checkpoints import FINAL_MODEL, save_model_with_statistics
+    from agent_envs.training.learners.checkpoints import FINAL_MODEL, save_model_with_statistics
 
     resolved = resolve_hyperparams(config)  # (SB3 kwargs, n_envs, VecNormalize kwargs, policy)
     off_policy = config.algo in OFF_POLICY
@@ -213,7 +213,7 @@ def _resume_point(config: TrainConfig, run_dir: Path, off_policy: bool, normaliz
     a resumed run continues, finished or interrupted. Nothing in the run directory is rewritten
     before it is verified.
     """
-    from agent_envs.training.checkpoints import resumable_checkpoint
+    from agent_envs.training.learners.checkpoints import resumable_checkpoint
 
     if not config.resume:
         return None
@@ -294,9 +294,9 @@ def _callbacks(config, run_dir: Path, sb3_envs: int, description: dict[str, Any]
     `checkpoint_freq` timesteps, validation every `eval_freq` with the reference controllers
     logged on the same seeds (the learning curve continues from `done` timesteps)."""
     from agent_envs.baselines import ProportionalController, TurnpikeController, ZeroController
-    from agent_envs.training.callbacks import SwarmEvalCallback, read_learning_curve
-    from agent_envs.training.checkpoints import checkpoint_callback
-    from agent_envs.training.policies import live_policy
+    from agent_envs.training.learners.callbacks import SwarmEvalCallback, read_learning_curve
+    from agent_envs.training.learners.checkpoints import checkpoint_callback
+    from agent_envs.training.learners.policies import live_policy
 
     off_policy = config.algo in OFF_POLICY
     callbacks: list[Any] = []
@@ -378,7 +378,7 @@ def _log_without_folder(model: Any) -> None:
 
 def save_checkpoint_of(model: Any, run_dir: Path, off_policy: bool) -> Path:
     """`checkpoints.save_checkpoint` (imported lazily: it needs SB3)."""
-    from agent_envs.training.checkpoints import save_checkpoint
+    from agent_envs.training.learners.checkpoints import save_checkpoint
 
     return save_checkpoint(model, run_dir, off_policy)
 

@@ -6,7 +6,7 @@
 
 Units of work. For each trainable task (every task but `LargeSwarm`) and each learner of
 `LEARNERS` and each training seed, one *unit*: train the learner on the task's env (the paper
-preset's hyperparameters and budgets, `agent_envs.training.presets`; its validation during
+preset's hyperparameters and budgets, `agent_envs.training.commands.presets`; its validation during
 training on the task's validation seeds 1000..), then score its best model on the task's 20 test
 seeds with `agent_envs.tasks.score`. `LargeSwarm` (N = 10^4) trains nothing: its units score the
 policies trained on `StiffSwarm` (the same dynamics at N = 100), a transfer to 100 times more
@@ -15,7 +15,7 @@ the task's shipped data: nothing is re-solved.
 
 Resumable in parts: each unit writes ``OUT/units/TASK__LEARNER__SEED.csv`` (its per-episode
 scores) when it is done, and a unit whose file exists is skipped; training itself reuses a
-finished run and resumes an interrupted one (`experiment.train_from_dict`). ``--tasks`` runs
+finished run and resumes an interrupted one (`learner_runs.train_from_dict`). ``--tasks`` runs
 part of the grid; ``--workers`` runs units in parallel processes (one torch and BLAS thread
 each). When every unit of the selected tasks is done, ``OUT/episodes.csv`` (every unit and the
 references, one row per policy x training seed x test seed) and ``OUT/leaderboard.md`` are
@@ -36,9 +36,9 @@ import numpy as np
 
 from agent_envs.tasks import TASK_LIST, TaskScore, TaskSpec, get_task, load_references, score
 from agent_envs.tasks.scores import summarize
+from agent_envs.training.commands.task_evaluation import SCORE_COLUMNS, csv_text, reference_scores
 from agent_envs.training.config import option_field
 from agent_envs.training.storage import write_text_atomic
-from agent_envs.training.task_evaluation import SCORE_COLUMNS, csv_text, reference_scores
 
 #: The learners of the leaderboard, by their name in the paper preset: `apg` (a per-agent
 #: feedback law trained through SERB) and SAC with the summary observation and one common
@@ -73,7 +73,7 @@ class Unit:
 
 def task_preset(task: TaskSpec, timesteps_scale: float = 1.0) -> Any:
     """A `Preset` that trains the leaderboard's learners on `task` (paper hyperparameters)."""
-    from agent_envs.training.presets import PRESETS, EnvSetting, Preset
+    from agent_envs.training.commands.presets import PRESETS, EnvSetting, Preset
 
     paper = PRESETS["paper"]
     learners = tuple(lr for lr in paper.learners if lr.name in LEARNERS)
@@ -103,12 +103,9 @@ def units(tasks: Sequence[str], seeds: Sequence[int] = TRAINING_SEEDS) -> list[U
 
 def _train(unit: Unit, out: Path, timesteps_scale: float) -> Path:
     """Train (or reuse) the unit's learner on its source task; the run directory."""
+    from agent_envs.training.commands.experiment import ExperimentOptions, learner_config
+    from agent_envs.training.commands.learner_runs import train_from_dict
     from agent_envs.training.config import TrainConfig
-    from agent_envs.training.experiment import (
-        ExperimentOptions,
-        learner_config,
-        train_from_dict,
-    )
 
     source = get_task(unit.source)
     preset = task_preset(source)
@@ -147,8 +144,8 @@ def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
     """Train and score one unit; write and return its file."""
     from threadpoolctl import threadpool_limits
 
-    from agent_envs.training.experiment import evaluation_spec
-    from agent_envs.training.policies import resolve_policy
+    from agent_envs.training.commands.learner_runs import evaluation_spec
+    from agent_envs.training.learners.policies import resolve_policy
 
     with threadpool_limits(1):
         import torch

@@ -117,17 +117,17 @@ def _check_pettingzoo_kwargs(env_kwargs: dict[str, Any] | None, option: str) -> 
 def make_training_env(config: TrainConfig, n_envs: int):
     """The vectorized training env (Monitor-wrapped), seeded from config.seed by SB3."""
     if is_multiagent(config.env_id):
-        from agent_envs.training.multiagent import make_shared_vec_env
+        from agent_envs.training.learners.multiagent import make_shared_vec_env
 
         return make_shared_vec_env(config.env_kwargs, n_copies=n_envs)
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     import agent_envs  # noqa: F401
-    from agent_envs.training.wrappers import HorizonAsTermination
+    from agent_envs.training.learners.wrappers import HorizonAsTermination
 
     if config.vec_env == "native":
-        from agent_envs.training.native_vec_env import NativeVecEnv
+        from agent_envs.training.learners.native_vec_env import NativeVecEnv
 
         try:
             venv = NativeVecEnv(

@@ -488,7 +488,7 @@ def resolve_policy(
             if name == "zero" or not issubclass(BASELINES[name], FeedbackController):
                 kw = {}
             return make_baseline(name, env, **kw), {"kind": "baseline", "name": name, **kw}
-        from agent_envs.training.apg_policy import is_apg_run, load_apg_policy
+        from agent_envs.training.learners.apg_policy import is_apg_run, load_apg_policy
 
         if is_apg_run(name):  # an apg run folder or its weights (.pt beside apg_law.json)
             return load_apg_policy(name), {"kind": "apg", "path": name}

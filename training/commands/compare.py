@@ -4,18 +4,18 @@
     agent-envs compare --preset paper            # N = 100, stiff, SERB, m = 50; much longer
     agent-envs compare --preset paper --setting eps1 --learners ppo
 
-The presets are the ones of `agent-envs sweep` (`agent_envs.training.presets`): compare runs one
-training seed (``--seed``, default the preset's first) of one env setting (``--setting``,
+The presets are the ones of `agent-envs sweep` (`agent_envs.training.commands.presets`): compare
+runs one training seed (``--seed``, default the preset's first) of one env setting (``--setting``,
 default the main one) in process; the runs come from the experiment builder
-(`agent_envs.training.experiment`), as the sweep's do.
+(`agent_envs.training.commands.experiment`), as the sweep's do.
 
-Steps: (1) train every learner of the preset (`experiment.train_learner`; a finished run
+Steps: (1) train every learner of the preset (`learner_runs.train_from_dict`; a finished run
 of the same configuration in ``OUT/runs`` is reused, an interrupted one resumed from its last
 checkpoint); (2) evaluate the learners' best models (chosen on the validation seeds) and the
 turnpike, proportional and zero controllers on the same held-out test seeds
-(`agent_envs.training.evaluate`), plus the parameter-shared policy agent by agent on the
-PettingZoo env; (3) write the report of `agent_envs.training.report` with the learning curves
-added (``OUT/report/report.md`` and ``.html``).
+(`agent_envs.training.commands.evaluate`), plus the parameter-shared policy agent by agent on the
+PettingZoo env; (3) write the report of `agent_envs.training.results.report` with the learning
+curves added (``OUT/report/report.md`` and ``.html``).
 
 Seeds: the training envs start from the run seed; validation (best-model choice and the
 learning curves, turnpike logged on the same seeds) uses seeds ``1000 + i``; the comparison uses
@@ -38,6 +38,17 @@ from typing import Any
 
 import numpy as np
 
+from agent_envs.training.commands.experiment import (
+    LEARNER,
+    ExperimentOptions,
+    GridArguments,
+    Trial,
+    build_trials,
+    check_envs,
+    select,
+)
+from agent_envs.training.commands.learner_runs import budget, evaluation_spec, train_from_dict
+from agent_envs.training.commands.presets import OPTIMUM_POLICIES, PRESETS, Learner, get_preset
 from agent_envs.training.config import command_line, json_field, option_field
 from agent_envs.training.defaults import (
     BASELINE_POLICIES,
@@ -45,19 +56,6 @@ from agent_envs.training.defaults import (
     PETTINGZOO_ENV_ID,
     parse_env_kwargs,
 )
-from agent_envs.training.experiment import (
-    LEARNER,
-    ExperimentOptions,
-    GridArguments,
-    Trial,
-    budget,
-    build_trials,
-    check_envs,
-    evaluation_spec,
-    select,
-    train_from_dict,
-)
-from agent_envs.training.presets import OPTIMUM_POLICIES, PRESETS, Learner, get_preset
 from agent_envs.validation import MAX_SEED, check_int
 
 
@@ -119,7 +117,7 @@ class CompareConfig(GridArguments):
         built them already), and the env with ``--env-kwargs`` and with ``--eval-env-kwargs``
         (both are built once).
         """
-        from agent_envs.training.environments import env_description
+        from agent_envs.training.learners.environments import env_description
         from agent_envs.training.storage import check_output_dir
 
         check_output_dir(self.out_dir, "--out")
@@ -187,7 +185,7 @@ class CompareConfig(GridArguments):
 def evaluate_all(
     policies: dict[str, Any], env_kwargs: dict[str, Any], seeds: list[int], out_dir: Path, progress
 ):
-    from agent_envs.training.evaluate import evaluate_policies
+    from agent_envs.training.commands.evaluate import evaluate_policies
 
     return evaluate_policies(
         policies,
@@ -205,9 +203,9 @@ def per_agent_table(run_dir: Path, env_kwargs: dict[str, Any], seeds: list[int])
     import pandas as pd
 
     import agent_envs  # noqa: F401
-    from agent_envs.training.checkpoints import best_model_path
-    from agent_envs.training.multiagent import evaluate_per_agent
-    from agent_envs.training.policies import load_sb3_policy
+    from agent_envs.training.learners.checkpoints import best_model_path
+    from agent_envs.training.learners.multiagent import evaluate_per_agent
+    from agent_envs.training.learners.policies import load_sb3_policy
 
     env = gym.make(GYM_ENV_ID, **env_kwargs)
     try:
@@ -235,7 +233,7 @@ def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], pa
     """Validation cost against swarm steps and wall time, one line per learner (log scale)."""
     from matplotlib.figure import Figure
 
-    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     fig = Figure(figsize=(11, 4.2))
     axes = fig.subplots(1, 2, sharey=True)
@@ -273,7 +271,7 @@ def plot_learning_curves(runs: dict[str, Path], references: dict[str, float], pa
 
 def _reference_costs(run_dirs: dict[str, Path]) -> dict[str, float]:
     """The baselines' costs the eval callback logged on the validation seeds (same for all)."""
-    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     for run_dir in run_dirs.values():
         rows = read_learning_curve(run_dir / "learning_curve.csv")
@@ -289,7 +287,7 @@ def _reference_costs(run_dirs: dict[str, Path]) -> dict[str, float]:
 def training_table(run_dirs: dict[str, Path], learners: dict[str, Learner]):
     import pandas as pd
 
-    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     rows = []
     for name, run_dir in run_dirs.items():
@@ -348,8 +346,8 @@ def _evaluate(config: CompareConfig, trials: list[Trial], run_dirs: dict[str, Pa
 
 
 def _proportional_section(results):
-    from agent_envs.training.report import ReportSection, display_table
-    from agent_envs.training.results import summarize
+    from agent_envs.training.results.report import ReportSection, display_table
+    from agent_envs.training.results.tables import summarize
 
     return ReportSection(
         "Against the proportional controller",
@@ -364,7 +362,7 @@ def _proportional_section(results):
 
 
 def _learning_curve_section(run_dirs: dict[str, Path], learners: dict[str, Learner], out: Path):
-    from agent_envs.training.report import ReportSection
+    from agent_envs.training.results.report import ReportSection
 
     curves_png = out / "learning_curves.png"
     plot_learning_curves(run_dirs, _reference_costs(run_dirs), curves_png)
@@ -386,7 +384,7 @@ def _learning_curve_section(run_dirs: dict[str, Path], learners: dict[str, Learn
 
 
 def _per_agent_section(name: str, table):
-    from agent_envs.training.report import ReportSection
+    from agent_envs.training.results.report import ReportSection
 
     return ReportSection(
         f"Per-agent costs of {name} (PettingZoo env)",
@@ -401,8 +399,8 @@ def _per_agent_section(name: str, table):
 
 
 def _transfer_section(config: CompareConfig, env_kwargs: dict[str, Any], transfer):
-    from agent_envs.training.report import ReportSection, display_table
-    from agent_envs.training.results import summarize
+    from agent_envs.training.results.report import ReportSection, display_table
+    from agent_envs.training.results.tables import summarize
 
     return ReportSection(
         f"Evaluated on another env: {config.eval_env_kwargs}",
@@ -415,7 +413,7 @@ def _transfer_section(config: CompareConfig, env_kwargs: dict[str, Any], transfe
 
 
 def _run_section(config: CompareConfig, env_kwargs, learners, total: float, training: float):
-    from agent_envs.training.report import ReportSection
+    from agent_envs.training.results.report import ReportSection
 
     preset = get_preset(config.preset)
     return ReportSection(
@@ -434,7 +432,7 @@ def _run_section(config: CompareConfig, env_kwargs, learners, total: float, trai
 
 def compare(config: CompareConfig) -> dict[str, Any]:
     """Run the whole comparison; returns paths and the summary table (see module docstring)."""
-    from agent_envs.training.train import torch_threads
+    from agent_envs.training.commands.train import torch_threads
 
     started = time.perf_counter()
     trials = config.trials()  # the grid is built (every TrainConfig validated) once
@@ -476,8 +474,8 @@ def compare(config: CompareConfig) -> dict[str, Any]:
 def _finish(config, results, sections, run_dirs, setting, timing) -> dict[str, Any]:
     """Write the report and ``comparison.json`` (`setting`: env kwargs and test seeds;
     `timing`: the start and end of training); print the table."""
-    from agent_envs.training.report import build_report, display_table
-    from agent_envs.training.results import summarize
+    from agent_envs.training.results.report import build_report, display_table
+    from agent_envs.training.results.tables import summarize
     from agent_envs.training.storage import write_json_atomic
 
     out = config.out_dir

@@ -12,8 +12,9 @@ training seed, one setting) and `agent-envs sweep` runs on Ray Tune (the whole g
   not train, so the training seed does not apply; settings that evaluate on the same env share
   them).
 
-`train_learner` is the one way both commands train: a finished run of the same configuration is
-reused, an interrupted one resumed from its last checkpoint. Building the trials imports
+How a trial's learner is trained (a finished run of the same configuration reused, an
+interrupted one resumed) is `learner_runs.train_from_dict`, the one way both commands train.
+Building the trials imports
 neither Ray nor torch, so the grid is testable on its own.
 """
 
@@ -29,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agent_envs.training.commands.presets import EnvSetting, Learner, Preset
 from agent_envs.training.config import (
     VEC_ENV_CHOICES,
     TrainConfig,
@@ -36,13 +38,12 @@ from agent_envs.training.config import (
     option_field,
 )
 from agent_envs.training.defaults import DEFAULT_TEST_SEED, is_multiagent, parse_env_kwargs
-from agent_envs.training.presets import EnvSetting, Learner, Preset
 from agent_envs.validation import MAX_SEED, check_int
 
 LEARNER = "learner"
 REFERENCE = "reference"
-#: the learner trained by analytic policy gradients (`agent_envs.training.apg`); every other
-#: learner's algo is a Stable-Baselines3 one
+#: the learner trained by analytic policy gradients (`agent_envs.training.learners.apg`); every
+#: other learner's algo is a Stable-Baselines3 one
 APG = "apg"
 #: keys of an apg trial's training dict that are not `APGConfig` fields
 APG_RUN_KEYS = ("algo", "env_id", "out", "run_name")
@@ -305,11 +306,11 @@ def apg_trial(
     name: str | None,
 ) -> dict[str, Any]:
     """The training dict of an `apg` learner trial: ``algo``, ``env_id``, ``out``, ``run_name``
-    and the fields of its validated `apg.APGConfig` (the learner's `hyperparams` over the
+    and the fields of its validated `apg_config.APGConfig` (the learner's `hyperparams` over the
     defaults, `iterations` = its budget times the scale; validation every 25 iterations and a
     checkpoint every 50, or at the end of a shorter run)."""
-    from agent_envs.training.apg import APGConfig
     from agent_envs.training.defaults import GYM_ENV_ID
+    from agent_envs.training.learners.apg_config import APGConfig
 
     values = {
         "eval_freq": min(25, iterations),
@@ -424,7 +425,7 @@ def check_envs(trials: Sequence[Trial], option: str = "--env-kwargs") -> None:
     """Build every distinct training and evaluation env of `trials` once, so that bad env
     kwargs are a ValueError naming `option` before anything trains (`env_description`)."""
     from agent_envs.training.defaults import GYM_ENV_ID
-    from agent_envs.training.environments import env_description
+    from agent_envs.training.learners.environments import env_description
 
     seen: set[str] = set()
     for trial in trials:
@@ -457,147 +458,6 @@ def evaluation_dir(trial: Trial, out: Path) -> Path:
     return reference_dir(trial, out)
 
 
-# ------------------------------------------------------------------------------------ training
-
-#: A run is reused or resumed only when all of these match, the budget included: a run resumed
-#: with another budget would keep its old evaluation and checkpoint schedule.
-SAME_RUN_FIELDS = (
-    "algo",
-    "env_id",
-    "env_kwargs",
-    "seed",
-    "n_envs",
-    "hyperparams",
-    "eval_seed",
-    "timesteps",
-)
-
-
-def find_run(wanted: TrainConfig) -> tuple[Path, bool] | None:
-    """The newest run of `wanted`'s configuration in ``wanted.out``: (run dir, finished).
-
-    With a `run_name`, only that folder is a candidate; without, every run folder there.
-    A run is finished when its summary counts at least `wanted.timesteps` timesteps.
-    """
-    runs_dir = Path(wanted.out)
-    paths = (
-        [runs_dir / wanted.run_name / "config.json"]
-        if wanted.run_name
-        else list(runs_dir.glob("*/config.json"))
-    )
-    candidates = []
-    for cfg_path in paths:
-        try:
-            saved = json.loads(cfg_path.read_text())
-        except (OSError, json.JSONDecodeError):
-            continue
-        if any(saved.get(k) != getattr(wanted, k) for k in SAME_RUN_FIELDS):
-            continue
-        summary_path = cfg_path.parent / "summary.json"
-        finished = False
-        if summary_path.exists():
-            summary = json.loads(summary_path.read_text())
-            finished = int(summary.get("timesteps", 0)) >= wanted.timesteps
-        candidates.append((cfg_path.stat().st_mtime, cfg_path.parent, finished))
-    if not candidates:
-        return None
-    _, run_dir, finished = max(candidates)
-    return run_dir, finished
-
-
-def train_learner(config: TrainConfig, *, retrain: bool = False) -> Path:
-    """Train one learner, or reuse / resume its run; return the run directory.
-
-    A finished run of the same configuration (`SAME_RUN_FIELDS`, `find_run`) is reused, an
-    unfinished one continues from its last checkpoint (`train --resume`); `retrain` starts a
-    new run whatever is there.
-    """
-    from agent_envs.training.train import train
-
-    existing = None if retrain else find_run(config)
-    if existing is None:
-        return train(config)
-    run_dir, finished = existing
-    if finished:
-        print(f"  reusing finished run {run_dir}")
-        return run_dir
-    print(f"  resuming {run_dir} from its last checkpoint")
-    return train(dataclasses.replace(config, resume=str(run_dir)))
-
-
-def _apg_run(config: Any, out: Path, run_name_: str | None) -> tuple[Path, bool] | None:
-    """The newest apg run in `out` (or `out/run_name_`) with `config`'s settings (`progress`
-    and `threads` aside): (run dir, finished with enough iterations)."""
-    from agent_envs.training.apg_policy import is_apg_run
-
-    wanted = {k: v for k, v in config.to_dict().items() if k not in ("progress", "threads")}
-    wanted = json.loads(json.dumps(wanted))
-    folders = [out / run_name_] if run_name_ else [p for p in out.glob("*") if is_apg_run(p)]
-    candidates = []
-    for folder in folders:
-        try:
-            saved = json.loads((folder / "config.json").read_text())
-        except (OSError, json.JSONDecodeError):
-            continue
-        if any(saved.get(k) != v for k, v in wanted.items() if k != "iterations"):
-            continue
-        try:
-            done = int(json.loads((folder / "summary.json").read_text())["iterations"])
-        except (OSError, ValueError, KeyError):
-            done = 0
-        candidates.append((folder.stat().st_mtime, folder, done >= config.iterations))
-    if not candidates:
-        return None
-    _, folder, finished = max(candidates)
-    return folder, finished
-
-
-def train_apg_trial(train: dict[str, Any], *, retrain: bool = False) -> Path:
-    """Train the apg learner of a training dict (`apg_trial`), or reuse / resume its run."""
-    from agent_envs.training.apg import APGConfig, default_run_dir, train_apg
-
-    config = APGConfig.from_dict({k: v for k, v in train.items() if k not in APG_RUN_KEYS})
-    out = Path(train["out"])
-    existing = None if retrain else _apg_run(config, out, train.get("run_name"))
-    if existing is None:
-        name = train.get("run_name")
-        run_dir = out / name if name else default_run_dir(out, config)
-        out.mkdir(parents=True, exist_ok=True)
-        train_apg(config, run_dir)
-        return run_dir
-    run_dir, finished = existing
-    if finished:
-        print(f"  reusing finished run {run_dir}")
-        return run_dir
-    print(f"  resuming {run_dir} from its last checkpoint")
-    train_apg(config, run_dir, resume=True)
-    return run_dir
-
-
-def train_from_dict(train: dict[str, Any], *, retrain: bool = False) -> Path:
-    """Train a trial's learner from its training dict (SB3 `TrainConfig` or apg), or reuse /
-    resume its run; return the run directory."""
-    if train.get("algo") == APG:
-        return train_apg_trial(train, retrain=retrain)
-    return train_learner(TrainConfig.from_dict(train), retrain=retrain)
-
-
-def budget(train: dict[str, Any]) -> str:
-    """A trial's training budget in words: SB3 timesteps or apg iterations."""
-    if train.get("algo") == APG:
-        return f"{train['iterations']} iterations"
-    return f"{train['timesteps']} timesteps"
-
-
-def evaluation_spec(run_dir: Path) -> str:
-    """What `evaluate_policies` loads for a trained run: an apg run folder as it is, an SB3
-    run's best model on the validation seeds (else its final one)."""
-    from agent_envs.training.apg_policy import is_apg_run
-    from agent_envs.training.checkpoints import best_model_path
-
-    return str(run_dir) if is_apg_run(run_dir) else str(best_model_path(run_dir))
-
-
 __all__ = [
     "APG",
     "LEARNER",
@@ -610,10 +470,7 @@ __all__ = [
     "build_trials",
     "check_envs",
     "evaluation_dir",
-    "find_run",
     "learner_config",
     "learner_run_dir",
     "run_name",
-    "train_from_dict",
-    "train_learner",
 ]

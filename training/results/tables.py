@@ -1,7 +1,7 @@
 """Results of evaluations and their statistics: the one episode record, the per-policy table.
 
 - `Episode`: one episode's path-mean record (positions, controls, running cost, rewards, target,
-  turnpike time, divergence) with its summary scalars; `agent_envs.training.evaluate.rollout`
+  turnpike time, divergence) with its summary scalars; `agent_envs.training.results.rollout.rollout`
   records one from an env, the turnpike reproduction records the paper's closed loop in it too.
   (The core's `agent_envs.simulator.Trajectory` is the simulator's raw output, all paths.)
 - `EvaluationResults`: the per-episode table, the per-policy trajectories stacked over seeds and

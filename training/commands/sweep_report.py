@@ -1,9 +1,9 @@
 """The report of a sweep: the trials' evaluations gathered per env setting, written with
-`agent_envs.training.report.build_report` (the report of `agent-envs compare`).
+`agent_envs.training.results.report.build_report` (the report of `agent-envs compare`).
 
 Sections: the per-policy table and plots of `build_report` for the main (first) setting, one
 row per trained model (``ppo (seed 0)``, ...) and per reference controller; the across-seed
-statistics of every setting (`agent_envs.training.seed_statistics`: IQM with
+statistics of every setting (`agent_envs.training.results.seed_statistics`: IQM with
 stratified-bootstrap CIs, probability of improvement against the references, next to the
 per-episode mean); the learning curves of every learner with a band over training seeds;
 the training runs; the run (command, wall times).
@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from agent_envs.training.commands.experiment import LEARNER, Trial
+from agent_envs.training.commands.presets import Preset, get_preset
 from agent_envs.training.defaults import interface_of
-from agent_envs.training.experiment import LEARNER, Trial
-from agent_envs.training.presets import Preset, get_preset
 
 #: references the probability of improvement is taken against, in this order, when present
 IMPROVEMENT_REFERENCES = ("optimal", "mpc", "turnpike", "proportional", "zero")
@@ -38,8 +38,8 @@ def model_label(trial: Trial) -> str:
 
 def setting_results(trials: list[Trial], setting: str, out: Path):
     """The evaluations of one setting merged into one `EvaluationResults` (models renamed)."""
-    from agent_envs.training.experiment import evaluation_dir
-    from agent_envs.training.results import EvaluationResults, merge_results
+    from agent_envs.training.commands.experiment import evaluation_dir
+    from agent_envs.training.results.tables import EvaluationResults, merge_results
 
     parts = []
     for trial in trials:
@@ -57,9 +57,9 @@ def setting_results(trials: list[Trial], setting: str, out: Path):
 
 def policy_scores(trials: list[Trial], setting: str, out: Path) -> dict[str, Any]:
     """{learner or reference: PolicyScores (runs = training seeds, tasks = test seeds)}."""
-    from agent_envs.training.experiment import evaluation_dir
-    from agent_envs.training.results import EvaluationResults
-    from agent_envs.training.seed_statistics import PolicyScores
+    from agent_envs.training.commands.experiment import evaluation_dir
+    from agent_envs.training.results.seed_statistics import PolicyScores
+    from agent_envs.training.results.tables import EvaluationResults
 
     rows: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     for trial in trials:
@@ -97,9 +97,9 @@ def plot_learning_curve_bands(
     MPC) as grey lines. Returns the plotted points, or None when no run logged a curve."""
     from matplotlib.figure import Figure
 
-    from agent_envs.training.callbacks import read_learning_curve
+    from agent_envs.training.commands.experiment import learner_run_dir
     from agent_envs.training.defaults import is_multiagent
-    from agent_envs.training.experiment import learner_run_dir
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
     references: dict[str, float] = {}
@@ -170,8 +170,8 @@ def rising_evaluations(curve: list[dict[str, Any]], factor: float = 2.0) -> int:
 def training_table(trials: list[Trial], out: Path) -> pd.DataFrame:
     """One row per learner trial: env options, budget, wall time, best validation cost, and
     the validations above twice the first."""
-    from agent_envs.training.callbacks import read_learning_curve
-    from agent_envs.training.experiment import learner_run_dir
+    from agent_envs.training.commands.experiment import learner_run_dir
+    from agent_envs.training.learners.callbacks import read_learning_curve
 
     rows = []
     for trial in trials:
@@ -249,8 +249,8 @@ CURVES_TEXT = (
 
 def _contrast_section(trials: list[Trial], setting: Any, out: Path):
     """The per-policy table of a contrast setting, against its optimum where it has one."""
-    from agent_envs.training.report import ReportSection, display_table
-    from agent_envs.training.results import summarize
+    from agent_envs.training.results.report import ReportSection, display_table
+    from agent_envs.training.results.tables import summarize
 
     results = setting_results(trials, setting.name, out)
     # the gap to the optimum where the setting has it (else the turnpike controller)
@@ -265,7 +265,7 @@ def _contrast_section(trials: list[Trial], setting: Any, out: Path):
 
 def _curves_section(trials, out: Path, setting: Any, scores, report_dir: Path):
     """The learning-curve bands of one setting (also written as CSV), or None without curves."""
-    from agent_envs.training.report import ReportSection
+    from agent_envs.training.results.report import ReportSection
 
     curves_png = report_dir / f"learning_curves_{setting.name}.png"
     test_lines = {
@@ -288,8 +288,11 @@ def _curves_section(trials, out: Path, setting: Any, scores, report_dir: Path):
 def _setting_sections(trials, out: Path, settings: list, report_dir: Path, rng):
     """The sections of every setting (contrast table, across-seed statistics, curves) and the
     across-seed tables, which are also written to ``across_seeds.csv``."""
-    from agent_envs.training.report import ReportSection
-    from agent_envs.training.seed_statistics import across_seed_table, display_across_seed_table
+    from agent_envs.training.results.report import ReportSection
+    from agent_envs.training.results.seed_statistics import (
+        across_seed_table,
+        display_across_seed_table,
+    )
 
     sections = []
     stats_tables = []
@@ -316,7 +319,7 @@ def _setting_sections(trials, out: Path, settings: list, report_dir: Path, rng):
 
 
 def _time_section(trials, trial_times: Mapping[str, float], nodes, report_dir: Path):
-    from agent_envs.training.report import ReportSection
+    from agent_envs.training.results.report import ReportSection
 
     times = trial_time_table(trials, trial_times, nodes)
     times.to_csv(report_dir / "trial_wall_times.csv", index=False)
@@ -333,8 +336,8 @@ def _time_section(trials, trial_times: Mapping[str, float], nodes, report_dir: P
 
 
 def _run_section(preset: Preset, timing: dict[str, float], command: str):
-    from agent_envs.training.experiment import available_references
-    from agent_envs.training.report import ReportSection
+    from agent_envs.training.commands.experiment import available_references
+    from agent_envs.training.results.report import ReportSection
 
     _, lacking = available_references(preset)
     sources = [
@@ -359,8 +362,8 @@ def _run_section(preset: Preset, timing: dict[str, float], command: str):
 
 def _gap_sections(main: Any, main_results) -> list:
     """The main setting's per-policy table against each optimum / yardstick it has."""
-    from agent_envs.training.report import ReportSection, display_table
-    from agent_envs.training.results import summarize
+    from agent_envs.training.results.report import ReportSection, display_table
+    from agent_envs.training.results.tables import summarize
 
     return [
         ReportSection(
@@ -392,7 +395,7 @@ def write_sweep_report(
     `trial_times` the wall time of each trial by trial id (Tune's `trial_wall_time_s`),
     `nodes` the Ray node each ran on.
     """
-    from agent_envs.training.report import ReportSection, build_report
+    from agent_envs.training.results.report import ReportSection, build_report
 
     preset = get_preset(config.preset)
     report_dir = out / "report"

@@ -5,7 +5,7 @@ contrasts), the learners with their budgets, the reference controllers, the trai
 and the evaluation sizes. `compare --preset X` runs one training seed of X (``--seed``, default
 the preset's first) on one of its settings (``--setting``, default the main one), in process;
 `sweep --preset X` runs the whole grid (learners x seeds x settings) on Ray Tune. The
-experiment builder (`agent_envs.training.experiment`) turns a preset and the command line's
+experiment builder (`agent_envs.training.commands.experiment`) turns a preset and the command line's
 changes into runs.
 
 Presets:
@@ -43,12 +43,12 @@ class Learner:
 
     `hyperparams` override the training layer's defaults (`config.default_hyperparams`) key by
     key; `timesteps` counts SB3 timesteps (agent-steps on the PettingZoo env). For the `apg`
-    learner (algo "apg": `agent_envs.training.apg`) `timesteps` is the number of iterations
+    learner (algo "apg": `agent_envs.training.learners.apg`) `timesteps` is the number of iterations
     and `hyperparams` are `APGConfig` fields over its defaults. `env_kwargs` are the learner's
     own env options over the setting's: its interface (`agent_envs.envs.interface`:
     observation layout, action basis, agent reward), which never changes the dynamics, the cost
     or the draws; the learned policy is evaluated on the setting's env through
-    `agent_envs.training.policies.InterfacePolicy` / `PerAgentPolicy`. `normalize` is
+    `agent_envs.training.learners.policies.InterfacePolicy` / `PerAgentPolicy`. `normalize` is
     `agent-envs train --normalize` (VecNormalize; None: the hyperparameter file's choice).
     """
 

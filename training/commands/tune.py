@@ -34,11 +34,11 @@ from pathlib import Path
 from typing import Any
 
 from agent_envs.params import SwarmParams
+from agent_envs.training.commands.experiment import ExperimentArguments, learner_config
+from agent_envs.training.commands.presets import PRESETS, Learner, get_preset
+from agent_envs.training.commands.sweep import RayArguments
 from agent_envs.training.config import TrainConfig, command_line, option_field
 from agent_envs.training.defaults import is_multiagent
-from agent_envs.training.experiment import ExperimentArguments, learner_config
-from agent_envs.training.presets import PRESETS, Learner, get_preset
-from agent_envs.training.sweep import RayArguments
 from agent_envs.validation import MAX_SEED, check_int
 
 #: Tune's experiment folder under OUT
@@ -239,7 +239,7 @@ def tune_trainable(config: dict[str, Any]) -> None:
     far at every evaluation (the scheduler may stop the trial there)."""
     from ray import tune
 
-    from agent_envs.training.train import train
+    from agent_envs.training.commands.train import train
 
     base = TrainConfig.from_dict(config["base"])
     trial = trial_train_config(
@@ -416,7 +416,7 @@ def best_yaml(config: TuneConfig, base: TrainConfig, table) -> str:
 
 def write_summary(config: TuneConfig, base: TrainConfig, grid: Any) -> dict[str, Path]:
     """OUT/trials.csv, OUT/tune_summary.md and OUT/best_hyperparams.yml."""
-    from agent_envs.training.report import markdown_table
+    from agent_envs.training.results.report import markdown_table
     from agent_envs.training.storage import write_text_atomic
 
     out = config.out_dir
@@ -451,10 +451,10 @@ def write_summary(config: TuneConfig, base: TrainConfig, grid: Any) -> dict[str,
 
 def tune_learner(config: TuneConfig) -> dict[str, Any]:
     """Run the search of `config` and write its summary; returns paths and the trials table."""
-    from agent_envs.training.environments import env_description
+    from agent_envs.training.commands.sweep import start_ray
+    from agent_envs.training.learners.environments import env_description
     from agent_envs.training.ray_session import clean_up_after_killed_driver, forget_session
     from agent_envs.training.storage import check_output_dir
-    from agent_envs.training.sweep import start_ray
 
     out = config.out_dir
     check_output_dir(out, "--out")

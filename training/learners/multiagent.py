@@ -7,7 +7,7 @@ acts for every agent from its own observation ``[x_k | drift_k | target | t/T]``
 sharing, decentralized execution. SB3 counts one timestep per agent-step.
 
 Evaluation: the trained shared policy runs on the Gymnasium env through
-`agent_envs.training.policies.PerAgentPolicy` (same seeds, same cost units as every other
+`agent_envs.training.learners.policies.PerAgentPolicy` (same seeds, same cost units as every other
 policy), and `evaluate_per_agent` runs it on the PettingZoo env itself to report each agent's
 cost (the agents' costs add up to the swarm's cost).
 """

@@ -10,10 +10,10 @@
    (`eval/turnpike_cost`, `eval/cost_ratio_to_turnpike`, ...), so the learning curve is read
    against the reference lines in TensorBoard and in ``learning_curve.csv``;
 3. the learner is evaluated as a `PolicyPredictor` on the raw env
-   (`agent_envs.training.policies.NormalizedObservationPolicy` applies the live `VecNormalize`
-   statistics; `agent_envs.training.policies.PerAgentPolicy` runs a parameter-shared PettingZoo
-   policy on the Gymnasium env), and the `VecNormalize` statistics are saved with the best model
-   (SB3's own `EvalCallback` saves only the model).
+   (`agent_envs.training.learners.policies.NormalizedObservationPolicy` applies the live
+   `VecNormalize` statistics; `agent_envs.training.learners.policies.PerAgentPolicy` runs a
+   parameter-shared PettingZoo policy on the Gymnasium env), and the `VecNormalize` statistics are
+   saved with the best model (SB3's own `EvalCallback` saves only the model).
 
 Costs are minus the episode's summed reward, which the env defines as the paper's discrete
 cost functional.
@@ -33,8 +33,8 @@ import numpy as np
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from agent_envs.training.checkpoints import BEST_MODEL, save_model_with_statistics
-from agent_envs.training.results import mean_confidence_interval
+from agent_envs.training.learners.checkpoints import BEST_MODEL, save_model_with_statistics
+from agent_envs.training.results.tables import mean_confidence_interval
 from agent_envs.training.storage import atomic_path
 
 

@@ -6,8 +6,8 @@
 
 Scoring needs the core install only (numpy; the references are shipped data): baseline names
 and ``module:attribute`` policies are resolved here without torch; saved SB3 models and apg
-runs need the ``train`` extra (`agent_envs.training.policies.resolve_policy`). Each policy is
-scored by `agent_envs.tasks.score` on the task's test seeds. A policy that fails (it raises,
+runs need the ``train`` extra (`agent_envs.training.learners.policies.resolve_policy`). Each policy
+is scored by `agent_envs.tasks.score` on the task's test seeds. A policy that fails (it raises,
 returns a wrong shape or dtype, NaN or inf) is reported in one line naming the policy, the seed
 and the step; the other policies are still scored and written, and the command exits 2.
 
@@ -44,12 +44,12 @@ from agent_envs.tasks import (
     score,
 )
 from agent_envs.tasks.scores import Summary
-from agent_envs.training.config import option_field
-from agent_envs.training.evaluate_options import (
+from agent_envs.training.commands.evaluate_options import (
     EvaluateConfig,
     is_object_spec,
     object_spec_parts,
 )
+from agent_envs.training.config import option_field
 from agent_envs.training.storage import write_json_atomic, write_text_atomic
 
 #: Columns of scores.csv.
@@ -131,7 +131,7 @@ def rowwise_factory(obj: Any) -> Any:
 
 def _factory(spec: str, baseline_kwargs: Mapping[str, Any]) -> Any:
     """A policy factory ``env -> policy`` for a baseline name, a saved model or an apg run."""
-    from agent_envs.training.policies import resolve_policy
+    from agent_envs.training.learners.policies import resolve_policy
 
     def make(env: Any) -> Any:
         return resolve_policy(spec, env, baseline_kwargs)[0]
@@ -293,8 +293,8 @@ def _report(
     resolved: Mapping[str, tuple[Any, bool]],
 ) -> None:
     """The usual evaluation report on the task env (train extra); per-agent policies left out."""
-    from agent_envs.training.evaluate import evaluate_policies
-    from agent_envs.training.report import build_report
+    from agent_envs.training.commands.evaluate import evaluate_policies
+    from agent_envs.training.results.report import build_report
 
     policies: dict[str, Any] = {}
     for name in names:
@@ -403,7 +403,7 @@ def run_tasks_command(config: TasksConfig) -> int:
         else:
             print_tasks()
         return 0
-    from agent_envs.training import task_references
+    from agent_envs.training.commands import task_references
 
     for task_id in config.regenerate or ():
         path = task_references.regenerate(

@@ -15,7 +15,7 @@ sees the same data for the same seeds (tested against DummyVecEnv in tests/test_
   ``truncated and not terminated``, and ``infos[i]["episode"]`` holds Monitor's
   ``{"r", "l", "t"}`` (return, length, seconds since the adapter was built).
 - observations float32, rewards float32, dones bool, as DummyVecEnv returns them.
-- `horizon_as_termination=True` applies `agent_envs.training.wrappers.HorizonAsTermination`
+- `horizon_as_termination=True` applies `agent_envs.training.learners.wrappers.HorizonAsTermination`
   (the end of the horizon is terminal for the learner), as the training env does.
 - `get_attr` returns per-env values of `positions`, `step_index`, `time`, `target` and
   `np_random`, and otherwise the native env's attribute (then its `config`'s, then its

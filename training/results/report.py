@@ -13,7 +13,7 @@ seed), the running cost over time (log scale) and the turnpike distance ||E x^n 
 
 Library use (the training comparison adds its learning curves as an extra section):
 
-    from agent_envs.training.report import build_report, ReportSection
+    from agent_envs.training.results.report import build_report, ReportSection
     build_report([results], "report/", extra_sections=[
         ReportSection("Learning curves", text="...", images=["curves.png"])])
 
@@ -38,7 +38,7 @@ from matplotlib.figure import Figure
 
 from agent_envs.training.config import option_field
 from agent_envs.training.defaults import seed_text
-from agent_envs.training.results import (
+from agent_envs.training.results.tables import (
     DEFAULT_REFERENCE,
     EvaluationResults,
     merge_results,
