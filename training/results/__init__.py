@@ -1,0 +1,8 @@
+"""The results: per-episode records and tables, their statistics, reports and plots.
+
+`rollout` runs one episode of a policy and records it (`tables.Episode`); `tables` holds the
+per-policy episode tables (`EvaluationResults`) and their summaries; `seed_statistics` the
+across-seed statistics (IQM, bootstrap intervals, probability of improvement); `report` the
+Markdown + HTML reports with PNG plots. Results import only the training layer's infrastructure
+(`config`, `defaults`, `storage`): never a learner, never a command.
+"""
