@@ -19,9 +19,10 @@ the rewards of an episode add up to minus the discrete cost functional on the en
 
 The observation needs the interaction drift L(x^{n+1}) x^{n+1} at the new state, and the next
 integrator step needs L(x^{n+1}) again (every scheme evaluates F(x, u) = L(x) x + u at the start
-of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the identity of the
-(read-only) state array, so the kernel matrix is built once per step instead of twice (the
-matrix-free operator of large swarms, `env kwarg linear_operator`, likewise).
+of the step). The episode's model, `agent_envs.dynamics.linearization_cache.LinearizationCache`,
+keeps the last L(x), keyed by the identity of the (read-only) state array, so the kernel
+matrix is built once per step instead of twice (the matrix-free operator of large swarms,
+env kwarg `linear_operator`, likewise).
 """
 
 from __future__ import annotations
@@ -37,8 +38,8 @@ from gymnasium import spaces
 
 from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
-from agent_envs.dynamics.laplacian import UpperTriangle
-from agent_envs.dynamics.operators import LinearizationOperator, check_linear_operator
+from agent_envs.dynamics.linearization_cache import LinearizationCache
+from agent_envs.dynamics.operators import check_linear_operator
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.interface import (
     ENV_KIND_VALUES,
@@ -238,119 +239,6 @@ def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
     return dataclasses.replace(a, target=b.target, gamma=b.gamma) == b
 
 
-class _CachedLinearizationModel(SwarmModel):
-    """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
-
-    On the numpy workspace path (`agent_envs.dynamics.laplacian`) it keeps the `FrozenLaplacian`
-    and the drift, valid while the workspace still holds that P (`FrozenLaplacian.current`);
-    on the Array-API path the matrix L(x) and the row sums. The episode only hands it read-only
-    state arrays that it never mutates, and the cached arrays are made read-only too, so a
-    stale or corrupted hit is impossible. torch tensors
-    cannot be made read-only: they are cached only with `cache_tensors=True`, which the owner
-    (the native vector env) sets because it builds a new state tensor every step and never
-    writes into one.
-
-    `fallbacks`: the owning env's ``plan_fallbacks`` (`agent_envs.envs.step_plan`), where
-    `discard_linearization` counts a fused step that gave up ("fused-gave-up").
-    """
-
-    def __init__(
-        self,
-        params: SwarmParams,
-        linear_operator: str = "auto",
-        cache_tensors: bool = False,
-        fallbacks: Counter[str] | None = None,
-    ) -> None:
-        super().__init__(params, linear_operator)
-        self.fallbacks: Counter[str] = Counter() if fallbacks is None else fallbacks
-        self._cache_tensors = cache_tensors
-        self._cached_state: Any = None
-        self._cached_matrix: Any = None
-
-    def _frozen_with_row_sums(self, x: Any) -> tuple[Any, Any]:
-        # the Array-API path: (L(x), P(x) 1), cached as a list to tell it from the workspace's
-        cached = self._cached_matrix
-        if x is self._cached_state and isinstance(cached, list):
-            return cached[0], cached[1]
-        matrix, row_sums = super()._frozen_with_row_sums(x)
-        if isinstance(x, np.ndarray) and not x.flags.writeable:
-            matrix.flags.writeable = False
-            row_sums.flags.writeable = False
-            self._cached_state, self._cached_matrix = x, [matrix, row_sums]
-        elif self._cache_tensors and arrays.is_torch(x):
-            self._cached_state, self._cached_matrix = x, [matrix, row_sums]
-        return matrix, row_sums
-
-    def _laplacian(self, x: np.ndarray) -> tuple[Any, np.ndarray]:
-        # the workspace path (numpy, Cucker-Smale, dense): the operator over the model's P and
-        # the drift, kept while P is still the workspace's (the next evaluation overwrites it)
-        cached = self._cached_matrix
-        if x is self._cached_state and isinstance(cached, tuple) and cached[0].current:
-            return cached
-        found = super()._laplacian(x)
-        if not x.flags.writeable:
-            found[1].flags.writeable = False
-            self._cached_state, self._cached_matrix = x, found
-        else:
-            self._cached_state = self._cached_matrix = None
-        return found
-
-    def cached_linearization(self, x: Any) -> tuple[Any, np.ndarray] | None:
-        """(L(x) over the workspace's P, the drift L(x) x) kept for the state array `x` (by
-        identity) while the workspace still holds its P, else None (nothing is computed)."""
-        cached = self._cached_matrix
-        if x is self._cached_state and isinstance(cached, tuple) and cached[0].current:
-            return cached
-        return None
-
-    def fused_relinearization(self, x: Any) -> tuple[np.ndarray, float, float] | None:
-        """What an exponential integrator needs to take the kernel pass at its next state in
-        its own compiled pass, member by member (`agent_envs.native.lanczos.
-        frozen_advance`): (the workspace's P for x's shape, writable; w; alpha^2), or None
-        where the compiled kernel pass does not serve x or x is not on the dense workspace path.
-        The integrator then hands the result to `adopt_linearization`, or calls
-        `discard_linearization` if it wrote part of P and gave up."""
-        compiled = self.compiled_pass_parameters(x)
-        if compiled is None or not self._uses_workspace(x):
-            return None
-        return (self._workspace.buffers(tuple(x.shape))[0], *compiled)
-
-    def adopt_linearization(self, x_next: np.ndarray, row_sums: Any, drift: Any) -> None:
-        """Keep L(x_next), whose P (its lower triangle: `UpperTriangle`) the integrator wrote
-        into the workspace, with its row sums and drift L(x_next) x_next, as
-        `_laplacian(x_next)` would have (x_next, the integrator's fresh array, and the drift
-        are made read-only)."""
-        ws = self._workspace
-        ws.generation += 1
-        p = ws.buffers(tuple(x_next.shape))[0]
-        *batch, n, _ = x_next.shape
-        operator = self._workspace_operator(p, row_sums.reshape(*batch, n), UpperTriangle(p))
-        drift = drift.reshape(x_next.shape)
-        x_next.flags.writeable = False
-        drift.flags.writeable = False
-        self._cached_state, self._cached_matrix = x_next, (operator, drift)
-
-    def discard_linearization(self) -> None:
-        """The workspace's P no longer holds the kernel of any state (an integrator wrote part
-        of it): the operators built on it stop being current, and nothing is cached. Counted
-        in `fallbacks` as "fused-gave-up" (the only caller is the fused step giving up)."""
-        fallbacks = self.__dict__.get("fallbacks")  # (a model unpickled from before has none)
-        if fallbacks is not None:
-            fallbacks["fused-gave-up"] += 1
-        self._workspace.generation += 1
-        self._cached_state = self._cached_matrix = None
-
-    def linearization_operator(self, x: np.ndarray, kind: str = "frozen") -> LinearizationOperator:
-        # the matrix-free L(x) (large N), cached like the matrix (it holds no mutable state)
-        cached = self._cached_matrix
-        if x is self._cached_state and getattr(cached, "kind", None) == kind:
-            return cached
-        operator = super().linearization_operator(x, kind)
-        if isinstance(x, np.ndarray) and not x.flags.writeable:
-            self._cached_state, self._cached_matrix = x, operator
-        return operator
-
-
 def start_positions(
     config: EpisodeConfig, rng: np.random.Generator, initial_positions: Any = None
 ) -> np.ndarray:
@@ -391,7 +279,7 @@ def _quiet_overflow(x: Any) -> Any:
 def mean_interaction_drift(model: SwarmModel, x: Any) -> Any:
     """E over the paths of the interaction drift L(x) x: x (..., P, N, d) -> (..., N, d).
 
-    Marks a numpy x read-only first, so that a `_CachedLinearizationModel` keeps L(x) for the
+    Marks a numpy x read-only first, so that a `LinearizationCache` keeps L(x) for the
     next integrator step from this state. numpy arrays or torch tensors.
     """
     if isinstance(x, np.ndarray):
@@ -484,10 +372,9 @@ class SwarmEpisode:
         self.config = config
         self.params = config.params
         self.fallbacks: Counter[str] = Counter()
-        self.model: SwarmModel = _CachedLinearizationModel(
-            self.params, config.linear_operator, fallbacks=self.fallbacks
+        self.model: LinearizationCache = LinearizationCache(
+            self.params, config.linear_operator, fallbacks=self.fallbacks, threads=threads
         )
-        self.model.threads = threads
         self.plan: StepPlan = resolve_step_plan(config, self.model, env=env, threads=threads)
         self.integrator: Integrator = planned_integrator(config, self.plan)
         arrays.prepare_hot_path()
@@ -561,11 +448,12 @@ class SwarmEpisode:
             # target and gamma are cost parameters: a new target keeps the dynamics model
             # (and its kernel); only a change of the dynamics would rebuild it.
             if not same_dynamics(params, self.params):
-                threads = self.model.threads
-                self.model = _CachedLinearizationModel(
-                    params, self.config.linear_operator, fallbacks=self.fallbacks
+                self.model = LinearizationCache(
+                    params,
+                    self.config.linear_operator,
+                    fallbacks=self.fallbacks,
+                    threads=self.model.threads,
                 )
-                self.model.threads = threads
             self.params = params
             self._target = params.target_vector
         x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()

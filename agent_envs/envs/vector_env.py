@@ -41,10 +41,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from agent_envs import arrays, native
+from agent_envs.dynamics.linearization_cache import LinearizationCache
 from agent_envs.envs import fast_step  # noqa: F401  (registers the "step" path's check)
 from agent_envs.envs.episode import (
     EpisodeConfig,
-    _CachedLinearizationModel,
     advance_paths,
     episode_params,
     mean_interaction_drift,
@@ -89,7 +89,7 @@ def single_env_phi_method(config: EpisodeConfig) -> str:
     in the call, which for a single env is its number of paths ("krylov" on a matrix-free
     operator).
     """
-    model = _CachedLinearizationModel(config.params, config.linear_operator)
+    model = LinearizationCache(config.params, config.linear_operator)
     return resolve_step_plan(config, model).phi_method
 
 
@@ -249,8 +249,12 @@ class SwarmVectorEnv(VectorEnv):
         n, d = params.n_agents, params.dim
         #: the mid-step fallbacks so far (`step_plan.FALLBACKS`), shared by the block models
         self.plan_fallbacks: Counter[str] = Counter()
-        self.model = _CachedLinearizationModel(
-            params, self.config.linear_operator, cache_tensors=True, fallbacks=self.plan_fallbacks
+        self.model = LinearizationCache(
+            params,
+            self.config.linear_operator,
+            cache_tensors=True,
+            fallbacks=self.plan_fallbacks,
+            threads=self.num_threads,
         )
         # which code a step runs, once: the phi strategy of the single env's P paths, the
         # blocks (numpy: of about BLOCK_BYTES of kernel matrices, each with its own model, unless
@@ -274,14 +278,16 @@ class SwarmVectorEnv(VectorEnv):
             slice(i, min(i + envs_per_block, self.num_envs))
             for i in range(0, self.num_envs, envs_per_block)
         ]
+        # (their threaded passes load in the first reset)
         self._block_models = [self.model] + [
-            _CachedLinearizationModel(
-                params, self.config.linear_operator, fallbacks=self.plan_fallbacks
+            LinearizationCache(
+                params,
+                self.config.linear_operator,
+                fallbacks=self.plan_fallbacks,
+                threads=self.num_threads,
             )
             for _ in self._blocks[1:]
         ]
-        for model in self._block_models:  # (their threaded passes load in the first reset)
-            model.threads = self.num_threads
         # the block views of the current state the block models last saw (their cache keys)
         self._block_views: list[Any] = []
         self._block_views_of: Any = None
