@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from agent_envs.envs.episode import EpisodeConfig
+from agent_envs.envs.episode_config import EpisodeConfig
 from agent_envs.training.apg_policy import (
     BEST_LAW,
     FINAL_LAW,

@@ -28,7 +28,6 @@ trained with did (sharing it would save about a quarter of an episode's cost and
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,7 +37,7 @@ import torch
 from agent_envs.baselines.optimal_control import differentiated_phi_method
 from agent_envs.costs import discrete_cost
 from agent_envs.dynamics.linearization_cache import LinearizationCache
-from agent_envs.envs.episode import EpisodeConfig
+from agent_envs.envs.episode_config import EpisodeConfig
 from agent_envs.simulator import brownian_increments, simulate, uniform_positions
 from agent_envs.training.apg_policy import SwarmFeedbackLaw
 
@@ -59,10 +58,13 @@ class EpisodeNoise:
     @classmethod
     def draw(cls, rng: np.random.Generator, config: EpisodeConfig) -> EpisodeNoise:
         """A fresh episode from `rng`, drawn in the env's order (start, then step by step)."""
-        n, d, k = config.params.n_agents, config.params.dim, config.n_paths
+        n, d, k = config.params.n_agents, config.params.dim, config.simulation.n_paths
         start = uniform_positions(rng, n, d)
         dw = np.stack(
-            [brownian_increments(rng, (k, n, d), config.dt) for _ in range(config.n_steps)]
+            [
+                brownian_increments(rng, (k, n, d), config.dt)
+                for _ in range(config.simulation.n_steps)
+            ]
         )
         return cls(start, dw)
 
@@ -83,7 +85,7 @@ class ClosedLoop:
         self.config = config
         self.params = config.params
         self.phi_method = differentiated_phi_method(
-            config.params, config.jacobian, phi_method or config.phi_method
+            config.params, config.simulation.jacobian, phi_method or config.simulation.phi_method
         )
         # torch states not cached: the gradients of the published runs (module docstring)
         self.model = LinearizationCache(config.params, "dense")
@@ -92,7 +94,7 @@ class ClosedLoop:
     def cost(self, law: SwarmFeedbackLaw, noise: EpisodeNoise) -> tuple[torch.Tensor, bool]:
         """(J, diverged): the sample-mean discrete cost of the episode (differentiable)."""
         config, model, target = self.config, self.model, self.target
-        m = config.n_steps
+        m = config.simulation.n_steps
 
         def control(t: float, x: torch.Tensor) -> torch.Tensor:
             s = torch.tensor(round(t / config.dt) / m, dtype=torch.float64)
@@ -102,11 +104,11 @@ class ClosedLoop:
         try:
             traj = simulate(
                 self.params,
-                config.integrator,
-                jacobian=config.jacobian,
+                config.simulation.integrator,
+                jacobian=config.simulation.jacobian,
                 phi_method=self.phi_method,
                 n_steps=m,
-                n_paths=config.n_paths,
+                n_paths=config.simulation.n_paths,
                 initial_positions=torch.as_tensor(noise.start, dtype=torch.float64),
                 increments=noise.increments,
                 control=control,
@@ -122,11 +124,9 @@ class ClosedLoop:
 
 
 def with_env_kwargs(config: EpisodeConfig, **changes: Any) -> EpisodeConfig:
-    """`config` with some `SwarmParams` fields or env options replaced (validated again)."""
-    params = {k: v for k, v in changes.items() if k in config.params.field_names()}
-    options = {k: v for k, v in changes.items() if k not in params}
-    new_params = dataclasses.replace(config.params, **params) if params else config.params
-    return dataclasses.replace(config, params=new_params, **options)
+    """`config` with some `SwarmParams` fields or env options replaced (validated again):
+    `EpisodeConfig.replace`."""
+    return config.replace(**changes)
 
 
 __all__ = ["ClosedLoop", "EpisodeNoise", "with_env_kwargs"]
