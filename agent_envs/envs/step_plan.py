@@ -4,10 +4,11 @@ Every choice of path that an env step makes from facts fixed when the env is mad
 arguments, its model, the compiled paths switched on in this process) is taken here, once, into
 a frozen `StepPlan` that each env exposes as ``env.plan`` (``env.unwrapped.plan`` through
 `gym.make`) and shows in its ``repr``; a training run records ``plan.describe()`` in its
-``env.json``. The hot code reads the plan instead of deciding again: the envs build their
-integrator with the plan's `phi_method` ("auto" resolved for the env's `n_paths`, the one
-place where `n_paths` reaches the integrator's choice), and the native vector env takes its
-blocks and its compiled envelope from it.
+``env.json``. The hot code reads the plan instead of deciding again: every env (the single
+envs' `SwarmEpisode`, the native vector env) makes its model, plan and integrator together in
+`planned_step`, which builds the integrator with the plan's `phi_method` ("auto" resolved for
+the env's `n_paths`, the one place where `n_paths` reaches the integrator's choice), and the
+native vector env takes its blocks and its compiled envelope from it.
 
 What cannot be known before a step (a Lanczos that does not converge, a state whose actions or
 cached linearization the compiled step does not take) still falls back mid-step, with the same
