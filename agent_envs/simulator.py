@@ -491,25 +491,64 @@ def simulate(
     divergence_threshold = check_positive(
         "divergence_threshold", divergence_threshold, DIVERGENCE_THRESHOLD_RANGE
     )
+    scheme = _scheme(params, integrator, jacobian, phi_method, model is None)
+    xp, dev, dtype = arrays.resolve(backend, device, initial_positions, control, control_rate)
+    n, d = params.n_agents, params.dim
+    control = _validate_control_array(control, n_steps, n, d, "control")
+    control_rate = _validate_control_array(control_rate, n_steps, n, d, "control_rate")
+    model = _model(params, model, linear_operator)
+    if not arrays.is_numpy_namespace(xp) and not isinstance(params.kernel, str):
+        # a user kernel on a torch path: probe it once (one clear error, not one deep inside)
+        probe = arrays.asarray(np.zeros(1), xp=xp, device=dev, dtype=dtype)
+        check_kernel_library(getattr(model, "kernel", params.kernel), probe, params.dim)
+    x0, increments = _start_and_increments(
+        params, seed, initial_positions, increments, (n_steps, n_paths), divergence_threshold
+    )
+    x0 = arrays.asarray(x0, xp=xp, device=dev, dtype=dtype)
+    increments = arrays.asarray(increments, xp=xp, device=dev, dtype=dtype)
+    times = np.linspace(0.0, params.horizon, n_steps + 1)
+    x = xp.broadcast_to(x0, (n_paths, n, d))
+    if arrays.is_numpy_namespace(xp):
+        x = x.copy()
+    loop = (xp, times, params.horizon / n_steps, divergence_threshold)
+    start = time.perf_counter()
+    states, applied, bad, divergence_step = _integrate(
+        scheme, model, x, increments, control, control_rate, loop
+    )
+    wall = time.perf_counter() - start
+    return _trajectory(params, scheme, xp, times, states, applied, bad, divergence_step, wall)
+
+
+def _scheme(
+    params: SwarmParams,
+    integrator: str | Integrator,
+    jacobian: str | None,
+    phi_method: str | None,
+    default_model: bool,
+) -> Integrator:
+    """`simulate`'s integrator: the instance given (a `jacobian` or `phi_method` that differs
+    from its own raises), or the registry's scheme with the defaults (and, for the default
+    model, "eigh" checked against the kernel)."""
     if isinstance(integrator, Integrator):
-        scheme = integrator
         for name, given in (("jacobian", jacobian), ("phi_method", phi_method)):
-            own = getattr(scheme, name, None)
+            own = getattr(integrator, name, None)
             if given is not None and given != own:
                 raise ValueError(
                     f"{name}={given!r} conflicts with the integrator instance's {name}={own!r}; "
                     f"set it when building the integrator (make_integrator(..., {name}=...))"
                 )
-    else:
-        jacobian = DEFAULT_JACOBIAN if jacobian is None else jacobian
-        phi_method = DEFAULT_PHI_METHOD if phi_method is None else phi_method
-        scheme = make_integrator(integrator, jacobian=jacobian, phi_method=phi_method)
-        if model is None:
-            check_phi_method_fits_kernel(params, integrator, jacobian, phi_method)
-    xp, dev, dtype = arrays.resolve(backend, device, initial_positions, control, control_rate)
-    n, d = params.n_agents, params.dim
-    control = _validate_control_array(control, n_steps, n, d, "control")
-    control_rate = _validate_control_array(control_rate, n_steps, n, d, "control_rate")
+        return integrator
+    jacobian = DEFAULT_JACOBIAN if jacobian is None else jacobian
+    phi_method = DEFAULT_PHI_METHOD if phi_method is None else phi_method
+    scheme = make_integrator(integrator, jacobian=jacobian, phi_method=phi_method)
+    if default_model:
+        check_phi_method_fits_kernel(params, integrator, jacobian, phi_method)
+    return scheme
+
+
+def _model(params: SwarmParams, model: DriftModel | None, linear_operator: str | None) -> Any:
+    """`simulate`'s drift model: `model`, or `SwarmModel(params, linear_operator or "auto")`
+    (`linear_operator` only with the default model)."""
     if linear_operator is not None:
         check_linear_operator(linear_operator)
         if model is not None:
@@ -519,10 +558,21 @@ def simulate(
             )
     if model is None:
         model = SwarmModel(params, "auto" if linear_operator is None else linear_operator)
-    if not arrays.is_numpy_namespace(xp) and not isinstance(params.kernel, str):
-        # a user kernel on a torch path: probe it once (one clear error, not one deep inside)
-        probe = arrays.asarray(np.zeros(1), xp=xp, device=dev, dtype=dtype)
-        check_kernel_library(getattr(model, "kernel", params.kernel), probe, params.dim)
+    return model
+
+
+def _start_and_increments(
+    params: SwarmParams,
+    seed: int | np.random.Generator | None,
+    initial_positions: Any,
+    increments: Any,
+    steps_and_paths: tuple[int, int],
+    divergence_threshold: float,
+) -> tuple[Any, Any]:
+    """x^0 (N, d) and the increments (m, K, N, d) of `simulate`: given (checked) or drawn from
+    the seed's two child generators (start, noise)."""
+    n_steps, n_paths = steps_and_paths
+    n, d = params.n_agents, params.dim
     init_rng, noise_rng = _generators(seed)
     if initial_positions is None:
         x0 = uniform_positions(init_rng, n, d)
@@ -541,19 +591,28 @@ def simulate(
             f"increments must have shape (n_steps, n_paths, N, d) = {(n_steps, *shape)}, "
             f"got {tuple(getattr(increments, 'shape', np.shape(increments)))}"
         )
-    x0 = arrays.asarray(x0, xp=xp, device=dev, dtype=dtype)
-    increments = arrays.asarray(increments, xp=xp, device=dev, dtype=dtype)
+    return x0, increments
 
-    dt = params.horizon / n_steps
-    times = np.linspace(0.0, params.horizon, n_steps + 1)
-    x = xp.broadcast_to(x0, shape)
-    if arrays.is_numpy_namespace(xp):
-        x = x.copy()
+
+def _integrate(
+    scheme: Integrator,
+    model: Any,
+    x: Any,
+    increments: Any,
+    control: ControlSpec,
+    control_rate: ControlSpec,
+    loop: tuple[Any, np.ndarray, float, float],
+) -> tuple[list[Any], list[Any], np.ndarray, int | None]:
+    """The time loop of `simulate` from x^0 = x (K, N, d) with `loop` = (the array namespace,
+    the time grid t_0 .. t_m, tau, the divergence threshold): (the states x^0 .. x^n up to the
+    first divergence, the controls applied, the (K,) flags of the diverged paths, the step n
+    at which some path diverged or None)."""
+    xp, times, dt, divergence_threshold = loop
+    n_steps = len(times) - 1
     states = [x]
     applied = []
-    bad = np.zeros(n_paths, dtype=bool)
+    bad = np.zeros(x.shape[0], dtype=bool)
     divergence_step = None
-    start = time.perf_counter()
     with arrays.hot_path_threads(), np.errstate(over="ignore", invalid="ignore"):
         for step in range(n_steps):
             t = float(times[step])
@@ -567,10 +626,26 @@ def simulate(
                 divergence_step = step + 1
                 break
             states.append(x)
-    wall = time.perf_counter() - start
-    nan_state = arrays.asarray(np.full(shape, np.nan), like=states[0])
-    zero_control = arrays.zeros(shape, like=states[0])
-    states += [nan_state] * (n_steps + 1 - len(states))
+    return states, applied, bad, divergence_step
+
+
+def _trajectory(
+    params: SwarmParams,
+    scheme: Integrator,
+    xp: Any,
+    times: np.ndarray,
+    states: list[Any],
+    applied: list[Any],
+    bad: np.ndarray,
+    divergence_step: int | None,
+    wall: float,
+) -> Trajectory:
+    """The `Trajectory` of the loop's states and controls, padded to m + 1 states (NaN after
+    a divergence) and m controls (zeros for no control)."""
+    n_steps = len(times) - 1
+    nan_state = arrays.asarray(np.full(tuple(states[0].shape), np.nan), like=states[0])
+    zero_control = arrays.zeros(tuple(states[0].shape), like=states[0])
+    states = states + [nan_state] * (n_steps + 1 - len(states))
     controls = [zero_control if u is None else u for u in applied]
     controls += [zero_control] * (n_steps - len(controls))
     return Trajectory(

@@ -84,9 +84,29 @@ MODULES: dict[str, tuple[str, list[str]]] = {
         "agent_envs/envs/episode.py",
         ["tests/test_laws.py", "tests/test_envs_gym.py", "tests/test_vector_env.py"],
     ),
+    "episode_config": (
+        "agent_envs/envs/episode_config.py",
+        ["tests/test_validation.py", "tests/test_envs_gym.py", "tests/test_input_properties.py"],
+    ),
+    "linearization_cache": (
+        "agent_envs/dynamics/linearization_cache.py",
+        ["tests/test_compiled_lanczos.py", "tests/test_step_plan.py", "tests/test_vector_env.py"],
+    ),
     "vector_env": (
         "agent_envs/envs/vector_env.py",
         ["tests/test_laws.py", "tests/test_vector_env.py", "tests/test_native_vec_env.py"],
+    ),
+    "vector_blocks": (
+        "agent_envs/envs/vector_blocks.py",
+        ["tests/test_vector_env.py", "tests/test_step_plan.py"],
+    ),
+    "vector_inputs": (
+        "agent_envs/envs/vector_inputs.py",
+        ["tests/test_vector_env.py", "tests/test_native_vec_env.py"],
+    ),
+    "fast_step": (
+        "agent_envs/envs/fast_step.py",
+        ["tests/test_fast_step.py", "tests/test_vector_env.py"],
     ),
     "optimal_control": (
         "baselines/optimal_control.py",

@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 
 import agent_envs  # noqa: E402  (registers the env ids)
 from agent_envs import swarm_v0  # noqa: E402
-from agent_envs.envs.episode import EpisodeConfig  # noqa: E402
+from agent_envs.envs.episode_config import EpisodeConfig  # noqa: E402
 from agent_envs.training.learners.apg import (  # noqa: E402
     is_apg_run,
     load_apg_policy,

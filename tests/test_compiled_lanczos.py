@@ -429,10 +429,10 @@ def test_fused_step_that_gives_up_takes_the_general_path(compiled, monkeypatch):
 def test_fused_step_leaves_the_linearization_of_its_result(compiled):
     """After a fused step the model holds L(x_next) and its drift, equal bit for bit to a
     fresh model's evaluation at x_next, and the operator of x^n is no longer current."""
-    from agent_envs.envs.episode import _CachedLinearizationModel
+    from agent_envs.dynamics.linearization_cache import LinearizationCache
 
     params = SwarmParams(n_agents=100, epsilon=0.05)
-    model = _CachedLinearizationModel(params)
+    model = LinearizationCache(params)
     rng = np.random.default_rng(0)
     x = rng.uniform(-1, 1, (4, 100, 1))
     x.flags.writeable = False

@@ -146,7 +146,7 @@ def test_native_env_on_two_threads_matches_sync_vector_env(monkeypatch, kwargs, 
     kwargs = {**DIVERGING, **kwargs}
     venv, senv = native(4, num_threads=2, **kwargs), sync(4, **kwargs)
     assert venv.unwrapped.num_threads == 2
-    assert all(model.threads == 2 for model in venv.unwrapped._block_models)
+    assert all(model.threads == 2 for model in venv.unwrapped._blocks.models)
     obs_n, info_n = venv.reset(seed=3)
     obs_s, info_s = senv.reset(seed=3)
     calls.update(kernel=0, fused=0)  # (the first reset's one-time load may have called them)

@@ -15,7 +15,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import importlib.util
 import inspect
 import os
@@ -82,7 +81,7 @@ def _documented_kwargs(doc: str) -> set[str]:
 
 
 def test_swarm_env_docstring_lists_every_keyword_argument():
-    from agent_envs.envs.episode import EpisodeConfig
+    from agent_envs.envs.episode_config import ENV_OPTION_NAMES
     from agent_envs.envs.swarm_env import SwarmEnv
     from agent_envs.params import SwarmParams
 
@@ -90,7 +89,7 @@ def test_swarm_env_docstring_lists_every_keyword_argument():
     own = set(inspect.signature(SwarmEnv.__init__).parameters) - {"self", "kwargs"}
     assert own == {"render_mode", "num_threads"}
     accepted = set(SwarmParams.field_names()) | own
-    accepted |= {f.name for f in dataclasses.fields(EpisodeConfig) if f.name != "params"}
+    accepted |= set(ENV_OPTION_NAMES)
     assert _documented_kwargs(SwarmEnv.__doc__) == accepted
 
 

@@ -117,7 +117,7 @@ def test_fused_switched_off_takes_the_general_step_with_the_same_bits(restored, 
     if not native.available("fused"):
         pytest.skip("the fused step needs numba")
     from agent_envs import SwarmParams, make_integrator
-    from agent_envs.envs.episode import _CachedLinearizationModel
+    from agent_envs.dynamics.linearization_cache import LinearizationCache
 
     lanczos = native.loaded("lanczos")
     calls = []
@@ -128,7 +128,7 @@ def test_fused_switched_off_takes_the_general_step_with_the_same_bits(restored, 
     results = []
     for on in (True, False):
         native.use("fused", on)
-        model = _CachedLinearizationModel(SwarmParams(n_agents=100, sigma=0.1), "dense")
+        model = LinearizationCache(SwarmParams(n_agents=100, sigma=0.1), "dense")
         state = x.copy()
         state.flags.writeable = False
         results.append(make_integrator("serb").step(model, state, None, 0.0, 0.01, dw))

@@ -171,7 +171,7 @@ def test_one_simulation_spec_holds_every_default():
 
     from agent_envs.baselines.optimal_control import solve_optimal_control
     from agent_envs.baselines.optimal_controllers import PlanningController
-    from agent_envs.envs.episode import EpisodeConfig
+    from agent_envs.envs.episode_config import EpisodeConfig
     from agent_envs.params import SwarmParams
     from agent_envs.simulator import (
         ENV_N_PATHS,

@@ -116,6 +116,29 @@ def test_n_paths_reaches_the_integrator_through_the_plan():
     assert make(n_agents=60, n_paths=20).unwrapped.plan.phi == FUSED
 
 
+def test_every_env_resolves_one_plan_for_its_model_and_integrator(monkeypatch):
+    """n_paths goes from the env's kwargs to its integrator through one plan: each env, made
+    once, resolves its plan once (`step_plan.planned_step`), with the model it steps with,
+    and its integrator takes the plan's strategy."""
+    from agent_envs.envs import step_plan
+
+    seen = []
+    original = step_plan.resolve_step_plan
+
+    def counted(config, model, **options):
+        plan = original(config, model, **options)
+        seen.append((options.get("env"), model, plan))
+        return plan
+
+    monkeypatch.setattr(step_plan, "resolve_step_plan", counted)
+    kwargs = {"n_agents": 60, "n_paths": 20}
+    envs = [make(**kwargs).unwrapped, swarm_v0.parallel_env(**kwargs), SwarmVectorEnv(2, **kwargs)]
+    assert [env for env, _, _ in seen] == ["gymnasium", "pettingzoo", "vector"]
+    for env, (_, model, plan) in zip(envs, seen, strict=True):
+        assert env.model is model and env.plan is plan and env.phi_method == plan.phi_method
+        assert plan.n_paths == 20 and plan.phi_method == "krylov"
+
+
 def test_the_vector_envs_plans():
     env = SwarmVectorEnv(4, n_agents=100)
     plan = env.plan

@@ -356,7 +356,7 @@ def test_env_threads_reach_the_native_training_env(tmp_path):
 
     venv = make_training_env(tiny_config(tmp_path, env_threads=2).validate(), 3)
     assert venv.venv.num_threads == 2
-    assert all(model.threads == 2 for model in venv.venv._block_models)
+    assert all(model.threads == 2 for model in venv.venv._blocks.models)
     venv.close()
 
 

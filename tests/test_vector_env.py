@@ -17,8 +17,7 @@ import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
-from agent_envs.envs import ENV_ID, SwarmVectorEnv, step_plan
-from agent_envs.envs.vector_env import single_env_phi_method
+from agent_envs.envs import ENV_ID, SwarmEnv, SwarmVectorEnv, step_plan
 from agent_envs.simulator import load_compiled_noise
 
 #: A member pushed by action +1 with this max_control leaves the threshold within the episode;
@@ -207,7 +206,8 @@ def test_arnoldi_members_match_exactly():
     # Non-symmetric kernel at N = 130: "auto" is Arnoldi, whose batch members also stop one by
     # one, so the vector env is exact there too.
     kwargs = {"n_agents": 130, "kernel": "nonsymmetric", "n_steps": 5}
-    assert single_env_phi_method(SwarmVectorEnv(1, **kwargs).config) == "krylov"
+    # the single env's strategy (its plan's, for its own paths) is the vector env's
+    assert SwarmEnv(**kwargs).plan.phi_method == SwarmVectorEnv(1, **kwargs).phi_method == "krylov"
     run_side_by_side(3, 8, **kwargs)
 
 

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from agent_envs.envs.episode import DEFAULT_MAX_CONTROL, EpisodeConfig, SwarmEpisode
+from agent_envs.envs.episode import SwarmEpisode
+from agent_envs.envs.episode_config import EpisodeConfig
 from agent_envs.envs.observation import split_agent_observation, split_observation
 from agent_envs.envs.swarm_env import ENV_ID, SwarmEnv, make_swarm_env
 from agent_envs.envs.swarm_parallel import SwarmParallelEnv
 from agent_envs.envs.vector_env import SwarmVectorEnv, make_swarm_vector_env
+from agent_envs.simulator import DEFAULT_MAX_CONTROL
 
 
 def register_envs() -> None:

@@ -1,9 +1,10 @@
 """The episode core shared by the Gymnasium and the PettingZoo swarm environments.
 
-Both envs are thin adapters over `SwarmEpisode`: it validates the keyword arguments
-(`EpisodeConfig`), holds the state of the `n_paths` Brownian paths, steps them with the core's
-integrator (`agent_envs.integrators.make_integrator`) on increments drawn from the generator
-the env passes in (its ``self.np_random``), takes the running cost of `eq:running_cost` with
+Both envs are thin adapters over `SwarmEpisode`: it takes the validated keyword arguments
+(`agent_envs.envs.episode_config.EpisodeConfig`), holds the state of the `n_paths` Brownian
+paths, steps them with the core's integrator (built as the env's `StepPlan` says,
+`agent_envs.envs.step_plan.planned_step`) on increments drawn from the generator the env
+passes in (its ``self.np_random``), takes the running cost of `eq:running_cost` with
 `agent_envs.costs`, and flags divergence with `agent_envs.simulator.diverged_paths`. Nothing
 here re-derives the dynamics: the drift, its linearization and the interaction drift of the
 observation all come from `agent_envs.dynamics.SwarmModel`.
@@ -19,365 +20,36 @@ the rewards of an episode add up to minus the discrete cost functional on the en
 
 The observation needs the interaction drift L(x^{n+1}) x^{n+1} at the new state, and the next
 integrator step needs L(x^{n+1}) again (every scheme evaluates F(x, u) = L(x) x + u at the start
-of the step). `_CachedLinearizationModel` keeps the last L(x), keyed by the identity of the
-(read-only) state array, so the kernel matrix is built once per step instead of twice (the
-matrix-free operator of large swarms, `env kwarg linear_operator`, likewise).
+of the step). The episode's model, `agent_envs.dynamics.linearization_cache.LinearizationCache`,
+keeps the last L(x), keyed by the identity of the (read-only) state array, so the kernel
+matrix is built once per step instead of twice (the matrix-free operator of large swarms,
+env kwarg `linear_operator`, likewise).
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 
 from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
-from agent_envs.dynamics.laplacian import UpperTriangle
-from agent_envs.dynamics.operators import LinearizationOperator, check_linear_operator
+from agent_envs.dynamics.linearization_cache import LinearizationCache
 from agent_envs.dynamics.swarm import SwarmModel
-from agent_envs.envs.interface import (
-    ENV_KIND_VALUES,
-    action_rows,
-    check_env_options,
-    check_option,
-    controls_from_actions,
+from agent_envs.envs.episode_config import (
+    EpisodeConfig,
+    episode_params,
+    same_dynamics,
+    start_positions,
 )
-from agent_envs.envs.observation import global_observation
-from agent_envs.envs.step_plan import StepPlan, planned_integrator, resolve_step_plan
-from agent_envs.integrators import (
-    DEFAULT_INTEGRATOR,
-    DEFAULT_JACOBIAN,
-    Integrator,
-)
-from agent_envs.params import SwarmParams
-from agent_envs.simulator import (
-    DEFAULT_DIVERGENCE_THRESHOLD,
-    DEFAULT_MAX_CONTROL,
-    DEFAULT_N_STEPS,
-    DEFAULT_PHI_METHOD,
-    ENV_N_PATHS,
-    SimulationSpec,
-    as_positions,
-    brownian_increments,
-    diverged_paths,
-    uniform_positions,
-)
-from agent_envs.validation import (
-    DIVERGENCE_THRESHOLD_RANGE,
-    check_positive,
-    real_array,
-)
-
-# The simulation defaults (DEFAULT_N_STEPS, DEFAULT_MAX_CONTROL, ...) are `SimulationSpec`'s,
-# defined once in `agent_envs.simulator` and imported above (agent_envs.envs re-exports
-# DEFAULT_MAX_CONTROL).
-
-#: Keys of `reset(options=...)` the swarm envs understand.
-RESET_OPTION_NAMES = ("initial_positions", "target")
-
-
-def reset_options(options: Any, strict: bool) -> dict[str, Any]:
-    """The understood reset options as a dict (missing keys are None).
-
-    With `strict`, an unknown key (a typo such as "initial_position") raises `ValueError`
-    naming it; otherwise unknown keys are ignored (PettingZoo's API tests pass
-    ``{"options": 1}`` and expect it to be accepted). The values are checked by
-    `SwarmEpisode.reset` (errors name ``initial_positions`` or ``target``).
-    """
-    if options is None:
-        options = {}
-    if not isinstance(options, dict):
-        raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
-    unknown = sorted(set(options) - set(RESET_OPTION_NAMES))
-    if strict and unknown:
-        raise ValueError(
-            f"unknown reset option(s) {unknown}; the swarm envs take {list(RESET_OPTION_NAMES)}"
-        )
-    return {name: options.get(name) for name in RESET_OPTION_NAMES}
-
-
-ENV_OPTION_NAMES = (
-    "integrator",
-    "jacobian",
-    "phi_method",
-    "n_steps",
-    "n_paths",
-    "max_control",
-    "divergence_threshold",
-    "linear_operator",
-    "observation",
-    "action_basis",
-    "agent_reward",
-)
-
-
-def _check_target(params: SwarmParams, threshold: float) -> None:
-    if np.any(np.abs(params.target_vector) >= threshold):
-        raise ValueError(
-            f"target must lie inside the divergence threshold (|target| < {threshold:g}), "
-            f"got {params.target}"
-        )
-
-
-def unexpected_keyword(owner: str, name: str, accepted: tuple[str, ...]) -> TypeError:
-    """Python's own error for an unknown keyword argument, with the accepted names as a note.
-
-    The message is exactly ``"<owner>() got an unexpected keyword argument '<name>'"``, the
-    form Python raises for a function call, because clients parse it (TorchRL's `GymEnv`
-    retries `gym.make` without ``render_mode`` or ``frameskip`` only on that message).
-    """
-    error = TypeError(f"{owner}() got an unexpected keyword argument {name!r}")
-    if hasattr(error, "add_note"):  # Python >= 3.11
-        error.add_note(f"the swarm envs take {', '.join(accepted)}")
-    return error
-
-
-@dataclass(frozen=True)
-class EpisodeConfig:
-    """Validated keyword arguments of both swarm envs (everything except `render_mode`).
-
-    Build it with `EpisodeConfig.from_kwargs(**kwargs)`: the `SwarmParams` fields go to
-    `params`, the rest are the fields below. A bad value raises `ValueError` (or `TypeError`)
-    naming the argument and its range (`agent_envs.validation`); an unknown name raises
-    Python's standard `TypeError` ("... got an unexpected keyword argument 'x'").
-
-    Ranges: 1 <= n_steps <= 1e9; 1 <= n_paths <= 1e6 with n_paths N d <= 1e8;
-    0 < max_control <= 1e6; 1 <= divergence_threshold <= 1e6 with |target| < it;
-    linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`); observation,
-    action_basis and agent_reward are the learner's interface (`agent_envs.envs.interface`:
-    each env takes its own values of them; none changes the dynamics, the cost or the random
-    draws). The first six
-    fields are the env's `SimulationSpec` (`simulation`), checked by it, with its defaults (one
-    Brownian path per episode: `ENV_N_PATHS`).
-    """
-
-    params: SwarmParams
-    integrator: str = DEFAULT_INTEGRATOR
-    jacobian: str = DEFAULT_JACOBIAN
-    phi_method: str = DEFAULT_PHI_METHOD
-    n_steps: int = DEFAULT_N_STEPS
-    n_paths: int = ENV_N_PATHS
-    max_control: float = DEFAULT_MAX_CONTROL
-    divergence_threshold: float = DEFAULT_DIVERGENCE_THRESHOLD
-    linear_operator: str = "auto"
-    observation: str = "absolute"
-    action_basis: str = "agents"
-    agent_reward: str = "own"
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.params, SwarmParams):
-            raise TypeError(f"params must be a SwarmParams, got {type(self.params).__name__}")
-        spec = self.simulation.for_params(self.params)
-        set_ = object.__setattr__
-        for name in ("n_steps", "n_paths", "max_control"):
-            set_(self, name, getattr(spec, name))
-        threshold = check_positive(
-            "divergence_threshold", self.divergence_threshold, DIVERGENCE_THRESHOLD_RANGE
-        )
-        set_(self, "divergence_threshold", threshold)
-        _check_target(self.params, threshold)
-        check_linear_operator(self.linear_operator)
-        for name in ("observation", "action_basis", "agent_reward"):
-            check_option(name, getattr(self, name))
-
-    @classmethod
-    def from_kwargs(
-        cls, owner: str = "EpisodeConfig.from_kwargs", /, env_kind: str | None = None, **kwargs: Any
-    ) -> EpisodeConfig:
-        """Split env keyword arguments into `SwarmParams` fields and env options.
-
-        `owner` names the callable in the `TypeError` for an unknown keyword (the env's
-        ``__init__``), as Python would. `env_kind` ("gymnasium" | "pettingzoo"): an option
-        value that env does not take is refused with that env's values
-        (`interface.check_env_options`), before the generic check that names both envs' values
-        (a value of the wrong type still gets its TypeError there; the defaults fit both envs).
-        """
-        param_names = SwarmParams.field_names()
-        accepted = (*param_names, *ENV_OPTION_NAMES, "render_mode")
-        for name in kwargs:
-            if name not in param_names and name not in ENV_OPTION_NAMES:
-                raise unexpected_keyword(owner, name, accepted)
-        if env_kind is not None:
-            check_env_options(
-                env_kind,
-                **{
-                    k: v
-                    for k, v in kwargs.items()
-                    if k in ENV_KIND_VALUES[env_kind] and isinstance(v, str)
-                },
-            )
-        params = SwarmParams(**{k: v for k, v in kwargs.items() if k in param_names})
-        return cls(params=params, **{k: v for k, v in kwargs.items() if k not in param_names})
-
-    @property
-    def dt(self) -> float:
-        """The time step tau = T / m."""
-        return self.params.horizon / self.n_steps
-
-    @property
-    def simulation(self) -> SimulationSpec:
-        """The env's discretization as the core's one `SimulationSpec` (seed: None; the env
-        draws from its own generator)."""
-        return SimulationSpec(
-            self.integrator,
-            self.jacobian,
-            self.phi_method,
-            self.n_steps,
-            self.n_paths,
-            self.max_control,
-        )
-
-
-def same_dynamics(a: SwarmParams, b: SwarmParams) -> bool:
-    """True when a and b differ at most in the cost parameters (target, gamma)."""
-    return dataclasses.replace(a, target=b.target, gamma=b.gamma) == b
-
-
-class _CachedLinearizationModel(SwarmModel):
-    """`SwarmModel` that remembers L(x) for the last state array it saw (by identity).
-
-    On the numpy workspace path (`agent_envs.dynamics.laplacian`) it keeps the `FrozenLaplacian`
-    and the drift, valid while the workspace still holds that P (`FrozenLaplacian.current`);
-    on the Array-API path the matrix L(x) and the row sums. The episode only hands it read-only
-    state arrays that it never mutates, and the cached arrays are made read-only too, so a
-    stale or corrupted hit is impossible. torch tensors
-    cannot be made read-only: they are cached only with `cache_tensors=True`, which the owner
-    (the native vector env) sets because it builds a new state tensor every step and never
-    writes into one.
-
-    `fallbacks`: the owning env's ``plan_fallbacks`` (`agent_envs.envs.step_plan`), where
-    `discard_linearization` counts a fused step that gave up ("fused-gave-up").
-    """
-
-    def __init__(
-        self,
-        params: SwarmParams,
-        linear_operator: str = "auto",
-        cache_tensors: bool = False,
-        fallbacks: Counter[str] | None = None,
-    ) -> None:
-        super().__init__(params, linear_operator)
-        self.fallbacks: Counter[str] = Counter() if fallbacks is None else fallbacks
-        self._cache_tensors = cache_tensors
-        self._cached_state: Any = None
-        self._cached_matrix: Any = None
-
-    def _frozen_with_row_sums(self, x: Any) -> tuple[Any, Any]:
-        # the Array-API path: (L(x), P(x) 1), cached as a list to tell it from the workspace's
-        cached = self._cached_matrix
-        if x is self._cached_state and isinstance(cached, list):
-            return cached[0], cached[1]
-        matrix, row_sums = super()._frozen_with_row_sums(x)
-        if isinstance(x, np.ndarray) and not x.flags.writeable:
-            matrix.flags.writeable = False
-            row_sums.flags.writeable = False
-            self._cached_state, self._cached_matrix = x, [matrix, row_sums]
-        elif self._cache_tensors and arrays.is_torch(x):
-            self._cached_state, self._cached_matrix = x, [matrix, row_sums]
-        return matrix, row_sums
-
-    def _laplacian(self, x: np.ndarray) -> tuple[Any, np.ndarray]:
-        # the workspace path (numpy, Cucker-Smale, dense): the operator over the model's P and
-        # the drift, kept while P is still the workspace's (the next evaluation overwrites it)
-        cached = self._cached_matrix
-        if x is self._cached_state and isinstance(cached, tuple) and cached[0].current:
-            return cached
-        found = super()._laplacian(x)
-        if not x.flags.writeable:
-            found[1].flags.writeable = False
-            self._cached_state, self._cached_matrix = x, found
-        else:
-            self._cached_state = self._cached_matrix = None
-        return found
-
-    def cached_linearization(self, x: Any) -> tuple[Any, np.ndarray] | None:
-        """(L(x) over the workspace's P, the drift L(x) x) kept for the state array `x` (by
-        identity) while the workspace still holds its P, else None (nothing is computed)."""
-        cached = self._cached_matrix
-        if x is self._cached_state and isinstance(cached, tuple) and cached[0].current:
-            return cached
-        return None
-
-    def fused_relinearization(self, x: Any) -> tuple[np.ndarray, float, float] | None:
-        """What an exponential integrator needs to take the kernel pass at its next state in
-        its own compiled pass, member by member (`agent_envs.native.lanczos.
-        frozen_advance`): (the workspace's P for x's shape, writable; w; alpha^2), or None
-        where the compiled kernel pass does not serve x or x is not on the dense workspace path.
-        The integrator then hands the result to `adopt_linearization`, or calls
-        `discard_linearization` if it wrote part of P and gave up."""
-        compiled = self.compiled_pass_parameters(x)
-        if compiled is None or not self._uses_workspace(x):
-            return None
-        return (self._workspace.buffers(tuple(x.shape))[0], *compiled)
-
-    def adopt_linearization(self, x_next: np.ndarray, row_sums: Any, drift: Any) -> None:
-        """Keep L(x_next), whose P (its lower triangle: `UpperTriangle`) the integrator wrote
-        into the workspace, with its row sums and drift L(x_next) x_next, as
-        `_laplacian(x_next)` would have (x_next, the integrator's fresh array, and the drift
-        are made read-only)."""
-        ws = self._workspace
-        ws.generation += 1
-        p = ws.buffers(tuple(x_next.shape))[0]
-        *batch, n, _ = x_next.shape
-        operator = self._workspace_operator(p, row_sums.reshape(*batch, n), UpperTriangle(p))
-        drift = drift.reshape(x_next.shape)
-        x_next.flags.writeable = False
-        drift.flags.writeable = False
-        self._cached_state, self._cached_matrix = x_next, (operator, drift)
-
-    def discard_linearization(self) -> None:
-        """The workspace's P no longer holds the kernel of any state (an integrator wrote part
-        of it): the operators built on it stop being current, and nothing is cached. Counted
-        in `fallbacks` as "fused-gave-up" (the only caller is the fused step giving up)."""
-        fallbacks = self.__dict__.get("fallbacks")  # (a model unpickled from before has none)
-        if fallbacks is not None:
-            fallbacks["fused-gave-up"] += 1
-        self._workspace.generation += 1
-        self._cached_state = self._cached_matrix = None
-
-    def linearization_operator(self, x: np.ndarray, kind: str = "frozen") -> LinearizationOperator:
-        # the matrix-free L(x) (large N), cached like the matrix (it holds no mutable state)
-        cached = self._cached_matrix
-        if x is self._cached_state and getattr(cached, "kind", None) == kind:
-            return cached
-        operator = super().linearization_operator(x, kind)
-        if isinstance(x, np.ndarray) and not x.flags.writeable:
-            self._cached_state, self._cached_matrix = x, operator
-        return operator
-
-
-def start_positions(
-    config: EpisodeConfig, rng: np.random.Generator, initial_positions: Any = None
-) -> np.ndarray:
-    """x^0 of one episode, (N, d): uniform on [-1, 1]^d from `rng`, or `initial_positions`.
-
-    The uniform draw is made either way, so the Brownian increments of a seeded episode do
-    not depend on whether a start was given.
-    """
-    n, d = config.params.n_agents, config.params.dim
-    x0 = uniform_positions(rng, n, d)
-    if initial_positions is not None:
-        x0 = as_positions(initial_positions, n, d, "initial_positions")
-        if np.any(diverged_paths(x0, config.divergence_threshold)):
-            raise ValueError(
-                "initial_positions must lie inside the divergence threshold "
-                f"(|x| <= {config.divergence_threshold})"
-            )
-    return x0
-
-
-def episode_params(config: EpisodeConfig, target: Any = None) -> SwarmParams:
-    """The `SwarmParams` of an episode: the config's, with xbar replaced by `target` if given."""
-    if target is None:
-        return config.params
-    params = dataclasses.replace(config.params, target=target)  # checks and names `target`
-    _check_target(params, config.divergence_threshold)
-    return params
+from agent_envs.envs.interface import action_rows, controls_from_actions
+from agent_envs.envs.step_plan import StepPlan, planned_step
+from agent_envs.integrators import Integrator
+from agent_envs.simulator import brownian_increments, diverged_paths
+from agent_envs.validation import real_array
 
 
 def _quiet_overflow(x: Any) -> Any:
@@ -391,7 +63,7 @@ def _quiet_overflow(x: Any) -> Any:
 def mean_interaction_drift(model: SwarmModel, x: Any) -> Any:
     """E over the paths of the interaction drift L(x) x: x (..., P, N, d) -> (..., N, d).
 
-    Marks a numpy x read-only first, so that a `_CachedLinearizationModel` keeps L(x) for the
+    Marks a numpy x read-only first, so that a `LinearizationCache` keeps L(x) for the
     next integrator step from this state. numpy arrays or torch tensors.
     """
     if isinstance(x, np.ndarray):
@@ -470,13 +142,14 @@ class SwarmEpisode:
     Attributes:
         config: the validated `EpisodeConfig`.
         params: the `SwarmParams` of the current episode (target included).
-        model: the `SwarmModel` of `params` (the integrators and controllers use it).
-        integrator: the `Integrator` named by `config.integrator`.
+        model: the `SwarmModel` of `params` (the integrators and controllers use it): a
+            `LinearizationCache`.
+        integrator: the `Integrator` named by the config's simulation, as the plan builds it.
         positions: (n_paths, N, d) current state (read-only array).
         step_index: n, the number of steps taken since reset.
         diverged: True once a step diverged (the episode is then over).
-        plan: the `StepPlan` of a step, resolved here once (`env` names the adapter:
-            "gymnasium" or "pettingzoo"); the integrator is built with its `phi_method`.
+        plan: the `StepPlan` of a step, resolved here once with the model and the integrator
+            (`step_plan.planned_step`; `env` names the adapter: "gymnasium" or "pettingzoo").
         fallbacks: the mid-step fallbacks counted (`step_plan.FALLBACKS`), a `Counter`.
     """
 
@@ -484,12 +157,12 @@ class SwarmEpisode:
         self.config = config
         self.params = config.params
         self.fallbacks: Counter[str] = Counter()
-        self.model: SwarmModel = _CachedLinearizationModel(
-            self.params, config.linear_operator, fallbacks=self.fallbacks
+        self.model: LinearizationCache
+        self.plan: StepPlan
+        self.integrator: Integrator
+        self.model, self.plan, self.integrator = planned_step(
+            config, self.fallbacks, env=env, threads=threads
         )
-        self.model.threads = threads
-        self.plan: StepPlan = resolve_step_plan(config, self.model, env=env, threads=threads)
-        self.integrator: Integrator = planned_integrator(config, self.plan)
         arrays.prepare_hot_path()
         self.dt = config.dt
         self.positions: np.ndarray | None = None
@@ -515,17 +188,17 @@ class SwarmEpisode:
     @property
     def time(self) -> float:
         """t_n = n T / m."""
-        return self.params.horizon * self.step_index / self.config.n_steps
+        return self.params.horizon * self.step_index / self.config.simulation.n_steps
 
     @property
     def time_fraction(self) -> float:
         """t_n / T = n / m."""
-        return self.step_index / self.config.n_steps
+        return self.step_index / self.config.simulation.n_steps
 
     @property
     def done(self) -> bool:
         """True when the episode has ended (horizon reached or diverged)."""
-        return self.diverged or self.step_index >= self.config.n_steps
+        return self.diverged or self.step_index >= self.config.simulation.n_steps
 
     @property
     def mean_positions(self) -> np.ndarray:
@@ -561,14 +234,15 @@ class SwarmEpisode:
             # target and gamma are cost parameters: a new target keeps the dynamics model
             # (and its kernel); only a change of the dynamics would rebuild it.
             if not same_dynamics(params, self.params):
-                threads = self.model.threads
-                self.model = _CachedLinearizationModel(
-                    params, self.config.linear_operator, fallbacks=self.fallbacks
+                self.model = LinearizationCache(
+                    params,
+                    self.config.linear_operator,
+                    fallbacks=self.fallbacks,
+                    threads=self.model.threads,
                 )
-                self.model.threads = threads
             self.params = params
             self._target = params.target_vector
-        x = np.broadcast_to(x0, (self.config.n_paths, n, d)).copy()
+        x = np.broadcast_to(x0, (self.config.simulation.n_paths, n, d)).copy()
         drift = mean_interaction_drift(self.model, x)
         if not np.all(np.isfinite(drift)):
             raise ValueError(
@@ -611,7 +285,7 @@ class SwarmEpisode:
             control=control,
             running_cost=cost,
             diverged=diverged,
-            truncated=not diverged and self.step_index >= self.config.n_steps,
+            truncated=not diverged and self.step_index >= self.config.simulation.n_steps,
         )
 
     # ------------------------------------------------------------------ rewards
@@ -655,98 +329,5 @@ class SwarmEpisode:
                 f"{name} must have shape ({rows * d},) or ({rows}, {d}), got {arr.shape}"
             )
         return controls_from_actions(
-            arr.reshape(rows, d), self.config.action_basis, self.config.max_control, n
-        )
-
-
-class EpisodeAttributes:
-    """Read-only attributes both env adapters expose (`env.unwrapped.params`, ...).
-
-    The adapter provides `self.episode` (a `SwarmEpisode`) and `self.config` (its
-    `EpisodeConfig`).
-    """
-
-    episode: SwarmEpisode
-    config: EpisodeConfig
-
-    @property
-    def params(self) -> SwarmParams:
-        """SwarmParams of the current episode (target included)."""
-        return self.episode.params
-
-    @property
-    def model(self) -> SwarmModel:
-        """The SwarmModel the integrator and the controllers use."""
-        return self.episode.model
-
-    @property
-    def max_control(self) -> float:
-        """u = max_control * action."""
-        return self.config.max_control
-
-    @property
-    def n_steps(self) -> int:
-        """m, the number of steps of an episode."""
-        return self.config.n_steps
-
-    @property
-    def n_paths(self) -> int:
-        """Brownian paths simulated together."""
-        return self.config.n_paths
-
-    @property
-    def dt(self) -> float:
-        """tau = T / m."""
-        return self.episode.dt
-
-    @property
-    def integrator_name(self) -> str:
-        return self.config.integrator
-
-    @property
-    def plan(self) -> StepPlan:
-        """Which code a step runs (`agent_envs.envs.step_plan.StepPlan`), resolved when the
-        env was made."""
-        return self.episode.plan
-
-    @property
-    def plan_fallbacks(self) -> Counter[str]:
-        """The mid-step fallbacks of this env's steps so far, by kind
-        (`agent_envs.envs.step_plan.FALLBACKS`): a `collections.Counter`."""
-        return self.episode.fallbacks
-
-    def _plan_repr(self, name: str) -> str:
-        """``<Class<name> plan>``: the env's name and its step plan."""
-        return f"<{type(self).__name__}<{name}> {self.plan.describe()}>"
-
-    @property
-    def jacobian(self) -> str:
-        return self.config.jacobian
-
-    @property
-    def positions(self) -> np.ndarray | None:
-        """(n_paths, N, d) current state (read-only; None before the first reset)."""
-        return self.episode.positions
-
-    @property
-    def time(self) -> float:
-        """t_n = n tau."""
-        return self.episode.time
-
-    @property
-    def step_index(self) -> int:
-        """n, the number of steps taken since reset."""
-        return self.episode.step_index
-
-    def _global_observation(self, space: spaces.Box, layout: str = "absolute") -> np.ndarray:
-        """The Gymnasium observation vector (= the PettingZoo global state, "absolute") of the
-        episode in `layout`."""
-        ep = self.episode
-        return global_observation(
-            ep.mean_positions,
-            ep.mean_interaction_drift,
-            ep.target,
-            ep.time_fraction,
-            space,
-            layout,
+            arr.reshape(rows, d), self.config.action_basis, self.config.simulation.max_control, n
         )

@@ -1,5 +1,12 @@
-"""The reference check of the native vector env's compiled prologue and epilogue
-(`agent_envs.native.step`, the compiled path "step").
+"""The native vector env's compiled prologue and epilogue (`agent_envs.native.step`, the
+compiled path "step"): the calls around the integrator's step, and their reference check.
+
+`compiled_prologue` turns a batch of actions into the controls, running costs and right-hand
+sides F = L(x) x + u in one compiled call; `compiled_epilogue` turns the new state into the
+path means, observations and divergence flags in another. `CompiledVectorStep`, a base of
+`SwarmVectorEnv`, is the env's step around them (its `_step_compiled`: prologue, draws, the
+integrator's fused step, epilogue), taken where its plan's envelope is the compiled step
+(`StepPlan.envelope`).
 
 `same_as_numpy` is registered with the loader (`agent_envs.native.register_check`) when this
 module is imported; the loader runs it when the path first loads, when a native vector env
@@ -16,15 +23,23 @@ warning; the env then steps with its numpy calls.
 
 from __future__ import annotations
 
-from typing import Any
+from collections import Counter
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from agent_envs import arrays, native
 from agent_envs.envs.episode import mean_running_cost
-from agent_envs.envs.interface import controls_from_actions
+from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import global_observation, observation_space
-from agent_envs.simulator import diverged_paths
+from agent_envs.integrators.exponential import GAVE_UP
+from agent_envs.simulator import GeneratorHandles, diverged_paths, fill_brownian_increments
+
+if TYPE_CHECKING:
+    from agent_envs.dynamics.linearization_cache import LinearizationCache
+    from agent_envs.envs.episode_config import EpisodeConfig
+    from agent_envs.envs.step_plan import StepPlan
 
 #: (B, P, N, d) of the load check: one and several paths, N below, at and above numpy's
 #: pairwise blocks (8, 128), d = 1, 2, 3 and 9 (a pairwise sum over the coordinates)
@@ -42,6 +57,176 @@ def load_compiled_step() -> bool:
     """``native.available("step")``: whether the native vector env may take its compiled
     prologue and epilogue (module docstring); loads and checks them on the first call."""
     return native.available("step")
+
+
+def compiled_prologue(
+    module: Any,
+    actions: np.ndarray,
+    max_control: float,
+    x: np.ndarray,
+    drift: np.ndarray,
+    targets: np.ndarray,
+    gamma: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """`module.prologue` (the compiled module): for actions (B, R, d) (C-contiguous), the
+    state x (B, P, N, d) and its drift L(x) x, targets (B, d): (controls u (B, N, d), running
+    costs (B,), rhs F = L(x) x + u (B, P, N, d)), the numpy step's bits
+    (`controls_from_actions`, `mean_running_cost`); None for a non-finite action (the numpy
+    step then raises)."""
+    b, _, d = actions.shape
+    n = x.shape[-2]
+    controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
+    if not module.prologue(actions, max_control, x, drift, targets, gamma, controls, costs, rhs):
+        return None
+    return controls, costs, rhs
+
+
+def compiled_epilogue(
+    module: Any,
+    x_next: np.ndarray,
+    drift_next: np.ndarray,
+    threshold: float,
+    targets: np.ndarray,
+    fractions: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    absolute: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`module.epilogue`: for the new state x_next (B, P, N, d) and its drift (C-contiguous),
+    the divergence threshold, targets (B, d), time fractions (n + 1) / m (B,) and the
+    observation space's (low, high) (float32): (E x (B, N, d), E drift (B, N, d), the
+    "absolute" observations (B, obs) float32 (meaningless unless `absolute`), diverged (B,)),
+    the numpy step's bits (`arrays.mean_axis`, `global_observation`, `advance_paths`'s
+    checks)."""
+    b, _, n, d = x_next.shape
+    low, high = bounds
+    mean_positions, mean_drift = np.empty((b, n, d)), np.empty((b, n, d))
+    observations = np.empty((b, low.shape[0]), dtype=np.float32)
+    diverged = np.empty(b, dtype=np.bool_)
+    module.epilogue(
+        x_next, drift_next, threshold, targets, fractions, low, high, absolute, mean_positions,
+        mean_drift, observations, diverged,
+    )  # fmt: skip
+    return mean_positions, mean_drift, observations, diverged
+
+
+class CompiledVectorStep:
+    """The native vector env's step on its plan's compiled envelope (`StepPlan.envelope`
+    "compiled-step" or "compiled-step+numpy-tail"): a base of `SwarmVectorEnv`, which provides
+    the attributes below and the numpy step's `_advance`, `_finish_step`, `_state_info`."""
+
+    num_envs: int
+    config: EpisodeConfig
+    plan: StepPlan
+    model: LinearizationCache
+    integrator: Any
+    plan_fallbacks: Counter[str]
+    np_randoms: list[Any]
+    step_index: np.ndarray
+    dt: float
+    times: np.ndarray
+    _positions: Any
+    _mean_drift: Any
+    _targets: Any
+    _all_rows: np.ndarray
+    _observation_bounds: tuple[np.ndarray, np.ndarray]
+    _autoreset: np.ndarray
+    _advance: Callable[..., tuple[Any, Any, Any]]
+    _finish_step: Callable[..., tuple[Any, ...]]
+    _state_info: Callable[..., dict[str, Any]]
+    _generator_handles: Callable[[], GeneratorHandles]
+
+    def _step_compiled(self, actions: Any) -> tuple[Any, ...] | None:
+        """`step` for the common case, where every env steps (no autoreset in this call) and
+        the actions are a float32 or float64 numpy array of shape (B, R d) or (B, R, d) (R = N,
+        or 1 for the "common" basis), from the state whose L(x) the model keeps: the controls,
+        running costs and right-hand sides in one compiled call (`compiled_prologue`), the
+        draws, the integrator's fused step (or Euler-Maruyama's update and the kernel pass),
+        and the divergence flags, path means and observation in another compiled call
+        (`compiled_epilogue`), the same values bit for bit as the numpy step, which is about
+        30 numpy calls over the batch (tests/test_fast_step.py). None, before any draw, where
+        it does not apply (the numpy step then runs, and raises for bad actions); a fused step
+        that gives up or does not apply takes the numpy step's `_advance` with the same draws
+        (counted in `plan_fallbacks`). Runs where the plan's envelope is the compiled step
+        (`StepPlan`: numpy, one block, every pass member by member, SERB or ERB on the fused
+        step or Euler-Maruyama, the "agents" or "common" action basis, the path "step"
+        available)."""
+        b, spec, params = self.num_envs, self.config.simulation, self.config.params
+        rows = action_rows(self.config.action_basis, params.n_agents)
+        if (
+            type(actions) is not np.ndarray
+            or actions.dtype not in (np.float32, np.float64)
+            or actions.shape not in ((b, rows * params.dim), (b, rows, params.dim))
+        ):
+            return None
+        model, x = self.model, self._positions
+        cached = model.cached_linearization(x)
+        if cached is None or not (x.flags.c_contiguous and cached[1].flags.c_contiguous):
+            return None
+        operator, drift = cached
+        module = native.loaded("step")
+        if module is False:  # (the path "step" switched off after the env was made)
+            return None
+        a = np.ascontiguousarray(actions).reshape(b, rows, params.dim)
+        found = compiled_prologue(
+            module, a, spec.max_control, x, drift, self._targets, params.gamma
+        )
+        if found is None:
+            return None  # (non-finite actions: the numpy step raises)
+        controls, costs, rhs = found
+        dw = fill_brownian_increments(
+            self.np_randoms, self._all_rows, np.empty(x.shape), self.dt, self._generator_handles()
+        )
+        x_next = self._compiled_advance(operator, rhs, x, model.sigma * dw)
+        every = self._all_rows >= 0  # (B,) True
+        if x_next is None or x_next is GAVE_UP:
+            if x_next is None:  # (GAVE_UP: counted by the model, `discard_linearization`)
+                self.plan_fallbacks["fused-declined"] += 1
+            # the fused step did not apply (say the compiled Lanczos switched off) or a
+            # member's Lanczos gave up (its workspace discarded): the numpy step's advance
+            # with the same draws (where it gave up, the integrator's general path tries the
+            # fused step once more before its own phi-action: a rare step's cost, not bits)
+            with arrays.hot_path_threads():
+                x_next, drift_next, diverged = self._advance(
+                    x, controls, self.times[:, None, None, None], dw
+                )
+            return self._finish_step(x, x_next, drift_next, diverged, controls, costs, every)
+        drift_next = model.cached_linearization(x_next)[1]
+        x_next, drift_next = np.ascontiguousarray(x_next), np.ascontiguousarray(drift_next)
+        absolute = self.config.observation == "absolute"
+        _, mean_drift, observations, diverged = compiled_epilogue(
+            module, x_next, drift_next, self.config.divergence_threshold, self._targets,
+            (self.step_index + 1) / spec.n_steps, self._observation_bounds, absolute,
+        )  # fmt: skip
+        numpy_tail = self.plan.envelope != "compiled-step"  # (not "absolute", or SAME_STEP)
+        if numpy_tail or diverged.any():
+            if not numpy_tail:
+                self.plan_fallbacks["numpy-tail"] += 1
+            if not absolute:
+                observations = None  # (the numpy observation of the state the step leaves)
+            return self._finish_step(
+                x, x_next, mean_drift, diverged, controls, costs, every, observations
+            )
+        # `_finish_step` where every env stepped and moved (NEXT_STEP autoresets): the same
+        # arrays with fewer passes over them
+        self._positions, self._mean_drift = x_next, mean_drift
+        self.step_index += 1
+        truncated = self.step_index >= spec.n_steps
+        info = self._state_info(controls, costs)
+        self._autoreset = truncated.copy()
+        return observations, -self.dt * costs, diverged, truncated, info
+
+    def _compiled_advance(self, operator: Any, rhs: Any, x: Any, noise: Any) -> Any:
+        """x^{n+1} of the compiled step from x with rhs F(x, u) and noise sigma dW: the
+        integrator's fused step (None or `GAVE_UP` where it does not apply or gives up), or
+        Euler-Maruyama's x + dt F + sigma dW and the kernel pass at x^{n+1} (its L(x^{n+1})
+        then kept by the model)."""
+        if self.plan.fused:  # (compiled: no numpy warnings to silence)
+            return self.integrator.fused_step(self.model, operator, rhs, x, self.dt, noise)
+        with np.errstate(over="ignore", invalid="ignore"):
+            x_next = x + self.dt * rhs + noise
+            x_next.flags.writeable = False
+            self.model.interaction_drift(x_next)
+        return x_next
 
 
 def _same_bits(a: np.ndarray, b: Any) -> bool:

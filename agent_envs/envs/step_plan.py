@@ -4,10 +4,11 @@ Every choice of path that an env step makes from facts fixed when the env is mad
 arguments, its model, the compiled paths switched on in this process) is taken here, once, into
 a frozen `StepPlan` that each env exposes as ``env.plan`` (``env.unwrapped.plan`` through
 `gym.make`) and shows in its ``repr``; a training run records ``plan.describe()`` in its
-``env.json``. The hot code reads the plan instead of deciding again: the envs build their
-integrator with the plan's `phi_method` ("auto" resolved for the env's `n_paths`, the one
-place where `n_paths` reaches the integrator's choice), and the native vector env takes its
-blocks and its compiled envelope from it.
+``env.json``. The hot code reads the plan instead of deciding again: every env (the single
+envs' `SwarmEpisode`, the native vector env) makes its model, plan and integrator together in
+`planned_step`, which builds the integrator with the plan's `phi_method` ("auto" resolved for
+the env's `n_paths`, the one place where `n_paths` reaches the integrator's choice), and the
+native vector env takes its blocks and its compiled envelope from it.
 
 What cannot be known before a step (a Lanczos that does not converge, a state whose actions or
 cached linearization the compiled step does not take) still falls back mid-step, with the same
@@ -24,6 +25,7 @@ answering per call, for `simulate` and the controllers, which have no fixed shap
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +33,7 @@ import numpy as np
 
 from agent_envs import native
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
+from agent_envs.dynamics.linearization_cache import LinearizationCache
 from agent_envs.dynamics.operators import GRID_MIN_AGENTS, grid_applies
 from agent_envs.integrators import INTEGRATORS, EulerMaruyama, Integrator, make_integrator
 from agent_envs.integrators.exponential import RosenbrockEuler
@@ -38,7 +41,7 @@ from agent_envs.integrators.phi_functions import auto_phi_method
 
 if TYPE_CHECKING:
     from agent_envs.dynamics.swarm import SwarmModel
-    from agent_envs.envs.episode import EpisodeConfig
+    from agent_envs.envs.episode_config import EpisodeConfig
 
 #: the mid-step fallbacks an env counts in ``env.plan_fallbacks``: what happened instead
 FALLBACKS = {
@@ -141,8 +144,9 @@ def planned_integrator(config: EpisodeConfig, plan: StepPlan) -> Integrator:
     """The env's integrator as its plan says: built with the plan's `phi_method` (so the
     env's `n_paths` reaches the integrator's choice here), and for ERB/SERB taking the fused
     step exactly where the plan has it (`RosenbrockEuler.fused`)."""
+    spec = config.simulation
     integrator = make_integrator(
-        config.integrator, jacobian=config.jacobian, phi_method=plan.phi_method
+        spec.integrator, jacobian=spec.jacobian, phi_method=plan.phi_method
     )
     if isinstance(integrator, RosenbrockEuler):
         integrator.fused = plan.fused
@@ -159,23 +163,24 @@ def _symmetric(config: EpisodeConfig, model: SwarmModel) -> bool:
     """Whether the step's linearization is symmetric (as `SwarmModel.drift_and_linearization`
     says): L(x) for a symmetric kernel; the exact Jacobian only for a radial one too."""
     symmetric = bool(model.kernel.symmetric)
-    if config.jacobian == "exact":
+    if config.simulation.jacobian == "exact":
         symmetric = symmetric and bool(getattr(model.kernel, "radial", False))
     return symmetric
 
 
 def resolve_phi_method(config: EpisodeConfig, model: SwarmModel, matrix_free: bool) -> str:
-    """The phi strategy of an env's integrator: `config.phi_method`, with "auto" resolved as
-    `phi_functions.phi_action` resolves it for the env's n_paths matrices (frozen: N x N;
-    exact: Nd x Nd), or "krylov" on a matrix-free operator (its only method)."""
-    if config.phi_method != "auto" or not INTEGRATORS[config.integrator].needs_jacobian:
-        return config.phi_method
+    """The phi strategy of an env's integrator: the simulation's `phi_method`, with "auto"
+    resolved as `phi_functions.phi_action` resolves it for the env's n_paths matrices (frozen:
+    N x N; exact: Nd x Nd), or "krylov" on a matrix-free operator (its only method)."""
+    spec = config.simulation
+    if spec.phi_method != "auto" or not INTEGRATORS[spec.integrator].needs_jacobian:
+        return spec.phi_method
     if matrix_free:
         return "krylov"
     size = config.params.n_agents
-    if config.jacobian == "exact":
+    if spec.jacobian == "exact":
         size *= config.params.dim
-    return auto_phi_method(size, config.n_paths, _symmetric(config, model))
+    return auto_phi_method(size, spec.n_paths, _symmetric(config, model))
 
 
 def member_by_member(config: EpisodeConfig, model: SwarmModel, num_envs: int) -> bool:
@@ -183,21 +188,21 @@ def member_by_member(config: EpisodeConfig, model: SwarmModel, num_envs: int) ->
     at a time: numba's kernel pass (the symmetric Cucker-Smale kernel on the dense workspace,
     the whole batch within the dense budget), and for an exponential integrator the compiled
     Lanczos on the frozen L(x). The env then takes one block (`SwarmVectorEnv`, BLOCK_BYTES)."""
-    p, n, d = config.n_paths, config.params.n_agents, config.params.dim
+    p, n, d = config.simulation.n_paths, config.params.n_agents, config.params.dim
     # the whole batch as one block (shape only): it must stay on the dense workspace path, as
     # each env does alone (beyond DENSE_MEMORY_BUDGET_BYTES the model goes matrix-free)
     like = _like(num_envs, p, n, d)
     if model.compiled_pass_parameters(like) is None or not model._uses_workspace(like):
         return False
-    if INTEGRATORS[config.integrator].needs_jacobian:  # ERB, SERB
-        return config.jacobian == "frozen" and native.available("lanczos")
+    if INTEGRATORS[config.simulation.integrator].needs_jacobian:  # ERB, SERB
+        return config.simulation.jacobian == "frozen" and native.available("lanczos")
     return True
 
 
 def _linear_operator(config: EpisodeConfig, model: SwarmModel, numpy: bool, kind: str) -> str:
     if not numpy:  # ("matrix_free" on torch: the env's first kernel pass raises)
         return "matrix_free" if config.linear_operator == "matrix_free" else "dense"
-    p, n, d = config.n_paths, config.params.n_agents, config.params.dim
+    p, n, d = config.simulation.n_paths, config.params.n_agents, config.params.dim
     try:
         return "matrix_free" if model.matrix_free(_like(p, n, d), kind) else "dense"
     except ValueError:  # (a matrix-free path that does not exist: the step raises)
@@ -211,7 +216,7 @@ def _kernel_pass(config: EpisodeConfig, model: SwarmModel, numpy: bool, operator
     if operator == "matrix_free":
         grid = grid_applies(model.kernel, d) and n >= GRID_MIN_AGENTS[d]
         return "grid" if grid else "chunked"
-    if model.compiled_pass_parameters(_like(config.n_paths, n, d)) is not None:
+    if model.compiled_pass_parameters(_like(config.simulation.n_paths, n, d)) is not None:
         return "compiled"
     return "numpy"
 
@@ -221,7 +226,7 @@ def _phi(
 ) -> str:
     """The phi-action's code, as `RosenbrockEuler.step` and `phi_functions.phi_action` pick it
     for the env's states (float64, n_paths x N x d)."""
-    if not INTEGRATORS[config.integrator].needs_jacobian:
+    if not INTEGRATORS[config.simulation.integrator].needs_jacobian:
         return "none"
     if operator == "matrix_free":
         return "krylov-matrix-free"
@@ -230,11 +235,13 @@ def _phi(
     if not _symmetric(config, model):
         return "arnoldi"
     workspace = (
-        numpy and config.jacobian == "frozen" and isinstance(model.kernel, CuckerSmaleKernel)
+        numpy
+        and config.simulation.jacobian == "frozen"
+        and isinstance(model.kernel, CuckerSmaleKernel)
     )  # the frozen L(x) as a `FrozenLaplacian` over the model's workspace
     if not workspace or not native.available("lanczos"):
         return "lanczos"
-    like = _like(config.n_paths, config.params.n_agents, config.params.dim)
+    like = _like(config.simulation.n_paths, config.params.n_agents, config.params.dim)
     if (  # `RosenbrockEuler.fused_step`'s conditions (`frozen_advance_applies`)
         model._peak is not None
         and hasattr(model, "fused_relinearization")
@@ -261,7 +268,7 @@ def _envelope(
         return "numpy"
     if not one_at_a_time:
         return "numpy"
-    cls = INTEGRATORS[config.integrator]
+    cls = INTEGRATORS[config.simulation.integrator]
     if not (cls is EulerMaruyama or (cls.needs_jacobian and phi == "fused-lanczos")):
         return "numpy"
     if not native.available("step"):
@@ -288,9 +295,9 @@ def resolve_step_plan(
     `compiled_pass_parameters`, `native.available`. For the native vector env (``env=
     "vector"``) also its blocks (`block_bytes` of kernel matrices at most, unless every pass
     runs member by member or the backend is torch: one block) and its envelope."""
-    cls = INTEGRATORS[config.integrator]
+    cls = INTEGRATORS[config.simulation.integrator]
     numpy = backend == "numpy"
-    kind = config.jacobian if cls.needs_jacobian else "frozen"
+    kind = config.simulation.jacobian if cls.needs_jacobian else "frozen"
     operator = _linear_operator(config, model, numpy, kind)
     phi_method = resolve_phi_method(config, model, operator == "matrix_free")
     phi = _phi(config, model, numpy, operator, phi_method)
@@ -300,7 +307,7 @@ def resolve_step_plan(
         if block_bytes is None:
             raise ValueError("the vector env's plan needs block_bytes")
         one_at_a_time = numpy and member_by_member(config, model, num_envs)
-        wanted = -(-num_envs * 8 * config.n_paths * n * n // block_bytes)
+        wanted = -(-num_envs * 8 * config.simulation.n_paths * n * n // block_bytes)
         if not numpy or one_at_a_time:
             wanted = 1
         wanted = max(1, min(num_envs, wanted))
@@ -309,8 +316,8 @@ def resolve_step_plan(
         envelope = _envelope(config, numpy, phi, blocks, same_step_autoreset, one_at_a_time)
     return StepPlan(
         env=env,
-        integrator=config.integrator,
-        jacobian=config.jacobian if cls.needs_jacobian else "none",
+        integrator=config.simulation.integrator,
+        jacobian=config.simulation.jacobian if cls.needs_jacobian else "none",
         phi_method=phi_method,
         phi=phi,
         linear_operator=operator,
@@ -319,8 +326,34 @@ def resolve_step_plan(
         num_envs=num_envs,
         blocks=blocks,
         envs_per_block=per_block,
-        n_paths=config.n_paths,
+        n_paths=config.simulation.n_paths,
         backend=backend,
         device=device,
         threads=threads,
     )
+
+
+def planned_step(
+    config: EpisodeConfig,
+    fallbacks: Counter[str],
+    *,
+    cache_tensors: bool = False,
+    threads: int = 1,
+    **plan_options: Any,
+) -> tuple[LinearizationCache, StepPlan, Integrator]:
+    """What an env steps with, made once when the env is made: its model (a
+    `LinearizationCache` of the config's params counting its fallbacks in `fallbacks`, torch
+    states cached with `cache_tensors`), the `StepPlan` resolved for that model
+    (`resolve_step_plan` with `threads` and `plan_options`: env, backend, device, num_envs,
+    block_bytes, same_step_autoreset) and the integrator the plan names
+    (`planned_integrator`). The single envs' episode and the native vector env both call it,
+    so `n_paths` goes from the env's kwargs to the integrator through one plan."""
+    model = LinearizationCache(
+        config.params,
+        config.linear_operator,
+        cache_tensors=cache_tensors,
+        fallbacks=fallbacks,
+        threads=threads,
+    )
+    plan = resolve_step_plan(config, model, threads=threads, **plan_options)
+    return model, plan, planned_integrator(config, plan)

@@ -14,13 +14,9 @@ import numpy as np
 from gymnasium import spaces
 
 from agent_envs import native
-from agent_envs.envs.episode import (
-    EpisodeAttributes,
-    EpisodeConfig,
-    StepOutcome,
-    SwarmEpisode,
-    reset_options,
-)
+from agent_envs.envs.attributes import EpisodeAttributes
+from agent_envs.envs.episode import StepOutcome, SwarmEpisode
+from agent_envs.envs.episode_config import EpisodeConfig, reset_options
 from agent_envs.envs.interface import action_rows
 from agent_envs.envs.observation import (
     interaction_drift_bound,

@@ -12,12 +12,9 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from agent_envs.envs.episode import (
-    EpisodeAttributes,
-    EpisodeConfig,
-    SwarmEpisode,
-    reset_options,
-)
+from agent_envs.envs.attributes import EpisodeAttributes
+from agent_envs.envs.episode import SwarmEpisode
+from agent_envs.envs.episode_config import EpisodeConfig, reset_options
 from agent_envs.envs.observation import (
     agent_observation_space,
     agent_observations,

@@ -31,7 +31,6 @@ compares them on the CPU). Observations, rewards and flags come out as numpy arr
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -41,59 +40,36 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from agent_envs import arrays, native
-from agent_envs.envs import fast_step  # noqa: F401  (registers the "step" path's check)
-from agent_envs.envs.episode import (
+from agent_envs.envs.attributes import EnvAttributes
+from agent_envs.envs.episode import mean_running_cost
+from agent_envs.envs.episode_config import (
     EpisodeConfig,
-    _CachedLinearizationModel,
-    advance_paths,
     episode_params,
-    mean_interaction_drift,
-    mean_running_cost,
     reset_options,
     start_positions,
 )
+from agent_envs.envs.fast_step import CompiledVectorStep
 from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import (
     global_observation,
     interaction_drift_bound,
     observation_space,
 )
-from agent_envs.envs.step_plan import StepPlan, planned_integrator, resolve_step_plan
-from agent_envs.integrators import Integrator
-from agent_envs.integrators.exponential import GAVE_UP
+from agent_envs.envs.step_plan import planned_step
+from agent_envs.envs.vector_blocks import BLOCK_BYTES, EnvBlocks
+from agent_envs.envs.vector_inputs import (
+    SeedArg,
+    batch_actions,
+    check_autoreset_mode,
+    check_num_envs,
+    check_render_mode,
+    env_seeds,
+    resolve_arrays,
+)
 from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
-from agent_envs.validation import check_seed, real_array
-
-#: Bytes of kernel matrices one block of envs holds at most (numpy passes over the whole batch:
-#: without numba, or a kernel or Jacobian numba does not serve): the envs are stepped in
-#: balanced blocks of at most this size, so that a block's P(x) (B_block x P x N x N floats)
-#: stays in the cache while the Krylov iteration multiplies with it, instead of streaming the
-#: whole batch's P from memory at every product (N = 100, 20 paths, B = 16: 25.6 MB per product
-#: in one batch). 8 MiB measured best of 1, 2, 4, 8 MiB and one batch on a 32 MiB L3
-#: (benchmarks/bench_throughput.py prints the vector env's figures). Where every pass runs
-#: member by member (`step_plan.member_by_member`), one block (`StepPlan.blocks`).
-BLOCK_BYTES = 2**23
-
-#: Autoreset modes the native env implements (Gymnasium's names).
-AUTORESET_MODES = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
-
-SeedArg = int | Sequence[int | None] | None
 
 
-def single_env_phi_method(config: EpisodeConfig) -> str:
-    """The phi strategy a single env with this config uses ("auto" resolved for its P paths):
-    its `StepPlan.phi_method` (`agent_envs.envs.step_plan.resolve_phi_method`).
-
-    The integrators apply phi to dt L(x) (frozen: N x N, acting on the d columns) or to the
-    exact Jacobian (Nd x Nd); "auto" picks by matrix size, symmetry and the number of matrices
-    in the call, which for a single env is its number of paths ("krylov" on a matrix-free
-    operator).
-    """
-    model = _CachedLinearizationModel(config.params, config.linear_operator)
-    return resolve_step_plan(config, model).phi_method
-
-
-class SwarmVectorEnv(VectorEnv):
+class SwarmVectorEnv(EnvAttributes, CompiledVectorStep, VectorEnv):
     r"""B copies of `agent_envs/Swarm-v0` stepped together as one batch of arrays.
 
     ## Description
@@ -200,94 +176,62 @@ class SwarmVectorEnv(VectorEnv):
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
-            raise TypeError(f"num_envs must be an int >= 1, got {num_envs!r}")
-        if num_envs < 1:
-            raise ValueError(f"num_envs must be an int >= 1, got {num_envs}")
-        if render_mode is not None:
-            raise ValueError(
-                f"render_mode={render_mode!r}: the native vector env does not render; use "
-                "gym.make_vec(..., vectorization_mode='sync', render_mode=...)"
-            )
-        if backend is None:
-            backend = "numpy" if device in (None, "cpu") else "torch"
-        self._xp, self._device, _ = arrays.resolve(backend, device)
-        if self._device is not None and self._device.type == "cuda":
-            import torch
-
-            if not torch.cuda.is_available():
-                raise ValueError(f"device={device!r}: torch sees no CUDA device here")
-        self.backend = backend
-        if not isinstance(tensor_output, bool):
-            raise TypeError(f"tensor_output must be a bool, got {tensor_output!r}")
-        if tensor_output and backend != "torch":
-            raise ValueError("tensor_output=True needs backend='torch' (or a torch device)")
+        self.num_envs = check_num_envs(num_envs)
+        check_render_mode(render_mode)
+        self.backend, self._xp, self._device, self.num_threads = resolve_arrays(
+            backend, device, tensor_output, num_threads
+        )
         self.tensor_output = tensor_output
-        self.num_threads = native.check_compiled_threads(num_threads, "num_threads")
-        if self.num_threads > 1 and backend != "numpy":
-            raise ValueError(
-                "num_threads > 1 needs the numpy backend (its compiled passes run on the "
-                f"threads); backend={backend!r} runs torch's own"
-            )
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            mode = None
-        if mode not in AUTORESET_MODES:
-            allowed = [m.value for m in AUTORESET_MODES]
-            raise ValueError(f"autoreset_mode must be one of {allowed}, got {autoreset_mode!r}")
+        mode = check_autoreset_mode(autoreset_mode)
         self.config = EpisodeConfig.from_kwargs(
             f"{type(self).__name__}.__init__", env_kind="gymnasium", **kwargs
         )
-        self.num_envs = int(num_envs)
         self.device = "cpu" if self._device is None else str(self._device)
         self.render_mode = None
         self.metadata = {**type(self).metadata, "autoreset_mode": mode}
         self.autoreset_mode = mode
-
-        params = self.config.params
-        n, d = params.n_agents, params.dim
         #: the mid-step fallbacks so far (`step_plan.FALLBACKS`), shared by the block models
         self.plan_fallbacks: Counter[str] = Counter()
-        self.model = _CachedLinearizationModel(
-            params, self.config.linear_operator, cache_tensors=True, fallbacks=self.plan_fallbacks
-        )
-        # which code a step runs, once: the phi strategy of the single env's P paths, the
-        # blocks (numpy: of about BLOCK_BYTES of kernel matrices, each with its own model, unless
-        # every pass runs member by member; torch: one, a device wants one batch) and whether
-        # the compiled prologue and epilogue apply (`_step_compiled`)
-        self.plan: StepPlan = resolve_step_plan(
+        # which code a step runs, once, with the model and the integrator: the phi strategy of
+        # the single env's P paths, the blocks (numpy: of about BLOCK_BYTES of kernel matrices,
+        # each with its own model, unless every pass runs member by member; torch: one, a
+        # device wants one batch) and whether the compiled prologue and epilogue apply
+        # (`_step_compiled`)
+        self.model, self.plan, self.integrator = planned_step(
             self.config,
-            self.model,
-            env="vector",
-            backend=backend,
-            device=self.device,
+            self.plan_fallbacks,
+            cache_tensors=True,
             threads=self.num_threads,
+            env="vector",
+            backend=self.backend,
+            device=self.device,
             num_envs=self.num_envs,
             block_bytes=BLOCK_BYTES,
             same_step_autoreset=mode is AutoresetMode.SAME_STEP,
         )
-        self.phi_method = self.plan.phi_method
-        self.integrator: Integrator = planned_integrator(self.config, self.plan)
-        envs_per_block = self.plan.envs_per_block
-        self._blocks = [
-            slice(i, min(i + envs_per_block, self.num_envs))
-            for i in range(0, self.num_envs, envs_per_block)
-        ]
-        self._block_models = [self.model] + [
-            _CachedLinearizationModel(
-                params, self.config.linear_operator, fallbacks=self.plan_fallbacks
-            )
-            for _ in self._blocks[1:]
-        ]
-        for model in self._block_models:  # (their threaded passes load in the first reset)
-            model.threads = self.num_threads
-        # the block views of the current state the block models last saw (their cache keys)
-        self._block_views: list[Any] = []
-        self._block_views_of: Any = None
+        self._blocks = EnvBlocks(
+            self.model, self.config, self.num_envs, self.plan.envs_per_block, self.plan_fallbacks
+        )
         arrays.prepare_hot_path()
         native.available("noise")  # (numba's load when the env is made, not in its first step)
-        self.dt = self.config.dt
+        self._make_spaces()
+        b, p = self.num_envs, self.config.simulation.n_paths
+        n, d = self.config.params.n_agents, self.config.params.dim
+        self._all_rows = np.arange(b)
+        self.np_randoms: list[np.random.Generator | None] = [None] * b
+        self._handles: GeneratorHandles | None = None
+        self._positions = self._on_device(np.zeros((b, p, n, d)))
+        self._mean_drift = self._on_device(np.zeros((b, n, d)))
+        target = self.config.params.target_vector
+        self._targets = self._on_device(np.broadcast_to(target, (b, d)).copy())
+        self.step_index = np.zeros(b, dtype=np.int64)
+        self._autoreset = np.zeros(b, dtype=bool)
+        self._has_reset = False
+
+    def _make_spaces(self) -> None:
+        """The single env's spaces, their batches, and the observation bounds (float32) of the
+        compiled epilogue."""
+        n, d = self.config.params.n_agents, self.config.params.dim
         rows = action_rows(self.config.action_basis, n)
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(rows * d,), dtype=np.float32)
         self.single_observation_space = observation_space(
@@ -299,35 +243,13 @@ class SwarmVectorEnv(VectorEnv):
         )
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-
-        self._all_rows = np.arange(self.num_envs)
         space = self.single_observation_space
         self._observation_bounds = (
             np.ascontiguousarray(space.low, dtype=np.float32),
             np.ascontiguousarray(space.high, dtype=np.float32),
         )
 
-        b, p = self.num_envs, self.config.n_paths
-        self.np_randoms: list[np.random.Generator | None] = [None] * b
-        self._handles: GeneratorHandles | None = None
-        self._positions = self._on_device(np.zeros((b, p, n, d)))
-        self._mean_drift = self._on_device(np.zeros((b, n, d)))
-        self._targets = self._on_device(np.broadcast_to(params.target_vector, (b, d)).copy())
-        self.step_index = np.zeros(b, dtype=np.int64)
-        self._autoreset = np.zeros(b, dtype=bool)
-        self._has_reset = False
-
     # ----------------------------------------------------------------- attributes
-    @property
-    def n_steps(self) -> int:
-        """m, the number of steps of an episode."""
-        return self.config.n_steps
-
-    @property
-    def n_paths(self) -> int:
-        """Brownian paths per env."""
-        return self.config.n_paths
-
     @property
     def positions(self) -> np.ndarray:
         """(B, P, N, d) current states as a numpy array: the (read-only) state itself on the
@@ -344,28 +266,9 @@ class SwarmVectorEnv(VectorEnv):
     @property
     def times(self) -> np.ndarray:
         """t_n = n T / m per env: (B,)."""
-        return self.config.params.horizon * self.step_index / self.config.n_steps
+        return self.config.params.horizon * self.step_index / self.config.simulation.n_steps
 
     # ----------------------------------------------------------------- helpers
-    def _env_seeds(self, seed: SeedArg) -> list[int | None]:
-        if seed is None:
-            return [None] * self.num_envs
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
-            first = check_seed(seed)
-            return [first + i for i in range(self.num_envs)]
-        if not isinstance(seed, (list, tuple, np.ndarray)):
-            raise TypeError(
-                f"seed must be None, an integer >= 0 or a list of {self.num_envs} of them (one "
-                f"per env), got {type(seed).__name__}"
-            )
-        seeds = [check_seed(s) for s in seed]
-        if len(seeds) != self.num_envs:
-            raise ValueError(
-                f"seed as a list must have one entry per env (num_envs={self.num_envs}), "
-                f"got {len(seeds)}"
-            )
-        return seeds
-
     def _rng(self, i: int) -> np.random.Generator:
         rng = self.np_randoms[i]
         if rng is None:
@@ -400,7 +303,7 @@ class SwarmVectorEnv(VectorEnv):
             arrays.mean_axis(self._positions, -3),
             self._mean_drift,
             self._targets,
-            self.step_index / self.config.n_steps,
+            self.step_index / self.config.simulation.n_steps,
             self.single_observation_space,
             self.config.observation,
         )
@@ -428,147 +331,16 @@ class SwarmVectorEnv(VectorEnv):
         self.step_index[mask] = 0
         self._autoreset[mask] = False
 
-    def _views_of(self, positions: Any) -> list[Any]:
-        """The block views of `positions`: the ones the block models cached, if current."""
-        if self._block_views_of is positions:
-            return self._block_views
-        return [positions[block] for block in self._blocks]
-
     def _mean_drift_of(self, positions: Any) -> Any:
         """E interaction drift (B, N, d) of `positions` (B, P, N, d), block by block; the block
-        models keep L(x) of their views for the next step."""
-        if len(self._blocks) == 1:
-            return mean_interaction_drift(self.model, positions)
-        positions.flags.writeable = False
-        views = self._views_of(positions)
-        drifts = [
-            mean_interaction_drift(m, v) for m, v in zip(self._block_models, views, strict=True)
-        ]
-        self._block_views, self._block_views_of = views, positions
-        return np.concatenate(drifts)
+        models keep L(x) of their views for the next step (`EnvBlocks.mean_drift`)."""
+        return self._blocks.mean_drift(positions)
 
     def _advance(self, x: Any, controls: Any, times: Any, dw: Any) -> tuple[Any, Any, Any]:
-        """`advance_paths` of the whole batch, one block of envs at a time (see BLOCK_BYTES):
-        every env's arithmetic is the same as in one call (the core works member by member)."""
+        """`advance_paths` of the whole batch, one block of envs at a time (`EnvBlocks.advance`,
+        `BLOCK_BYTES`): every env's arithmetic is the same as in one call."""
         threshold = self.config.divergence_threshold
-        if len(self._blocks) == 1:
-            return advance_paths(
-                self.integrator, self.model, x, controls, times, self.dt, dw, threshold
-            )
-        parts = [
-            advance_paths(
-                self.integrator,
-                model,
-                view,
-                controls[block],
-                times[block],
-                self.dt,
-                dw[block],
-                threshold,
-            )
-            for model, view, block in zip(
-                self._block_models, self._views_of(x), self._blocks, strict=True
-            )
-        ]
-        x_next = np.concatenate([part[0] for part in parts])
-        x_next.flags.writeable = False
-        self._block_views, self._block_views_of = [part[0] for part in parts], x_next
-        drift = np.concatenate([part[1] for part in parts])
-        diverged = np.concatenate([part[2] for part in parts])
-        return x_next, drift, diverged
-
-    def _step_compiled(self, actions: Any) -> tuple[Any, ...] | None:
-        """`step` for the common case, where every env steps (no autoreset in this call) and
-        the actions are a float32 or float64 numpy array of shape (B, R d) or (B, R, d) (R = N,
-        or 1 for the "common" basis), from
-        the state whose L(x) the model keeps: the controls, running costs and right-hand sides
-        in one compiled call (`native.step.prologue`), the draws, the integrator's fused
-        step (or Euler-Maruyama's update and the kernel pass), and the divergence flags, path
-        means and observation in another compiled call (`native.step.epilogue`), the same
-        values bit for bit as the numpy step, which is about 30 numpy calls over the batch
-        (tests/test_fast_step.py). None, before any draw, where it does not apply (the numpy
-        step then runs, and raises for bad actions); a fused step that gives up or does not
-        apply takes the numpy step's `_advance` with the same draws (counted in
-        `plan_fallbacks`). Runs where the plan's envelope is the compiled step (`StepPlan`:
-        numpy, one block, every pass member by member, SERB or ERB on the fused step or
-        Euler-Maruyama, the "agents" or "common" action basis, the path "step" available)."""
-        b = self.num_envs
-        n, d = self.config.params.n_agents, self.config.params.dim
-        rows = action_rows(self.config.action_basis, n)
-        if (
-            type(actions) is not np.ndarray
-            or actions.dtype not in (np.float32, np.float64)
-            or actions.shape not in ((b, rows * d), (b, rows, d))
-        ):
-            return None
-        model, x = self.model, self._positions
-        cached = model.cached_linearization(x)
-        if cached is None or not (x.flags.c_contiguous and cached[1].flags.c_contiguous):
-            return None
-        operator, drift = cached
-        module = native.loaded("step")
-        if module is False:  # (the path "step" switched off after the env was made)
-            return None
-        controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
-        a = np.ascontiguousarray(actions).reshape(b, rows, d)
-        params = self.config.params
-        if not module.prologue(
-            a, self.config.max_control, x, drift, self._targets, params.gamma, controls, costs, rhs
-        ):
-            return None  # (non-finite actions: the numpy step raises)
-        dw = fill_brownian_increments(
-            self.np_randoms, self._all_rows, np.empty(x.shape), self.dt, self._generator_handles()
-        )
-        noise = model.sigma * dw
-        if self.plan.fused:  # (compiled: no numpy warnings to silence)
-            x_next = self.integrator.fused_step(model, operator, rhs, x, self.dt, noise)
-        else:  # Euler-Maruyama's x + dt F + sigma dW, then the kernel pass at x_next
-            with np.errstate(over="ignore", invalid="ignore"):
-                x_next = x + self.dt * rhs + noise
-                x_next.flags.writeable = False
-                model.interaction_drift(x_next)
-        every = self._all_rows >= 0  # (B,) True
-        if x_next is None or x_next is GAVE_UP:
-            if x_next is None:  # (GAVE_UP: counted by the model, `discard_linearization`)
-                self.plan_fallbacks["fused-declined"] += 1
-            # the fused step did not apply (say the compiled Lanczos switched off) or a
-            # member's Lanczos gave up (its workspace discarded): the numpy step's advance
-            # with the same draws (where it gave up, the integrator's general path tries the
-            # fused step once more before its own phi-action: a rare step's cost, not bits)
-            with arrays.hot_path_threads():
-                x_next, drift_next, diverged = self._advance(
-                    x, controls, self.times[:, None, None, None], dw
-                )
-            return self._finish_step(x, x_next, drift_next, diverged, controls, costs, every)
-        drift_next = model.cached_linearization(x_next)[1]
-        x_next, drift_next = np.ascontiguousarray(x_next), np.ascontiguousarray(drift_next)
-        absolute = self.config.observation == "absolute"
-        low, high = self._observation_bounds
-        mean_positions, mean_drift = np.empty((b, n, d)), np.empty((b, n, d))
-        observations = np.empty((b, low.shape[0]), dtype=np.float32)
-        diverged = np.empty(b, dtype=np.bool_)
-        module.epilogue(
-            x_next, drift_next, self.config.divergence_threshold, self._targets,
-            (self.step_index + 1) / self.config.n_steps, low, high, absolute, mean_positions,
-            mean_drift, observations, diverged,
-        )  # fmt: skip
-        numpy_tail = self.plan.envelope != "compiled-step"  # (not "absolute", or SAME_STEP)
-        if numpy_tail or diverged.any():
-            if not numpy_tail:
-                self.plan_fallbacks["numpy-tail"] += 1
-            if not absolute:
-                observations = None  # (the numpy observation of the state the step leaves)
-            return self._finish_step(
-                x, x_next, mean_drift, diverged, controls, costs, every, observations
-            )
-        # `_finish_step` where every env stepped and moved (NEXT_STEP autoresets): the same
-        # arrays with fewer passes over them
-        self._positions, self._mean_drift = x_next, mean_drift
-        self.step_index += 1
-        truncated = self.step_index >= self.config.n_steps
-        info = self._state_info(controls, costs)
-        self._autoreset = truncated.copy()
-        return observations, -self.dt * costs, diverged, truncated, info
+        return self._blocks.advance(self.integrator, x, controls, times, self.dt, dw, threshold)
 
     def _state_info(self, control: Any = None, running_cost: Any = None) -> dict[str, Any]:
         """The info of the current state, every key filled by every env; a reset's info has
@@ -596,45 +368,27 @@ class SwarmVectorEnv(VectorEnv):
     def _controls(self, actions: Any, stepping: Any, every: bool = False) -> Any:
         """u = max_control * clip(a, -1, 1) per env: (B, N, d) (rows not stepping ignored).
 
-        `actions` may be a numpy array (or nested sequence) or a torch tensor; `stepping` is
-        the (B,) mask on the env's device, `every` whether it is all True (then no row is
-        masked: the same controls with two passes over the batch fewer).
+        `actions` may be a numpy array (or nested sequence) or a torch tensor, checked by
+        `vector_inputs.batch_actions`; `stepping` is the (B,) mask on the env's device, `every`
+        whether it is all True (then no row is masked: the same controls with two passes over
+        the batch fewer).
         """
-        b, xp = self.num_envs, self._xp
         n, d = self.config.params.n_agents, self.config.params.dim
-        if arrays.is_torch(actions):
-            # torch dtypes are floating, integer, complex or bool: the last two are not real
-            if actions.is_complex() or str(actions.dtype) == "torch.bool":
-                raise TypeError(f"actions must hold real numbers, got a tensor of {actions.dtype}")
-            if self._device is not None:
-                arr = actions.to(device=self._device, dtype=self._positions.dtype)
-            else:
-                arr = real_array("actions", arrays.to_numpy(actions.detach()), finite=False)
-        else:
-            # the dtype is checked for every row; finiteness below only for the rows that step
-            # (an autoresetting env ignores its action, as SyncVectorEnv does)
-            arr = self._on_device(real_array("actions", actions, finite=False))
-        rows = action_rows(self.config.action_basis, n)
-        if tuple(arr.shape) not in ((b, rows * d), (b, rows, d)):
-            raise ValueError(
-                f"actions must have shape ({b}, {rows * d}) or ({b}, {rows}, {d}), got "
-                f"{tuple(arr.shape)}"
-            )
-        arr = xp.reshape(arr, (b, rows, d))
-        if not bool(xp.all(xp.isfinite(arr if every else arr[stepping]))):
-            raise ValueError("actions must be finite, got NaN or inf entries")
-        if not every:
-            # rows that do not step get no control at all, so a NaN there never reaches the
-            # batch
-            arr = xp.where(stepping[:, None, None], arr, 0.0)
-        return controls_from_actions(arr, self.config.action_basis, self.config.max_control, n)
+        shape = (self.num_envs, action_rows(self.config.action_basis, n), d)
+        arr = batch_actions(
+            actions, shape, stepping, every, self._xp, self._on_device, self._device,
+            self._positions.dtype,
+        )  # fmt: skip
+        return controls_from_actions(
+            arr, self.config.action_basis, self.config.simulation.max_control, n
+        )
 
     # ------------------------------------------------------------------ API
     def reset(
         self, *, seed: SeedArg = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every env (or those of ``options["reset_mask"]``); see the class docstring."""
-        seeds = self._env_seeds(seed)
+        seeds = env_seeds(seed, self.num_envs)
         if self.num_threads > 1:
             # the threaded passes' one-time load (it starts numba's threads) falls in the first
             # reset, not in the constructor, so that a process may fork after making an env
@@ -673,7 +427,7 @@ class SwarmVectorEnv(VectorEnv):
             if found is not None:
                 return found
             self.plan_fallbacks["compiled-step-declined"] += 1
-        b, p = self.num_envs, self.config.n_paths
+        b, p = self.num_envs, self.config.simulation.n_paths
         n, d = self.config.params.n_agents, self.config.params.dim
         resetting = self._autoreset.copy()
         stepping = ~resetting
@@ -739,7 +493,7 @@ class SwarmVectorEnv(VectorEnv):
         # the episode's steps so far, the diverging one included: gym.make's TimeLimit counts
         # calls, so a single env that diverges on its last step is terminated and truncated
         elapsed = self.step_index + diverged
-        truncated = stepping & (elapsed >= self.config.n_steps)
+        truncated = stepping & (elapsed >= self.config.simulation.n_steps)
         terminated = diverged.copy()
         if observations is None or not np.all(moved):
             observations = self._observations()

@@ -12,10 +12,9 @@ so every scheme can be compared on the same noise.
 `model` is anything with `drift(t, x, u)`, `sigma` and, for exponential schemes,
 `drift_and_linearization(t, x, u, kind)` (see `agent_envs.dynamics.swarm.SwarmModel`); a
 closed-loop model whose drift includes a time-dependent feedback law fits the same protocol.
-A model that keeps its linearization for the next step may also offer
-`fused_relinearization(x)`, `adopt_linearization(x_next, row_sums, drift)` and
-`discard_linearization()` (the envs' model, `agent_envs.envs.episode`): the exponential
-schemes then take the next kernel pass in the same compiled call as the step
+A model that keeps its linearization for the next step follows `LinearizationCachingModel`
+(`agent_envs.dynamics.linearization_cache.LinearizationCache`, the envs' model): the
+exponential schemes then take the next kernel pass in the same compiled call as the step
 (`agent_envs.integrators.exponential`), with the same result.
 States are numpy arrays or torch tensors (`agent_envs.arrays`); the schemes only use
 operators and the model, so they run (and differentiate, on torch) on either.
@@ -23,6 +22,7 @@ operators and the model, so they run (and differentiate, on torch) on either.
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
@@ -39,6 +39,41 @@ class DriftModel(Protocol):
 
     def drift_and_linearization(self, t: float, x: Any, u: Any, kind: str):
         """(F(t, x, u), Linearization) for exponential schemes; kind "exact" or "frozen"."""
+        ...
+
+
+class LinearizationCachingModel(DriftModel, Protocol):
+    """A `DriftModel` that keeps L(x) of its last state for the next step, and takes the next
+    kernel pass from the exponential integrators' fused step (`RosenbrockEuler.fused_step`).
+
+    The fused step asks `fused_relinearization(x)` for the workspace it may write P(x_next)
+    into, then hands what it computed to `adopt_linearization` or, where a member's Lanczos
+    gave up after writing part of P, calls `discard_linearization`. The integrators look the
+    hooks up on the model (a plain `SwarmModel` has none: the general step runs); the one
+    implementation is `agent_envs.dynamics.linearization_cache.LinearizationCache`.
+    """
+
+    #: the mid-step fallbacks by kind (`agent_envs.envs.step_plan.FALLBACKS`): the step counts
+    #: "fused-declined" here, `discard_linearization` "fused-gave-up"
+    fallbacks: Counter[str]
+    #: numba's threads for the compiled passes over the batch's members
+    threads: int
+
+    def cached_linearization(self, x: Any) -> tuple[Any, Any] | None:
+        """(L(x), L(x) x) kept for the state array x (by identity), or None."""
+        ...
+
+    def fused_relinearization(self, x: Any) -> tuple[np.ndarray, float, float] | None:
+        """(the workspace's P for x's shape, w, alpha^2) for the compiled kernel pass at the
+        step's next state, or None where the fused step does not serve x."""
+        ...
+
+    def adopt_linearization(self, x_next: np.ndarray, row_sums: Any, drift: Any) -> None:
+        """Keep L(x_next), whose P the integrator wrote, with its row sums and drift."""
+        ...
+
+    def discard_linearization(self) -> None:
+        """Forget the linearization: the workspace's P was written in part."""
         ...
 
 

@@ -20,7 +20,7 @@ from typing import Any
 
 from agent_envs import arrays, native
 from agent_envs.dynamics.laplacian import FrozenLaplacian
-from agent_envs.integrators.base import DriftModel, Integrator
+from agent_envs.integrators.base import DriftModel, Integrator, LinearizationCachingModel
 from agent_envs.integrators.phi_functions import (
     PHI_METHODS,
     frozen_advance,
@@ -86,15 +86,24 @@ class RosenbrockEuler(Integrator):
             incr = incr + dt**2 * phi_action(scaled, lin.as_columns(v), 2, **kw)
         return x + lin.from_columns(incr, x) + noise
 
-    def fused_step(self, model: Any, operator: Any, rhs: Any, x: Any, dt: float, noise: Any) -> Any:
+    def fused_step(
+        self,
+        model: LinearizationCachingModel,
+        operator: Any,
+        rhs: Any,
+        x: Any,
+        dt: float,
+        noise: Any,
+    ) -> Any:
         """The step and the model's next kernel pass in one compiled pass, member by member
         (`phi_functions.frozen_advance`), for a model that keeps its linearization
-        (`fused_relinearization`: the envs' models) on the compiled frozen L(x) (`operator`,
-        the `FrozenLaplacian` of `model.drift_and_linearization`), with rhs = F(x, u) and
-        noise = sigma dW: x_next, equal bit for bit to the general path's; None where it does
-        not apply; `GAVE_UP` when a member's Lanczos did not converge (the model's workspace
-        is then discarded and L(x) must be computed again). The native vector env calls it
-        directly (`agent_envs.envs.vector_env`), with rhs from its compiled prologue.
+        (`LinearizationCachingModel`: the envs' `LinearizationCache`) on the compiled frozen
+        L(x) (`operator`, the `FrozenLaplacian` of `model.drift_and_linearization`), with
+        rhs = F(x, u) and noise = sigma dW: x_next, equal bit for bit to the general path's;
+        None where it does not apply (a model without the protocol's hooks among them);
+        `GAVE_UP` when a member's Lanczos did not converge (the model's workspace is then
+        discarded and L(x) must be computed again). The native vector env calls it directly
+        (`agent_envs.envs.vector_env`), with rhs from its compiled prologue.
 
         The compiled path "fused" (``native.use("fused", False)`` switches it off) is asked
         last: where the step applies, the kernel pass and the Lanczos it needs are loaded

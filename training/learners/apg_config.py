@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.envs.episode import EpisodeConfig
+from agent_envs.envs.episode_config import EpisodeConfig
 from agent_envs.training.defaults import (
     DEFAULT_EVAL_SEED,
     GYM_ENV_ID,

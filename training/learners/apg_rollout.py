@@ -16,14 +16,18 @@ then one (K, N, d) block of increments per step), so a cost computed here on an 
 env's episode cost for that seed (up to the float32 rounding of the env's observations and
 actions; `tests/test_apg.py` checks it).
 
-The closed loop needs the interaction drift L(x^n) x^n at every step, which the integrator's
-step computes again (L(x^n) is its frozen linearization): `LinearizationCache` keeps the last
-L(x) by the identity of the state tensor, so it is built once per step.
+The closed loop needs the interaction drift L(x^n) x^n at every step, and the integrator's
+step needs L(x^n) again (its frozen linearization). The model is the envs' one
+`agent_envs.dynamics.linearization_cache.LinearizationCache`, with torch states not cached
+(``cache_tensors=False``, its default): one L(x^n) for both uses gives the same cost, but its
+backward pass adds the two uses' gradients before going through L(x^n) once, which moves the
+law's gradient by round-off (about 1e-14 on the tests' settings) and so every trained law.
+Each step therefore still builds L(x^n) twice, as the rollouts the published apg runs were
+trained with did (sharing it would save about a quarter of an episode's cost and gradient).
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,33 +36,10 @@ import torch
 
 from agent_envs.baselines.optimal_control import differentiated_phi_method
 from agent_envs.costs import discrete_cost
-from agent_envs.dynamics.swarm import SwarmModel
-from agent_envs.envs.episode import EpisodeConfig
+from agent_envs.dynamics.linearization_cache import LinearizationCache
+from agent_envs.envs.episode_config import EpisodeConfig
 from agent_envs.simulator import brownian_increments, simulate, uniform_positions
 from agent_envs.training.learners.apg_policy import SwarmFeedbackLaw
-
-
-class LinearizationCache(SwarmModel):
-    """`SwarmModel` that keeps L(x) of the last state tensor it saw (compared by identity).
-
-    `simulate` never writes into a state tensor (its stepping is functional) and the cache
-    holds a reference to the tensor, so an identity hit is always the same state.
-    """
-
-    def __init__(self, params: Any, linear_operator: str = "dense") -> None:
-        super().__init__(params, linear_operator)
-        self._state: Any = None
-        self._matrix: Any = None
-
-    def frozen_linearization(self, x: Any) -> Any:
-        if x is self._state and self._matrix is not None:
-            return self._matrix
-        matrix = super().frozen_linearization(x)
-        self._state, self._matrix = x, matrix
-        return matrix
-
-    def clear(self) -> None:
-        self._state = self._matrix = None
 
 
 @dataclass(frozen=True)
@@ -77,10 +58,13 @@ class EpisodeNoise:
     @classmethod
     def draw(cls, rng: np.random.Generator, config: EpisodeConfig) -> EpisodeNoise:
         """A fresh episode from `rng`, drawn in the env's order (start, then step by step)."""
-        n, d, k = config.params.n_agents, config.params.dim, config.n_paths
+        n, d, k = config.params.n_agents, config.params.dim, config.simulation.n_paths
         start = uniform_positions(rng, n, d)
         dw = np.stack(
-            [brownian_increments(rng, (k, n, d), config.dt) for _ in range(config.n_steps)]
+            [
+                brownian_increments(rng, (k, n, d), config.dt)
+                for _ in range(config.simulation.n_steps)
+            ]
         )
         return cls(start, dw)
 
@@ -101,15 +85,16 @@ class ClosedLoop:
         self.config = config
         self.params = config.params
         self.phi_method = differentiated_phi_method(
-            config.params, config.jacobian, phi_method or config.phi_method
+            config.params, config.simulation.jacobian, phi_method or config.simulation.phi_method
         )
-        self.model = LinearizationCache(config.params)
+        # torch states not cached: the gradients of the published runs (module docstring)
+        self.model = LinearizationCache(config.params, "dense")
         self.target = torch.as_tensor(config.params.target_vector, dtype=torch.float64)
 
     def cost(self, law: SwarmFeedbackLaw, noise: EpisodeNoise) -> tuple[torch.Tensor, bool]:
         """(J, diverged): the sample-mean discrete cost of the episode (differentiable)."""
         config, model, target = self.config, self.model, self.target
-        m = config.n_steps
+        m = config.simulation.n_steps
 
         def control(t: float, x: torch.Tensor) -> torch.Tensor:
             s = torch.tensor(round(t / config.dt) / m, dtype=torch.float64)
@@ -119,11 +104,11 @@ class ClosedLoop:
         try:
             traj = simulate(
                 self.params,
-                config.integrator,
-                jacobian=config.jacobian,
+                config.simulation.integrator,
+                jacobian=config.simulation.jacobian,
                 phi_method=self.phi_method,
                 n_steps=m,
-                n_paths=config.n_paths,
+                n_paths=config.simulation.n_paths,
                 initial_positions=torch.as_tensor(noise.start, dtype=torch.float64),
                 increments=noise.increments,
                 control=control,
@@ -139,11 +124,9 @@ class ClosedLoop:
 
 
 def with_env_kwargs(config: EpisodeConfig, **changes: Any) -> EpisodeConfig:
-    """`config` with some `SwarmParams` fields or env options replaced (validated again)."""
-    params = {k: v for k, v in changes.items() if k in config.params.field_names()}
-    options = {k: v for k, v in changes.items() if k not in params}
-    new_params = dataclasses.replace(config.params, **params) if params else config.params
-    return dataclasses.replace(config, params=new_params, **options)
+    """`config` with some `SwarmParams` fields or env options replaced (validated again):
+    `EpisodeConfig.replace`."""
+    return config.replace(**changes)
 
 
-__all__ = ["ClosedLoop", "EpisodeNoise", "LinearizationCache", "with_env_kwargs"]
+__all__ = ["ClosedLoop", "EpisodeNoise", "with_env_kwargs"]
