@@ -17,10 +17,10 @@ from agent_envs.baselines import (
     make_baseline,
     turnpike_time,
 )
+from agent_envs.draws import uniform_positions
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.observation import split_observation
 from agent_envs.params import SwarmParams
-from agent_envs.simulator import uniform_positions
 
 ENV_ID = "agent_envs/Swarm-v0"
 #: the paper's tbar (Section 5.2) for N = 100 uniform on [-1, 1], beta = 12, delta = 2e-4

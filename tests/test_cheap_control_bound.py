@@ -9,9 +9,10 @@ import math
 import numpy as np
 import pytest
 
+from agent_envs.draws import brownian_increments
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.params import SwarmParams
-from agent_envs.simulator import brownian_increments, simulate
+from agent_envs.simulator import simulate
 from agent_envs.training.experiments.cheap_control_config import CheapControlBoundConfig
 from agent_envs.training.experiments.cheap_control_formulas import (
     StartStatistics,

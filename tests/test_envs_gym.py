@@ -13,8 +13,8 @@ from gymnasium.utils.env_checker import check_env, data_equivalence
 import agent_envs
 from agent_envs import INTEGRATORS, SwarmModel, make_integrator
 from agent_envs.costs import discrete_cost
+from agent_envs.draws import brownian_increments, uniform_positions
 from agent_envs.envs import DEFAULT_MAX_CONTROL, ENV_ID, SwarmEnv, split_observation
-from agent_envs.simulator import brownian_increments, uniform_positions
 
 SMALL = {"n_agents": 6, "n_steps": 10}
 

@@ -400,7 +400,7 @@ def test_cli_evaluate_report_and_reproduce(tmp_path, capsys):
 
 def test_paper_setting_em_unstable_after_tbar_serb_reaches_target():
     # Section 5.2 at the paper's setting (N = 100, m = 50, 20 paths), the paper's procedure.
-    from agent_envs.simulator import uniform_positions
+    from agent_envs.draws import uniform_positions
     from agent_envs.training.experiments.turnpike_controlled import (
         PAPER_RUNS,
         run_closed_loop_mode,

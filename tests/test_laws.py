@@ -28,10 +28,11 @@ import pytest
 
 from agent_envs import SwarmModel, SwarmParams
 from agent_envs.costs import agent_running_cost, discrete_cost, running_cost, turnpike_distance
+from agent_envs.draws import brownian_increments
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
 from agent_envs.envs.swarm_env import SwarmEnv
 from agent_envs.envs.vector_env import make_swarm_vector_env
-from agent_envs.simulator import brownian_increments, simulate
+from agent_envs.simulator import simulate
 
 N_SE = 5.0  # tolerance in standard errors
 

@@ -50,7 +50,7 @@ def test_environment_variable_turns_every_path_off_and_the_envs_still_step():
         from agent_envs.dynamics import laplacian
         from agent_envs.envs import fast_step
         from agent_envs.integrators import exponential, phi_functions
-        from agent_envs import simulator
+        from agent_envs import draws
         env = gym.make("agent_envs/Swarm-v0", n_agents=60, n_steps=3, n_paths=2)
         env.reset(seed=0)
         for _ in range(3):
@@ -61,7 +61,7 @@ def test_environment_variable_turns_every_path_off_and_the_envs_still_step():
         for _ in range(4):
             obs, *_ = venv.step(np.zeros(venv.action_space.shape, dtype=np.float32))
         old = [laplacian.load_compiled_kernel(), phi_functions.load_compiled(),
-               exponential.fused_step_enabled(), simulator.load_compiled_noise(),
+               exponential.fused_step_enabled(), draws.load_compiled_noise(),
                fast_step.load_compiled_step()]
         print(json.dumps({"status": native.status(), "old": old,
                           "finite": bool(np.all(np.isfinite(obs))),
@@ -104,9 +104,9 @@ def test_the_switches_of_before_are_the_one_switch(restored):
     assert not native.available("lanczos") and not native.available("fused")
     exponential.use_fused_step(False)
     assert loader._loaded["fused"] is False
-    from agent_envs import simulator
+    from agent_envs import draws
 
-    simulator.use_compiled_noise(False)
+    draws.use_compiled_noise(False)
     status = native.status()
     assert not any(status[name] for name in ("kernel", "lanczos", "fused", "noise"))
 

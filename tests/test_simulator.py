@@ -235,7 +235,7 @@ def test_batched_brownian_increments_equal_each_generators_own_bit_for_bit():
     """`fill_brownian_increments` (the native vector env's draws: each row from its own
     generator, scaled once) gives each row the bits `brownian_increments` gives that generator
     alone, and leaves the other rows as they were; the scaling is sqrt(dt) z itself."""
-    from agent_envs.simulator import brownian_increments, fill_brownian_increments
+    from agent_envs.draws import brownian_increments, fill_brownian_increments
 
     dt, shape = 0.02, (3, 7, 2)
     alone = [brownian_increments(np.random.default_rng(s), shape, dt) for s in (4, 5, 6)]
@@ -260,7 +260,7 @@ def _same_state(a, b) -> bool:
 
 def _compiled_noise_or_skip():
     pytest.importorskip("numba")
-    from agent_envs.simulator import load_compiled_noise
+    from agent_envs.draws import load_compiled_noise
 
     if not load_compiled_noise():
         pytest.skip("compiled draws switched off (AGENT_ENVS_NUMBA=0)")
@@ -273,7 +273,7 @@ def test_compiled_draws_are_numpys_bit_for_bit_and_advance_the_generator_alike(b
     take the ziggurat's rare branches (about 1 % of the draws: the wedges and the tail); each
     generator's state then continues as numpy's would (the next numpy draw is the same)."""
     _compiled_noise_or_skip()
-    from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
+    from agent_envs.draws import GeneratorHandles, fill_brownian_increments
 
     kind = getattr(np.random, bit_generator)
     seeds, rows, dt = (11, 12, 13), [2, 0, 3], 0.05
@@ -296,7 +296,7 @@ def test_compiled_draws_take_the_tail_of_the_ziggurat_as_numpy():
     """Normals beyond the ziggurat's last rectangle (|z| > 3.654, drawn by the tail branch)
     are numpy's too: 4e6 draws hold about a thousand of them."""
     _compiled_noise_or_skip()
-    from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
+    from agent_envs.draws import GeneratorHandles, fill_brownian_increments
 
     rngs = [np.random.default_rng(99)]
     out = fill_brownian_increments(rngs, [0], np.zeros((1, 4_000_000)), 1.0, GeneratorHandles(rngs))
@@ -312,7 +312,7 @@ def test_generator_handles_check_their_generators_and_survive_copies():
     import copy
     import pickle
 
-    from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
+    from agent_envs.draws import GeneratorHandles, fill_brownian_increments
 
     rngs = [np.random.default_rng(s) for s in (1, 2)]
     handles = GeneratorHandles(rngs)
@@ -350,7 +350,7 @@ def test_draws_without_the_compiled_call_are_the_same_bits():
     """The compiled draws switched off, the same handles give the same bits through numpy's
     one call per generator."""
     _compiled_noise_or_skip()
-    from agent_envs.simulator import (
+    from agent_envs.draws import (
         GeneratorHandles,
         fill_brownian_increments,
         use_compiled_noise,
@@ -375,25 +375,25 @@ def test_compiled_draws_that_differ_from_numpys_are_switched_off(monkeypatch):
     """The load-time check: a module whose draws differ from numpy's (or that fails to build)
     is never used, with a RuntimeWarning, and the draws are numpy's calls."""
     _compiled_noise_or_skip()
-    from agent_envs import simulator
+    from agent_envs import draws
     from agent_envs.native import loader
 
     def failing(module):
         raise RuntimeError("no codegen")
 
     for check, message in ((lambda module: False, "differ"), (failing, "did not load")):
-        monkeypatch.setattr(simulator, "_draws_equal_numpys", check)
+        monkeypatch.setattr(draws, "_draws_equal_numpys", check)
         monkeypatch.setitem(loader._loaded, "noise", None)
         with pytest.warns(RuntimeWarning, match=message):
-            assert simulator.load_compiled_noise() is False
+            assert draws.load_compiled_noise() is False
         rngs = [np.random.default_rng(3)]
-        out = simulator.fill_brownian_increments(
-            rngs, [0], np.zeros((1, 6)), 1.0, simulator.GeneratorHandles(rngs)
+        out = draws.fill_brownian_increments(
+            rngs, [0], np.zeros((1, 6)), 1.0, draws.GeneratorHandles(rngs)
         )
         np.testing.assert_array_equal(out[0], np.random.default_rng(3).standard_normal(6))
     monkeypatch.undo()
-    simulator.use_compiled_noise(True)
-    assert simulator.load_compiled_noise()
+    draws.use_compiled_noise(True)
+    assert draws.load_compiled_noise()
 
 
 @pytest.mark.parametrize("torch_too", [False, True])

@@ -17,8 +17,8 @@ import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import agent_envs  # noqa: F401  (registers agent_envs/Swarm-v0)
+from agent_envs.draws import load_compiled_noise
 from agent_envs.envs import ENV_ID, SwarmEnv, SwarmVectorEnv, step_plan
-from agent_envs.simulator import load_compiled_noise
 
 #: A member pushed by action +1 with this max_control leaves the threshold within the episode;
 #: members driven by small random actions reach the horizon.

@@ -37,6 +37,7 @@ import numpy as np
 
 from agent_envs import arrays
 from agent_envs.costs import agent_running_cost, running_cost
+from agent_envs.draws import brownian_increments
 from agent_envs.dynamics.linearization_cache import LinearizationCache
 from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.episode_config import (
@@ -48,7 +49,7 @@ from agent_envs.envs.episode_config import (
 from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.step_plan import StepPlan, planned_step
 from agent_envs.integrators import Integrator
-from agent_envs.simulator import brownian_increments, diverged_paths
+from agent_envs.simulator import diverged_paths
 from agent_envs.validation import real_array
 
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from agent_envs.draws import uniform_positions
 from agent_envs.dynamics.operators import check_linear_operator
 from agent_envs.envs.interface import ENV_KIND_VALUES, check_env_options, check_option
 from agent_envs.params import SwarmParams
@@ -24,7 +25,6 @@ from agent_envs.simulator import (
     SimulationSpec,
     as_positions,
     diverged_paths,
-    uniform_positions,
 )
 from agent_envs.validation import DIVERGENCE_THRESHOLD_RANGE, check_positive
 

@@ -30,11 +30,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from agent_envs import arrays, native
+from agent_envs.draws import GeneratorHandles, fill_brownian_increments
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import global_observation, observation_space
 from agent_envs.integrators.exponential import GAVE_UP
-from agent_envs.simulator import GeneratorHandles, diverged_paths, fill_brownian_increments
+from agent_envs.simulator import diverged_paths
 
 if TYPE_CHECKING:
     from agent_envs.dynamics.linearization_cache import LinearizationCache

@@ -40,6 +40,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from agent_envs import arrays, native
+from agent_envs.draws import GeneratorHandles, fill_brownian_increments
 from agent_envs.envs.attributes import EnvAttributes
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.episode_config import (
@@ -66,7 +67,6 @@ from agent_envs.envs.vector_inputs import (
     env_seeds,
     resolve_arrays,
 )
-from agent_envs.simulator import GeneratorHandles, fill_brownian_increments
 
 
 class SwarmVectorEnv(EnvAttributes, CompiledVectorStep, VectorEnv):

@@ -13,7 +13,7 @@ name        module                 serves                               owner (n
 "fused"     `native.lanczos`       an ERB/SERB step and the next        `integrators.exponential`
             (`frozen_advance`)     kernel pass in one call; needs       (the general step)
                                    "kernel" and "lanczos"
-"noise"     `native.noise`         numpy's normals from many            `simulator` (checked:
+"noise"     `native.noise`         numpy's normals from many            `draws` (checked:
                                    generators in one call               `_draws_equal_numpys`)
 "step"      `native.step`          the native vector env's prologue     `envs.fast_step` (checked:
                                    and epilogue                         `same_as_numpy`)

@@ -16,7 +16,7 @@ the same order, with numpy's tables (as numba's port of that function has them,
 `numba.np.random._constants`). So the values are numpy's bit for bit, and the generators'
 states advance exactly as numpy's calls would advance them: a later numpy draw from the same
 generator continues the same stream. The loader checks this against numpy when it loads the
-module (`agent_envs.simulator._draws_equal_numpys`, the owner's check; a mismatch, say from
+module (`agent_envs.draws._draws_equal_numpys`, the owner's check; a mismatch, say from
 another numba's tables, switches the compiled draws off with a warning), and
 tests/test_simulator.py checks it on a million draws.
 

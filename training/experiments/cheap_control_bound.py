@@ -234,7 +234,7 @@ def plot(rows: list[dict], contraction: list[dict], sigma: float, path: Path) ->
 
 def reproduce(out: Path, config: CheapControlBoundConfig) -> tuple[list[dict], list[dict]]:
     """Run every part, write the table, the contraction table, the figure and meta.json."""
-    from agent_envs.simulator import uniform_positions
+    from agent_envs.draws import uniform_positions
 
     out.mkdir(parents=True, exist_ok=True)
     began = time.perf_counter()

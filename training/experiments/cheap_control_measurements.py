@@ -235,7 +235,7 @@ def random_start_rows(config: CheapControlBoundConfig) -> list[dict]:
     bounds it from below (module docstring). The centre control does not depend on T, so one run
     over the longest horizon gives every T (prefix sums).
     """
-    from agent_envs.simulator import uniform_positions
+    from agent_envs.draws import uniform_positions
 
     n_agents, longest = config.n_agents, max(config.horizons)
     params = case_params(n_agents, longest, 0.0, config.epsilon)

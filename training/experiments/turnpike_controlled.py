@@ -157,10 +157,11 @@ def run_closed_loop_mode(
     and costs are then read off the trajectory at each step's start.
     """
     from agent_envs.costs import running_cost
+    from agent_envs.draws import brownian_increments
     from agent_envs.dynamics.swarm import SwarmModel
     from agent_envs.integrators import make_integrator
     from agent_envs.params import SwarmParams
-    from agent_envs.simulator import brownian_increments, simulate
+    from agent_envs.simulator import simulate
 
     kw = run.env_kwargs(x0.shape[0], n_steps, n_paths)
     params = SwarmParams(**{k: kw[k] for k in SwarmParams.field_names() if k in kw})

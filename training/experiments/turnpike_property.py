@@ -476,7 +476,7 @@ def write_tables(rows: list[dict], out: Path) -> None:
 
 def reproduce(out: Path, config: TurnpikePropertyConfig) -> list[dict]:
     """Run every setting and horizon, write the figure, tables and meta.json into `out`."""
-    from agent_envs.simulator import uniform_positions
+    from agent_envs.draws import uniform_positions
 
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()

@@ -36,9 +36,10 @@ import torch
 
 from agent_envs.baselines.optimal_control import differentiated_phi_method
 from agent_envs.costs import discrete_cost
+from agent_envs.draws import brownian_increments, uniform_positions
 from agent_envs.dynamics.linearization_cache import LinearizationCache
 from agent_envs.envs.episode_config import EpisodeConfig
-from agent_envs.simulator import brownian_increments, simulate, uniform_positions
+from agent_envs.simulator import simulate
 from agent_envs.training.learners.apg_policy import SwarmFeedbackLaw
 
 
