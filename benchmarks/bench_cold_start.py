@@ -17,6 +17,7 @@ this host, shown only beside the ratio.
 
     python benchmarks/bench_cold_start.py            # both settings, 5 processes each
     python benchmarks/bench_cold_start.py --quick    # quick setting, 2 processes (~30 s)
+    python benchmarks/bench_cold_start.py --python OTHER/.venv/bin/python   # another checkout
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="quick setting, 2 processes")
     parser.add_argument("--rounds", type=int, default=None, help="processes and warm rounds")
     parser.add_argument("--steps", type=int, default=100, help="steps per block")
+    parser.add_argument("--python", default=None, help="run the processes with this interpreter")
     _timing.add_worker_arguments(parser, WORKERS)
     args = parser.parse_args()
     if _timing.serve_worker(args, WORKERS):
@@ -71,7 +73,7 @@ def main() -> int:
         for integrator in ("serb", "em"):
             runs = [
                 _timing.run_fresh(
-                    __file__, "cold", setting=setting, integrator=integrator, **per_run
+                    __file__, "cold", args.python, setting=setting, integrator=integrator, **per_run
                 )
                 for _ in range(rounds)
             ]
