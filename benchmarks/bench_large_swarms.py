@@ -55,7 +55,7 @@ class _ProductCounter:
 
     def __init__(self) -> None:
         self.count = 0
-        self._orig = operators.LinearizationOperator.matvec
+        self.original = operators.LinearizationOperator.matvec
 
     def __enter__(self):
         counter = self
@@ -68,7 +68,7 @@ class _ProductCounter:
         return self
 
     def __exit__(self, *exc):
-        operators.LinearizationOperator.matvec = self._orig
+        operators.LinearizationOperator.matvec = self.original
 
 
 def _steps(n: int, dim: int, mode: str, x0: np.ndarray, n_steps: int, seed: int = 0):
