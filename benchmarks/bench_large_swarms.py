@@ -62,7 +62,7 @@ class _ProductCounter:
 
         def matvec(op, v):
             counter.count += 1
-            return counter._orig(op, v)
+            return counter.original(op, v)
 
         operators.LinearizationOperator.matvec = matvec
         return self
