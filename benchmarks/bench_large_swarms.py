@@ -55,20 +55,20 @@ class _ProductCounter:
 
     def __init__(self) -> None:
         self.count = 0
-        self._orig = operators.LinearizationOperator.matvec
+        self.original = operators.LinearizationOperator.matvec
 
     def __enter__(self):
         counter = self
 
         def matvec(op, v):
             counter.count += 1
-            return counter._orig(op, v)
+            return counter.original(op, v)
 
         operators.LinearizationOperator.matvec = matvec
         return self
 
     def __exit__(self, *exc):
-        operators.LinearizationOperator.matvec = self._orig
+        operators.LinearizationOperator.matvec = self.original
 
 
 def _steps(n: int, dim: int, mode: str, x0: np.ndarray, n_steps: int, seed: int = 0):

@@ -20,6 +20,7 @@ path per env:
    on the CPU at the same B (needs the torch core and a CUDA device; skipped otherwise).
 
     python benchmarks/bench_vector_env.py            # parts 1 and 2, about 2-3 minutes
+    python benchmarks/bench_vector_env.py --quick    # part 1 at B = 16, short blocks (seconds)
     python benchmarks/bench_vector_env.py --device cuda
 
 OPENBLAS_NUM_THREADS (and the other BLAS pools) are set to 1 below, before numpy loads.
@@ -173,14 +174,19 @@ def bench_device(device: str, num_envs: int, seconds: float) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--batches", type=int, nargs="+", default=[16, 64, 256])
-    parser.add_argument("--seconds", type=float, default=0.8)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--quick", action="store_true", help="B = 16, short blocks, no PPO")
+    parser.add_argument("--batches", type=int, nargs="+", default=None, help="[16, 64, 256]")
+    parser.add_argument("--seconds", type=float, default=None, help="0.8 (quick: 0.1)")
+    parser.add_argument("--repeats", type=int, default=None, help="3 (quick: 1)")
     parser.add_argument("--ppo-timesteps", type=int, default=2048)
     parser.add_argument("--skip-ppo", action="store_true")
     parser.add_argument("--device", default=None, help="also time B = --gpu-envs on this device")
     parser.add_argument("--gpu-envs", type=int, default=4096)
     args = parser.parse_args()
+    args.batches = args.batches or ([16] if args.quick else [16, 64, 256])
+    args.seconds = args.seconds or (0.1 if args.quick else 0.8)
+    args.repeats = args.repeats or (1 if args.quick else 3)
+    args.skip_ppo = args.skip_ppo or args.quick
     print(f"CPU cores available: {len(os.sched_getaffinity(0))}, load average {os.getloadavg()}\n")
     bench_env_steps(args.batches, args.seconds, args.repeats)
     if not args.skip_ppo:

@@ -1,0 +1,69 @@
+"""The throughput benchmarks run: each script's `--quick` mode in a fresh process.
+
+The figures in docs/benchmarks.md come from these scripts (`benchmarks/bench_*.py`, one
+question each, public APIs of `agent_envs` only). Their quick modes take seconds each (the
+cold-start one about half a minute: it starts fresh processes), so the test is `slow`. It
+checks that a script exits 0 and prints its table, not its figures (they move with the load).
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+#: script -> a header cell its quick table prints
+QUICK_TABLES = {
+    "bench_cold_start.py": "cold/warm",
+    "bench_step_floor.py": "ratio (same process)",
+    "bench_kernel_pass.py": "in-place numpy / compiled pass",
+    "bench_phi_actions.py": "step / EM step",
+    "bench_vector_batching.py": "native / loop",
+    "bench_threads.py": "",  # (a table only where numba allows two threads or more)
+    "bench_step_breakdown.py": "call (share of the step)",
+    "bench_device.py": "",  # (without CUDA: says so and exits 0)
+    "bench_vector_env.py": "native / sync",
+}
+
+
+def test_every_throughput_benchmark_is_listed():
+    """A new benchmark script gets its quick run here (and a row in docs/benchmarks.md)."""
+    scripts = {p.name for p in BENCHMARKS.glob("bench_*.py")}
+    timed_elsewhere = {
+        "bench_apg.py",  # training runs (docs/learners/apg.md)
+        "bench_scoring.py",
+        "bench_integrators.py",
+        "bench_gradient.py",
+        "bench_env_step.py",
+        "bench_blas_threads.py",
+        "bench_large_swarms.py",
+        "bench_optimal.py",
+    }
+    assert scripts - timed_elsewhere == set(QUICK_TABLES)
+
+
+def test_benchmarks_use_public_names_of_agent_envs_only():
+    """No `module._private` access into agent_envs from the benchmark scripts (the helper
+    `_timing` is the benchmarks' own module)."""
+    for name in QUICK_TABLES:
+        text = (BENCHMARKS / name).read_text()
+        assert not re.findall(r"\b(?!_timing\b)[a-z]\w*\._[a-z]\w*", text), name
+    assert not re.findall(r"\b[a-z]\w*\._[a-z]\w*", (BENCHMARKS / "_timing.py").read_text())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("script", sorted(QUICK_TABLES))
+def test_quick_mode_runs(script):
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / script), "--quick"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:] + done.stdout[-2000:]
+    assert QUICK_TABLES[script] in done.stdout
