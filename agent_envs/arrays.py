@@ -205,7 +205,7 @@ def aligned_empty(shape: tuple[int, ...], alignment: int = WORKSPACE_ALIGNMENT) 
     a page), so a (..., 100, 100) kernel matrix began at 16 mod 64 and half of the 32-byte
     loads of its rows crossed a cache line: the compiled Lanczos product over such a P took
     0.88-0.93 us against 0.80-0.82 us at 64-byte alignment (N = 100, a microbenchmark over
-    base offsets 0 to 4096, benchmarks/bench_throughput.py for the env)."""
+    base offsets 0 to 4096, benchmarks/bench_step_floor.py for the env)."""
     if alignment % 8:
         raise ValueError(f"alignment must be a multiple of 8 bytes, got {alignment}")
     size = math.prod(shape)

@@ -116,7 +116,7 @@ def bare_stepper(integrator: str, n_paths: int, n: int = 100, m: int = 50) -> Ca
     """One `integrator.step` per call (zero control, `SwarmModel` with eps = 0.05), episodes
     of m steps from uniform starts drawn from default_rng(k) for episode k; x (n_paths, n, 1)."""
     from agent_envs import SwarmModel, SwarmParams, make_integrator
-    from agent_envs.simulator import brownian_increments, uniform_positions
+    from agent_envs.draws import brownian_increments, uniform_positions
 
     model = SwarmModel(SwarmParams(n_agents=n, epsilon=0.05))
     scheme = make_integrator(integrator)

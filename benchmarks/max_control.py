@@ -26,7 +26,7 @@ import numpy as np
 
 from agent_envs import SwarmModel, SwarmParams, simulate
 from agent_envs.baselines import DEFAULT_BETA, DEFAULT_DELTA, turnpike_time
-from agent_envs.envs.episode import DEFAULT_MAX_CONTROL
+from agent_envs.simulator import DEFAULT_MAX_CONTROL
 
 BETA = DEFAULT_BETA
 DELTA = DEFAULT_DELTA

@@ -26,7 +26,7 @@ from agent_envs.integrators import Integrator
 #: stays in the cache while the Krylov iteration multiplies with it, instead of streaming the
 #: whole batch's P from memory at every product (N = 100, 20 paths, B = 16: 25.6 MB per product
 #: in one batch). 8 MiB measured best of 1, 2, 4, 8 MiB and one batch on a 32 MiB L3
-#: (benchmarks/bench_throughput.py prints the vector env's figures). Where every pass runs
+#: (benchmarks/bench_vector_batching.py prints the vector env's figures). Where every pass runs
 #: member by member (`step_plan.member_by_member`), one block (`StepPlan.blocks`).
 BLOCK_BYTES = 2**23
 
