@@ -20,7 +20,8 @@ for the rows followed by two passes of `lower_product` over the triangle, which 
 (`_lower_row`, then s by `lower_product` and the d columns of P x two at a time by
 `lower_products`: fusing its d + 1 sums into the rows measured 1.8x slower at d = 2). The
 divisions alone are 4.1-4.3 us per member at N = 100 (part 2b of the former
-benchmarks/bench_throughput.py, docs/performance-notes.md): the divider's throughput, about two cycles a division.
+benchmarks/bench_throughput.py, docs/performance-notes.md): the divider's throughput, about two
+cycles a division.
 
 The upper triangle is left unwritten: the compiled Lanczos reads only the lower one, and an
 Euler-Maruyama step reads P not at all; `agent_envs.dynamics.laplacian.FrozenLaplacian` fills
