@@ -26,8 +26,8 @@ from collections.abc import Callable
 import numpy as np
 
 from agent_envs import SwarmModel, SwarmParams, make_integrator
-from agent_envs.envs import SwarmEnv, SwarmParallelEnv
 from agent_envs.draws import brownian_increments, uniform_positions
+from agent_envs.envs import SwarmEnv, SwarmParallelEnv
 
 
 def best_times(fns: dict[str, Callable[[], None]], steps: int, repeats: int) -> dict[str, float]:
