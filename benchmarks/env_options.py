@@ -1,9 +1,11 @@
 """What do good controls look like in action units, and what does the common control lose?
 
 The env options of docs/env-options.md were designed from these figures. At the paper's setting
-(training.presets.PAPER_ENV: N = 100, m = 50, eps = 0.05, SERB, 20 paths, max_control = 25) on
-the test seeds, for the optimal control (the sample-average solve of
-`agent_envs.baselines.OptimalController`) and the proportional law u_k = beta (xbar - E x_k):
+(training.commands.presets.PAPER_ENV: N = 100, m = 50, eps = 0.05, SERB, 20 paths,
+max_control = 25) on the validation seeds 1000, 1001, ... (`training.defaults.DEFAULT_EVAL_SEED`:
+these figures chose env options and bounds, so they never read a test seed), for the optimal
+control (the sample-average solve of `agent_envs.baselines.OptimalController`) and the
+proportional law u_k = beta (xbar - E x_k):
 
 - the largest |u_k^n| and the largest |mean_k u_k^n| (the common control), in action units
   (/ max_control);
@@ -31,13 +33,14 @@ import numpy as np
 import agent_envs  # noqa: F401  (registers the env)
 from agent_envs.baselines import make_baseline
 from agent_envs.training.commands.presets import PAPER_ENV
+from agent_envs.training.defaults import DEFAULT_EVAL_SEED
 
 #: The env of the figures: the paper's, with --env-kwargs over it.
 SETTING = dict(PAPER_ENV)
 
 
 def episode(name: str, seed: int, **options: str) -> dict[str, np.ndarray | float]:
-    """One test episode of controller `name` on the setting's env with `options`: cost, the
+    """One validation episode of controller `name` on the setting's env with `options`: cost, the
     applied controls (m, N) and the centre's offsets xbar - c^n (m,)."""
     env = gym.make("agent_envs/Swarm-v0", **SETTING, **options)
     policy = make_baseline(name, env)
@@ -83,17 +86,20 @@ def measure(name: str, seeds: list[int], max_control: float) -> dict[str, float]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=5, help="test seeds 10000, 10001, ...")
+    parser.add_argument(
+        "--seeds", type=int, default=5, help="validation seeds 1000, 1001, ... (never test seeds)"
+    )
     parser.add_argument("--out", default=None, help="write the figures as JSON here")
     parser.add_argument("--env-kwargs", default="{}", help="JSON env kwargs over the paper's")
     args = parser.parse_args()
     SETTING.update(json.loads(args.env_kwargs))
-    seeds = list(range(10000, 10000 + args.seeds))
+    seeds = list(range(DEFAULT_EVAL_SEED, DEFAULT_EVAL_SEED + args.seeds))
     start = time.perf_counter()
     results = {
         name: measure(name, seeds, SETTING["max_control"]) for name in ("optimal", "proportional")
     }
-    print(f"{SETTING}, test seeds {seeds[0]}..{seeds[-1]} ({time.perf_counter() - start:.0f} s)")
+    elapsed = time.perf_counter() - start
+    print(f"{SETTING}, validation seeds {seeds[0]}..{seeds[-1]} ({elapsed:.0f} s)")
     keys = list(results["optimal"])
     print(f"{'':32s}" + "".join(f"{name:>14s}" for name in results))
     for key in keys:

@@ -3,8 +3,8 @@
 For each learner of the paper preset (its own TrainConfig, one seed, DummyVecEnv, no
 evaluation during the short run) this trains `--short` timesteps and takes the time per
 timestep; TD3's warm-up (random actions until `learning_starts`) is timed on its own, since it
-costs an env step and no gradient step. It then times the held-out evaluation per episode of
-each trained model and of the reference controllers this install has. The estimate of one
+costs an env step and no gradient step. It then times the evaluation per episode (on validation
+seeds) of each trained model and of the reference controllers this install has. The estimate of one
 learner trial is
 
     budget x (time per timestep)                           training
@@ -36,6 +36,7 @@ from agent_envs.training.commands.experiment import LEARNER, ExperimentOptions, 
 from agent_envs.training.commands.presets import PRESETS
 from agent_envs.training.commands.train import train
 from agent_envs.training.config import TrainConfig
+from agent_envs.training.defaults import DEFAULT_EVAL_SEED
 
 #: short-run timesteps per learner (PPO: two rollouts; SAC/TD3: 1500 steps of gradient updates)
 SHORT = {"ppo": 8192, "ppo-swarm": 8192, "sac": 1500, "td3": 1500, "ppo-shared": 8000}
@@ -63,7 +64,8 @@ def timed_train(trial, out: str, steps: int, **hyper) -> tuple[float, str]:
 
 def timed_eval(spec: str, trial) -> float:
     start = time.perf_counter()
-    seeds = list(trial.test_seeds[:EVAL_EPISODES])
+    # timing only, but on validation seeds: a design script never reads a test seed
+    seeds = list(range(DEFAULT_EVAL_SEED, DEFAULT_EVAL_SEED + EVAL_EPISODES))
     evaluate_policies({"p": spec}, env_kwargs=trial.eval_env_kwargs, seeds=seeds, progress=False)
     return (time.perf_counter() - start) / EVAL_EPISODES
 
