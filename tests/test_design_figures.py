@@ -1,0 +1,42 @@
+"""The design figures the docs quote, recomputed from the committed outputs of their scripts."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _doc_rows(doc: str, first_cell: str) -> list[list[str]]:
+    rows = []
+    for line in (ROOT / doc).read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("| ") and cells[0].startswith(first_cell):
+            rows.append(cells)
+    return rows
+
+
+def test_max_control_table_is_the_committed_output():
+    """docs/envs/gymnasium.md's "Why max_control = 150" table = max_control.py's output."""
+    out = (ROOT / "docs/results/max-control/max_control.txt").read_text()
+    peaks = {}
+    for kernel, xbar, integrator, paths, peak in re.findall(
+        r"^\s*(\w+)\s+(-?[\d.]+)\s+(serb|em)\s+(\d+) \|\s+([\d.]+)", out, re.M
+    ):
+        peaks[(kernel, float(xbar), integrator, int(paths))] = float(peak)
+    assert len(peaks) == 12
+    columns = [("serb", 20), ("em", 20), ("serb", 1), ("em", 1)]
+    settings = {
+        "symmetric eps = 0.05, xbar = 0.7": ("symmetric", 0.7),
+        "symmetric eps = 0.05, xbar = -1.7": ("symmetric", -1.7),
+        "non-symmetric eps in [0.01, 0.1], xbar = 2.3": ("nonsymmetric", 2.3),
+    }
+    rows = {r[0]: r[1:] for r in _doc_rows("docs/envs/gymnasium.md", "") if r[0] in settings}
+    assert set(rows) == set(settings)
+    for label, (kernel, xbar) in settings.items():
+        expected = [f"{peaks[(kernel, xbar, i, p)]:.1f}" for i, p in columns]
+        assert rows[label] == expected, label
+    largest = max(peaks.values())
+    assert f"largest {largest:.1f} against 150" in (ROOT / "docs/envs/gymnasium.md").read_text()
+    assert f"largest |u| = {largest:.2f}" in out and "never clipped" in out
