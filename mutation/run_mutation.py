@@ -82,31 +82,55 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "episode": (
         "agent_envs/envs/episode.py",
-        ["tests/test_laws.py", "tests/test_envs_gym.py", "tests/test_vector_env.py"],
+        [
+            "tests/test_envs_gym.py",
+            "tests/test_envs_pettingzoo.py",
+            "tests/test_env_options.py",
+            "tests/test_laws.py",
+        ],
     ),
     "episode_config": (
         "agent_envs/envs/episode_config.py",
-        ["tests/test_validation.py", "tests/test_envs_gym.py", "tests/test_input_properties.py"],
+        ["tests/test_validation.py", "tests/test_envs_gym.py"],
+    ),
+    "attributes": (
+        "agent_envs/envs/attributes.py",
+        ["tests/test_envs_gym.py", "tests/test_step_plan.py"],
+    ),
+    "step_plan": (
+        "agent_envs/envs/step_plan.py",
+        ["tests/test_step_plan.py", "tests/test_native_switch.py"],
+    ),
+    "swarm_env": ("agent_envs/envs/swarm_env.py", ["tests/test_envs_gym.py"]),
+    "swarm_parallel": ("agent_envs/envs/swarm_parallel.py", ["tests/test_envs_pettingzoo.py"]),
+    "observation": (
+        "agent_envs/envs/observation.py",
+        ["tests/test_envs_gym.py", "tests/test_env_options.py", "tests/test_envs_pettingzoo.py"],
+    ),
+    "interface": (
+        "agent_envs/envs/interface.py",
+        ["tests/test_env_options.py", "tests/test_envs_gym.py", "tests/test_envs_pettingzoo.py"],
     ),
     "linearization_cache": (
         "agent_envs/dynamics/linearization_cache.py",
-        ["tests/test_compiled_lanczos.py", "tests/test_step_plan.py", "tests/test_vector_env.py"],
+        ["tests/test_step_plan.py", "tests/test_vector_env.py", "tests/test_compiled_lanczos.py"],
     ),
     "vector_env": (
         "agent_envs/envs/vector_env.py",
-        ["tests/test_laws.py", "tests/test_vector_env.py", "tests/test_native_vec_env.py"],
+        ["tests/test_vector_env.py", "tests/test_native_vec_env.py"],
     ),
     "vector_blocks": (
         "agent_envs/envs/vector_blocks.py",
         ["tests/test_vector_env.py", "tests/test_step_plan.py"],
     ),
-    "vector_inputs": (
-        "agent_envs/envs/vector_inputs.py",
-        ["tests/test_vector_env.py", "tests/test_native_vec_env.py"],
-    ),
+    "vector_inputs": ("agent_envs/envs/vector_inputs.py", ["tests/test_vector_env.py"]),
     "fast_step": (
         "agent_envs/envs/fast_step.py",
         ["tests/test_fast_step.py", "tests/test_vector_env.py"],
+    ),
+    "draws": (
+        "agent_envs/draws.py",
+        ["tests/test_simulator.py", "tests/test_vector_env.py", "tests/test_laws.py"],
     ),
     "operators": (
         "agent_envs/dynamics/operators.py",

@@ -310,6 +310,13 @@ def test_step_after_the_end_raises():
         env.step(np.zeros(3, dtype=np.float32))
 
 
+def test_a_misshapen_action_names_both_accepted_shapes():
+    env = SwarmEnv(dim=2, target=(0.5, -0.3), n_agents=6, n_steps=3)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action must have shape \(12,\) or \(6, 2\), got \(6,\)"):
+        env.step(np.zeros(6, dtype=np.float32))
+
+
 # ------------------------------------------------------------------- divergence
 @pytest.mark.parametrize(
     "kwargs",
