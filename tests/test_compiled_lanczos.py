@@ -19,6 +19,12 @@ import pytest
 import agent_envs  # noqa: F401  (registers the env ids)
 from agent_envs import SwarmModel, SwarmParams, make_integrator, native
 from agent_envs.integrators import phi_functions as pf
+from agent_envs.integrators import phi_krylov
+from agent_envs.integrators.krylov_space import RowOperator
+from agent_envs.integrators.lanczos_stopping import next_checks
+from agent_envs.integrators.phi_fused import compiled_frozen_lanczos
+from agent_envs.integrators.phi_lanczos import lanczos_action, lanczos_numpy
+from agent_envs.native import lanczos_rule
 
 TOL = 1e-12
 
@@ -35,6 +41,14 @@ def compiled():
     before = pf.use_compiled(True)
     yield native.loaded("lanczos")
     pf.use_compiled(before)
+
+
+@pytest.fixture()
+def tridiagonal(compiled):
+    """The compiled small eigenproblem of T_m (`agent_envs.native.lanczos_tridiagonal`)."""
+    from agent_envs.native import lanczos_tridiagonal
+
+    return lanczos_tridiagonal
 
 
 def _frozen(n, d, paths, spread, seed, scale, kernel="symmetric"):
@@ -60,10 +74,10 @@ CASES = [
 @pytest.mark.parametrize("order", [1, 2])
 def test_compiled_equals_numpy_and_reference_lanczos(compiled, n, d, batch, spread, order):
     _, _, f, op = _frozen(n, d, batch, spread, seed=n + d, scale=0.02)
-    got, got_ok = pf._compiled_frozen_lanczos(op, f, order, 1e-10, 100, None)
-    rows = pf._RowOperator(op)
-    numpy_result, numpy_ok = pf._lanczos_numpy(rows, f, order, 1e-10, 100)
-    reference, reference_ok = pf._lanczos_action(rows, f, order, 1e-10, 100)
+    got, got_ok = compiled_frozen_lanczos(op, f, order, 1e-10, 100, None)
+    rows = RowOperator(op)
+    numpy_result, numpy_ok = lanczos_numpy(rows, f, order, 1e-10, 100)
+    reference, reference_ok = lanczos_action(rows, f, order, 1e-10, 100)
     scale = np.max(np.abs(reference))
     assert got.shape == reference.shape == (*batch, n, d)
     np.testing.assert_array_equal(got_ok, reference_ok)
@@ -78,12 +92,12 @@ def test_compiled_equals_numpy_at_large_krylov_dimensions(compiled, scale):
     error bound): the phi-action equals the numpy Lanczos, and a dimension short of what the
     members need leaves them flagged as not converged."""
     _, _, f, op = _frozen(100, 1, (3,), 1.0, seed=5, scale=scale)
-    got, got_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
-    expected, expected_ok = pf._lanczos_numpy(pf._RowOperator(op), f, 1, 1e-10, 100)
+    got, got_ok = compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    expected, expected_ok = lanczos_numpy(RowOperator(op), f, 1, 1e-10, 100)
     assert got_ok.all() and expected_ok.all()
     assert np.max(np.abs(got - expected)) <= TOL * np.max(np.abs(expected))
-    _, short_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 20, None)
-    _, short_numpy_ok = pf._lanczos_numpy(pf._RowOperator(op), f, 1, 1e-10, 20)
+    _, short_ok = compiled_frozen_lanczos(op, f, 1, 1e-10, 20, None)
+    _, short_numpy_ok = lanczos_numpy(RowOperator(op), f, 1, 1e-10, 20)
     assert not short_ok.any()
     np.testing.assert_array_equal(short_ok, short_numpy_ok)
 
@@ -94,7 +108,7 @@ def test_compiled_result_is_phi_of_the_matrix(compiled):
     _, _, f, op = _frozen(100, 2, (4,), 0.5, seed=3, scale=0.02)
     f = np.array(f)
     f[1, :, 1] = 0.0
-    got, ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    got, ok = compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
     lam, q = np.linalg.eigh(op.dense())
     want = q @ (pf.phi_scalar(lam, 1)[..., None] * (np.swapaxes(q, -1, -2) @ f))
     assert ok.all()
@@ -109,15 +123,15 @@ def test_a_constant_vector_is_deflated_exactly(compiled, order):
     _, _, f, op = _frozen(100, 2, (3,), 0.5, seed=4, scale=0.02)
     v = np.empty_like(f)
     v[..., 0], v[..., 1] = 2.5, -0.75
-    got, ok = pf._compiled_frozen_lanczos(op, v, order, 1e-10, 100, None)
+    got, ok = compiled_frozen_lanczos(op, v, order, 1e-10, 100, None)
     assert ok.all()
     np.testing.assert_array_equal(got, v / order)  # 1/1!, 1/2!: the mean's part, exactly
 
 
 def test_bounds_given_or_read_from_the_row_sums_agree(compiled):
     _, _, f, op = _frozen(100, 1, (5,), 1.0, seed=7, scale=0.02)
-    from_sums, _ = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
-    given, _ = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, op.krylov_bounds())
+    from_sums, _ = compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    given, _ = compiled_frozen_lanczos(op, f, 1, 1e-10, 100, op.krylov_bounds())
     np.testing.assert_array_equal(from_sums, given)
 
 
@@ -125,8 +139,8 @@ def test_not_converged_members_are_flagged_like_the_reference(compiled):
     """With a Krylov dimension too small, the members that did not converge are the
     reference's, and `phi_action` replaces exactly those with the dense method."""
     _, _, f, op = _frozen(100, 1, (6,), 1.0, seed=11, scale=0.02)
-    _, got_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 6, None)
-    _, want_ok = pf._lanczos_action(pf._RowOperator(op), f, 1, 1e-10, 6)
+    _, got_ok = compiled_frozen_lanczos(op, f, 1, 1e-10, 6, None)
+    _, want_ok = lanczos_action(RowOperator(op), f, 1, 1e-10, 6)
     np.testing.assert_array_equal(got_ok, want_ok)
     assert not got_ok.all()
     with pytest.warns(RuntimeWarning, match="falling back"):
@@ -139,10 +153,10 @@ def test_a_member_does_not_depend_on_the_batch(compiled):
     """Each member is computed on its own: the batch's result equals the members' one by one
     bit for bit (what the native vector env's equality with SyncVectorEnv needs)."""
     model, x, f, op = _frozen(100, 1, (5,), 1.0, seed=5, scale=0.02)
-    batched, _ = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+    batched, _ = compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
     for i in range(5):
         fi, lin = model.drift_and_linearization(0.0, x[i : i + 1], None, "frozen")
-        one, _ = pf._compiled_frozen_lanczos(0.02 * lin.matrix, fi, 1, 1e-10, 100, None)
+        one, _ = compiled_frozen_lanczos(0.02 * lin.matrix, fi, 1, 1e-10, 100, None)
         np.testing.assert_array_equal(one[0], batched[i])
 
 
@@ -150,12 +164,12 @@ def test_stale_operator_raises(compiled):
     model, x, f, op = _frozen(100, 1, (2,), 1.0, seed=1, scale=0.02)
     model.drift_and_linearization(0.0, x + 0.1, None, "frozen")  # overwrites P
     with pytest.raises(RuntimeError, match="overwritten"):
-        pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
+        compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None)
 
 
-def test_tridiagonal_eigensolver_against_lapack(compiled):
+def test_tridiagonal_eigensolver_against_lapack(tridiagonal):
     """The QL iteration's eigenvalues equal LAPACK's; its recorded rotations form an orthogonal
-    Z with T Z = Z diag(d) (`_apply_z` on the unit vectors), whose first and last rows are the
+    Z with T Z = Z diag(d) (`apply_z` on the unit vectors), whose first and last rows are the
     two it carried along."""
     rng = np.random.default_rng(0)
     for m in (1, 2, 5, 17, 40):
@@ -164,11 +178,11 @@ def test_tridiagonal_eigensolver_against_lapack(compiled):
         d, e, rows = diag.copy(), off.copy(), np.empty((2, m))
         size = 2 * m * m + 8
         rot_c, rot_s, rot_at = np.empty(size), np.empty(size), np.empty(size, int)
-        count = compiled._tridiagonal_ql(d, e, rows, m, rot_c, rot_s, rot_at)
+        count = tridiagonal.tridiagonal_ql(d, e, rows, m, rot_c, rot_s, rot_at)
         assert count >= 0
         z = np.eye(m)
         for j in range(m):
-            compiled._apply_z(z[:, j], count, rot_c, rot_s, rot_at)
+            tridiagonal.apply_z(z[:, j], count, rot_c, rot_s, rot_at)
         t = np.diag(diag) + np.diag(off[: m - 1], 1) + np.diag(off[: m - 1], -1)
         order = np.argsort(d)
         np.testing.assert_allclose(d[order], np.linalg.eigvalsh(t), atol=1e-13)
@@ -177,24 +191,24 @@ def test_tridiagonal_eigensolver_against_lapack(compiled):
         np.testing.assert_allclose(rows, z[[0, m - 1]], atol=1e-14)
 
 
-def test_tridiagonal_eigensolver_reports_a_full_rotation_buffer(compiled):
+def test_tridiagonal_eigensolver_reports_a_full_rotation_buffer(tridiagonal):
     """More rotations than the buffers hold: -1 (the caller then takes LAPACK's eigh)."""
     m = 12
     rng = np.random.default_rng(1)
     d, e, rows = rng.normal(size=m), rng.normal(size=m), np.empty((2, m))
     tiny = np.empty(3)
-    assert compiled._tridiagonal_ql(d, e, rows, m, tiny, tiny.copy(), np.empty(3, int)) == -1
+    assert tridiagonal.tridiagonal_ql(d, e, rows, m, tiny, tiny.copy(), np.empty(3, int)) == -1
 
 
 @pytest.mark.parametrize("order", [1, 2])
-def test_phi_of_tridiagonal_from_rotations_equals_lapack(compiled, order):
+def test_phi_of_tridiagonal_from_rotations_equals_lapack(tridiagonal, order):
     """phi_p(T_m) e_1, Saad's estimate's parts and the error bound's (eigenvalues, Z's first
     and last rows, phi_p of the eigenvalues) from the QL rotations equal those from LAPACK's
     eigh, which the compiled Lanczos takes when the rotation buffer is full."""
     m = 9
     rng = np.random.default_rng(2)
     alphas, betas = -np.abs(rng.normal(size=(m, 1))) * 5, np.abs(rng.normal(size=(m, 1)))
-    fact = compiled._factorials(compiled.TAYLOR_TERMS + order + 1)
+    fact = tridiagonal.factorials(tridiagonal.TAYLOR_TERMS + order + 1)
     t = np.diag(alphas[:, 0]) + np.diag(betas[: m - 1, 0], 1) + np.diag(betas[: m - 1, 0], -1)
     lam, vec = np.linalg.eigh(t)
     phi = (np.expm1(lam) / lam) if order == 1 else (np.expm1(lam) - lam) / lam**2
@@ -204,7 +218,7 @@ def test_phi_of_tridiagonal_from_rotations_equals_lapack(compiled, order):
         out, d, e, rows = np.empty(m), np.empty(m), np.empty(m), np.empty((2, m))
         rot_c, rot_s, rot_at = np.empty(capacity), np.empty(capacity), np.empty(capacity, int)
         phis = np.empty(m)
-        last, size, count = compiled._phi_of_tridiagonal(
+        last, size, count = tridiagonal.phi_of_tridiagonal(
             alphas, betas, m, 0, order, fact, out, d, e, rows, rot_c, rot_s, rot_at, phis
         )
         order_of = np.argsort(d)
@@ -213,10 +227,10 @@ def test_phi_of_tridiagonal_from_rotations_equals_lapack(compiled, order):
         # Z's rows up to the sign of each eigenvector: their products g_j are sign-free
         g = rows[0] * rows[1]
         np.testing.assert_allclose(g[order_of], vec[0] * vec[-1], rtol=1e-9, atol=1e-14)
-        bounds.append(compiled._error_bound(d, rows, phis, m, order, fact, 0.0))
+        bounds.append(tridiagonal.error_bound(d, rows, phis, m, order, fact, 0.0))
         assert (count >= 0) == (capacity > 2)
         if count > 0:
-            compiled._apply_z(out, count, rot_c, rot_s, rot_at)
+            tridiagonal.apply_z(out, count, rot_c, rot_s, rot_at)
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-15)
         assert last == pytest.approx(abs(expected[-1]), rel=1e-10)
         assert size == pytest.approx(np.linalg.norm(expected), rel=1e-12)
@@ -259,8 +273,10 @@ def test_env_episode_compiled_equals_numpy(setting):
 
 def test_serb_step_uses_the_compiled_path(compiled, monkeypatch):
     calls = []
-    original = pf._compiled_frozen_lanczos
-    monkeypatch.setattr(pf, "_compiled_frozen_lanczos", lambda *a: calls.append(1) or original(*a))
+    original = phi_krylov.compiled_frozen_lanczos
+    monkeypatch.setattr(
+        phi_krylov, "compiled_frozen_lanczos", lambda *a: calls.append(1) or original(*a)
+    )
     model = SwarmModel(SwarmParams(n_agents=100, epsilon=0.05), linear_operator="dense")
     x = np.random.default_rng(0).uniform(-1, 1, (2, 100, 1))
     make_integrator("serb").step(model, x, None, 0.0, 0.02, np.zeros_like(x))
@@ -313,10 +329,10 @@ def test_compiled_product_pass_equals_the_product_taken_first(compiled, n, d, ba
     product taken first and then the compiled and the reference Lanczos (1e-12)."""
     _, _, f, op = _frozen(n, d, batch, spread, seed=n + d, scale=0.02)
     w = 0.01 * np.random.default_rng(2).standard_normal(f.shape)
-    got, ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None, (w, 50.0))
+    got, ok = compiled_frozen_lanczos(op, f, 1, 1e-10, 100, None, (w, 50.0))
     rhs = f + 50.0 * (op @ w)
-    first, first_ok = pf._compiled_frozen_lanczos(op, rhs, 1, 1e-10, 100, None)
-    reference, _ = pf._lanczos_action(pf._RowOperator(op), rhs, 1, 1e-10, 100)
+    first, first_ok = compiled_frozen_lanczos(op, rhs, 1, 1e-10, 100, None)
+    reference, _ = lanczos_action(RowOperator(op), rhs, 1, 1e-10, 100)
     scale = np.max(np.abs(reference))
     np.testing.assert_array_equal(ok, first_ok)
     assert np.max(np.abs(got - first)) <= TOL * scale
@@ -452,11 +468,11 @@ def test_compiled_reads_the_callers_interval_like_numpy(compiled):
     about the Krylov tolerance)."""
     _, _, f, op = _frozen(100, 1, (4,), 0.01, seed=7, scale=0.02)
     norms, widths, low = op.krylov_bounds()
-    rows = pf._RowOperator(op)
+    rows = RowOperator(op)
     results = []
     for bounds in ((norms, widths), (norms, widths, None), (norms, widths, low)):
-        got, got_ok = pf._compiled_frozen_lanczos(op, f, 1, 1e-10, 100, bounds)
-        want, want_ok = pf._lanczos_numpy(rows, f, 1, 1e-10, 100, bounds=bounds)
+        got, got_ok = compiled_frozen_lanczos(op, f, 1, 1e-10, 100, bounds)
+        want, want_ok = lanczos_numpy(rows, f, 1, 1e-10, 100, bounds=bounds)
         np.testing.assert_array_equal(got_ok, want_ok)
         assert np.max(np.abs(got - want)) <= 1e-14 * np.max(np.abs(want))
         results.append(got)
@@ -465,17 +481,19 @@ def test_compiled_reads_the_callers_interval_like_numpy(compiled):
 
 
 def test_check_schedule_is_the_same_rule_compiled_and_numpy(compiled):
-    """`_next_check` compiled and numpy: the same next dimension over a grid of (m, ratio,
-    previous check), on both sides of the full-step threshold FULL_STEP_FROM n, and the two
-    modules' constants agree."""
-    assert compiled.FIRST_BOUND_CHECK == pf.FIRST_BOUND_CHECK
-    assert compiled.FULL_STEP_FROM == pf.FULL_STEP_FROM
+    """The schedule compiled (`lanczos_rule.next_check` under numba) and numpy
+    (`next_checks`, vectorized over members): the same next dimension over a grid of (m, ratio,
+    previous check), on both sides of the full-step threshold FULL_STEP_FROM n; the compiled
+    rules are the plain-Python ones of `lanczos_rule`, the one source of the rule."""
+    assert compiled._next_check.py_func is lanczos_rule.next_check
+    assert compiled._spectrum_top.py_func is lanczos_rule.spectrum_top
+    assert compiled._first_check.py_func is lanczos_rule.first_check
     for n in (20, 100, 400):
         for m in (3, 4, 5, 6, 9, 13, 19, 25):
             for prev_m in (0, 1, m - 1, max(m - 8, 1)):
                 for prev_ratio in (0.0, 2.0, 1e3, 1e9, np.inf):
                     ratio = np.array([1.5, 10.0, 1e3, 1e8, 1e30, np.inf])
-                    want = pf._next_check(
+                    want = next_checks(
                         m, ratio, np.full(6, float(prev_m)), np.full(6, prev_ratio), 8, n
                     )
                     got = [compiled._next_check(m, r, prev_m, prev_ratio, 8, n) for r in ratio]

@@ -16,7 +16,7 @@ from agent_envs.dynamics import kernel_sums, operators
 from agent_envs.dynamics.kernel_sums import ChunkedKernelSum, GridKernelSum, lagrange_weights
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
 from agent_envs.dynamics.operators import LinearizationOperator
-from agent_envs.integrators import phi_functions
+from agent_envs.integrators import phi_lanczos
 from agent_envs.integrators.phi_functions import phi_action
 
 N = 2000
@@ -221,7 +221,7 @@ def test_lanczos_sums_its_basis_for_large_n_like_the_stacked_product(monkeypatch
     op = 0.02 * SwarmModel(_params("symmetric", 600), "matrix_free").linearization_operator(x)
     v = np.random.default_rng(4).standard_normal((1, 600, 2))
     stacked = phi_action(op, v, 1, symmetric=True)
-    monkeypatch.setattr(phi_functions, "_ACCUMULATE_BASIS_MIN_N", 0)
+    monkeypatch.setattr(phi_lanczos, "ACCUMULATE_BASIS_MIN_N", 0)
     np.testing.assert_allclose(
         phi_action(op, v, 1, symmetric=True), stacked, rtol=1e-12, atol=1e-15
     )

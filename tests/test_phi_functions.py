@@ -8,8 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_envs.integrators import phi_functions as pf
+from agent_envs.integrators.lanczos_stopping import next_checks
 from agent_envs.integrators.phi_functions import phi_action, phi_scalar
+from agent_envs.native.lanczos_rule import FULL_STEP_FROM
 
 
 def _mp_phi(a: np.ndarray, v: np.ndarray, order: int) -> np.ndarray:
@@ -174,21 +175,18 @@ def _swarm_laplacians(n_paths: int = 6, n: int = 100):
 @pytest.mark.parametrize("order", [1, 2])
 @pytest.mark.parametrize("columns", [1, 2])
 def test_numpy_lanczos_equals_the_reference_lanczos_bit_for_bit(order, columns):
-    """The numpy Lanczos (`_lanczos_numpy`) repeats `_lanczos_action` operation by operation,
+    """The numpy Lanczos (`lanczos_numpy`) repeats `lanczos_action` operation by operation,
     on plain matrices (no bounds) and on the workspace operator (row-sum bounds)."""
-    from agent_envs.integrators.phi_functions import (
-        _lanczos_action,
-        _lanczos_numpy,
-        _RowOperator,
-    )
+    from agent_envs.integrators.krylov_space import RowOperator
+    from agent_envs.integrators.phi_lanczos import lanczos_action, lanczos_numpy
 
     rng = np.random.default_rng(order + columns)
     for _, dense, operator in _swarm_laplacians():
         v = rng.standard_normal((dense.shape[0], 100, columns))
         v[0] = 0.0  # a zero member: the happy breakdown at m = 1
         for a in (dense, operator):
-            got, got_ok = _lanczos_numpy(_RowOperator(a), v, order, 1e-10, 100)
-            want, want_ok = _lanczos_action(_RowOperator(a), v, order, 1e-10, 100)
+            got, got_ok = lanczos_numpy(RowOperator(a), v, order, 1e-10, 100)
+            want, want_ok = lanczos_action(RowOperator(a), v, order, 1e-10, 100)
             np.testing.assert_array_equal(got, want)
             np.testing.assert_array_equal(got_ok, want_ok)
             assert np.all(got_ok)
@@ -215,11 +213,8 @@ def test_a_constant_vector_is_deflated_exactly(order):
     round-off of it); without the width (no deflation) the same value to the tolerance."""
     import math
 
-    from agent_envs.integrators.phi_functions import (
-        _lanczos_action,
-        _lanczos_numpy,
-        _RowOperator,
-    )
+    from agent_envs.integrators.krylov_space import RowOperator
+    from agent_envs.integrators.phi_lanczos import lanczos_action, lanczos_numpy
 
     for _, dense, operator in _swarm_laplacians():
         v = np.full((dense.shape[0], 100, 2), 2.5)
@@ -227,11 +222,11 @@ def test_a_constant_vector_is_deflated_exactly(order):
         want = v / math.factorial(order)
         bounds = operator.krylov_bounds()
         assert bounds[1] is not None and np.all(np.isfinite(bounds[1]))
-        for lanczos in (_lanczos_numpy, _lanczos_action):
-            got, ok = lanczos(_RowOperator(operator), v, order, 1e-10, 100, bounds=bounds)
+        for lanczos in (lanczos_numpy, lanczos_action):
+            got, ok = lanczos(RowOperator(operator), v, order, 1e-10, 100, bounds=bounds)
             assert np.all(ok)
             np.testing.assert_array_equal(got, want)  # the mean's part alone, exactly
-            plain, ok = lanczos(_RowOperator(dense), v, order, 1e-10, 100)
+            plain, ok = lanczos(RowOperator(dense), v, order, 1e-10, 100)
             assert np.all(ok)
             np.testing.assert_allclose(plain, want, rtol=1e-9, atol=0)
 
@@ -288,20 +283,20 @@ def test_deflated_krylov_matches_dense_on_any_swarm(n, d, spread, dt, order, mea
 @pytest.mark.parametrize("order", [1, 2])
 @pytest.mark.parametrize("scale", [0.02, 0.2])
 def test_lanczos_error_bound_is_above_the_error(order, scale):
-    """`_error_bounds` on the frozen c L(x) of spread, consensus and mixed swarms: at every
-    Krylov dimension, b_m max |f| over `_spectrum_interval` is at least the error of the Lanczos
+    """`error_bounds` on the frozen c L(x) of spread, consensus and mixed swarms: at every
+    Krylov dimension, b_m max |f| over `spectrum_interval` is at least the error of the Lanczos
     approximation against the dense eigh value (where that error is above round-off), and,
     below 1e-6, within a factor 30 of it: the max over the interval is taken where the
     spectrum may be, and a spread swarm at c = 0.2 spans [-400, 0] (12x there; 1.01x near
     consensus, where Saad's estimate overstates the error by about c p_max)."""
-    from agent_envs.integrators.phi_functions import _error_bounds, _spectrum_interval
+    from agent_envs.integrators.lanczos_stopping import error_bounds, spectrum_interval
 
     rng = np.random.default_rng(order)
     checked = 0
     for _, dense, operator in _swarm_laplacians():
         dense, operator = dense * (scale / 0.02), operator * (scale / 0.02)
         norms, widths, low = operator.krylov_bounds()
-        lo, hi, tight = _spectrum_interval(norms, widths, np.full(norms.shape, low))
+        lo, hi, tight = spectrum_interval(norms, widths, np.full(norms.shape, low))
         assert tight.all()
         for member in range(dense.shape[0]):
             a = dense[member]
@@ -322,7 +317,7 @@ def test_lanczos_error_bound_is_above_the_error(order, scale):
                 phis = phi_scalar(tl, order)
                 approx = np.linalg.norm(v) * (np.array(basis).T @ (tz @ (phis * tz[0])))
                 error = np.linalg.norm(approx - exact) / np.linalg.norm(v)
-                bound = b * _error_bounds(
+                bound = b * error_bounds(
                     tl[None, None], tz[0][None, None], tz[-1][None, None], phis[None, None],
                     order, hi[member : member + 1],
                 )[0, 0]  # fmt: skip
@@ -333,7 +328,7 @@ def test_lanczos_error_bound_is_above_the_error(order, scale):
                     # that cancel)
                     mus = np.linspace(lo[member], hi[member], 9)
                     f = np.array([
-                        _error_bounds(tl[None, None], tz[0][None, None], tz[-1][None, None],
+                        error_bounds(tl[None, None], tz[0][None, None], tz[-1][None, None],
                                       phis[None, None], order, np.array([mu]))[0, 0]
                         for mu in mus
                     ])  # fmt: skip
@@ -369,10 +364,42 @@ def test_check_schedule_steps_half_way_then_all_the_way():
     (m >= FULL_STEP_FROM n), half way (2 on) below, never more than max_step on, and 1 on
     without a previous check or where the bound did not fall."""
     n = 100
-    big = math.ceil(pf.FULL_STEP_FROM * n)
+    big = math.ceil(FULL_STEP_FROM * n)
     one = np.ones(1)
-    assert pf._next_check(big, 1e4 * one, (big - 1) * one, 1e5 * one, 8, n)[0] == big + 4
-    assert pf._next_check(big - 1, 1e4 * one, (big - 2) * one, 1e5 * one, 8, n)[0] == big + 1
-    assert pf._next_check(big, 1e4 * one, (big - 1) * one, 1e5 * one, 3, n)[0] == big + 3
-    assert pf._next_check(big, 1e4 * one, 0 * one, 0 * one, 8, n)[0] == big + 1
-    assert pf._next_check(big, 1e4 * one, (big - 1) * one, 1e3 * one, 8, n)[0] == big + 1
+    assert next_checks(big, 1e4 * one, (big - 1) * one, 1e5 * one, 8, n)[0] == big + 4
+    assert next_checks(big - 1, 1e4 * one, (big - 2) * one, 1e5 * one, 8, n)[0] == big + 1
+    assert next_checks(big, 1e4 * one, (big - 1) * one, 1e5 * one, 3, n)[0] == big + 3
+    assert next_checks(big, 1e4 * one, 0 * one, 0 * one, 8, n)[0] == big + 1
+    assert next_checks(big, 1e4 * one, (big - 1) * one, 1e3 * one, 8, n)[0] == big + 1
+
+
+def test_numpy_stopping_rule_is_the_scalar_rule_member_by_member():
+    """One stopping rule: the numpy executor's vectorized `spectrum_interval`, `first_checks`
+    and `next_checks` give, member by member, what the plain-Python rules of
+    `agent_envs.native.lanczos_rule` give (the functions the compiled executor compiles), over
+    bounds with and without a known interval and a grid of check histories."""
+    from agent_envs.integrators.lanczos_stopping import first_checks, spectrum_interval
+    from agent_envs.native import lanczos_rule
+
+    norms = np.array([0.5, 4.0, 40.0, 400.0, 40.0, 40.0, 1e-3])
+    widths = np.array([0.2, np.inf, 30.0, 100.0, 30.0, 0.0, np.inf])
+    lows = np.array([-0.3, np.nan, -35.0, np.nan, 1.0, -2.0, -1.0])
+    _, hi, tight = spectrum_interval(norms, widths, lows)
+    for max_dim in (3, 100):
+        first = first_checks(norms, widths, tight, max_dim)
+        for i in range(norms.size):
+            top, known = lanczos_rule.spectrum_top(norms[i], widths[i], lows[i])
+            assert (hi[i], tight[i]) == (top, known)
+            deflate = bool(np.isfinite(widths[i]))
+            want = lanczos_rule.first_check(norms[i], widths[i], deflate, known, max_dim)
+            assert first[i] == want
+    for n in (20, 100, 400):
+        for m in (3, 4, 5, 9, 19, 25):
+            for prev_m in (0, 1, m - 1):
+                for prev_ratio in (0.0, 2.0, 1e3, np.inf):
+                    ratio = np.array([1.5, 10.0, 1e3, 1e30, np.inf])
+                    got = next_checks(
+                        m, ratio, np.full(5, float(prev_m)), np.full(5, prev_ratio), 8, n
+                    )
+                    want = [lanczos_rule.next_check(m, r, prev_m, prev_ratio, 8, n) for r in ratio]
+                    np.testing.assert_array_equal(got, want)

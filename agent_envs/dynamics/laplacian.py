@@ -365,7 +365,7 @@ class FrozenLaplacian:
         of the row sums and the diagonal of P, times |c|; and the bottom -c p_max of the
         interval of that width holding spec(c L) on 1^perp, for c > 0 (None otherwise): L is
         -p_max plus a graph Laplacian of p_max - P there, whose spectrum lies in [0, width / c]
-        (`phi_functions._spectrum_interval`)."""
+        (`lanczos_stopping.spectrum_interval`)."""
         idx = np.arange(self.n)
         norms, widths = krylov_bounds(
             self.row_sums, self._matrix[..., idx, idx], self.n, self.peak, self.symmetric

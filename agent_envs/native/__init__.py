@@ -7,6 +7,11 @@ import each other: the Lanczos uses the kernel pass's products):
   the half-read products over P's lower triangle;
 - `lanczos`: the Lanczos phi-action of the frozen L(x) and the fused exponential
   Rosenbrock-Euler step (`frozen_advance`);
+- `lanczos_tridiagonal`: its small eigenproblem: phi_p(T_m) e_1 and the error bound from the
+  QL iteration on T_m;
+- `lanczos_rule`: the Lanczos stopping rule's constants and scalar rules, plain Python (no
+  numba): the one source that the compiled Lanczos compiles and the numpy Lanczos
+  (`agent_envs.integrators.lanczos_stopping`) reads;
 - `noise`: numpy's standard normals from many numpy generators in one call;
 - `step`: the native vector env's prologue and epilogue around its fused pass.
 
@@ -14,7 +19,7 @@ import each other: the Lanczos uses the kernel pass's products):
 `use(name, on)`, `status()`, ``AGENT_ENVS_NUMBA=0`` (its docstring has the table of paths,
 owners and checks), and runs the compiled passes on numba's threads (`call_on_threads`).
 Importing this package imports no numba. The numpy code that each path replaces stays with
-its owner (`agent_envs.dynamics.laplacian`, `agent_envs.integrators.phi_functions`,
+its owner (`agent_envs.dynamics.laplacian`, `agent_envs.integrators.phi_lanczos`,
 `agent_envs.simulator`, `agent_envs.envs.fast_step`), which is the reference the compiled
 values are checked against.
 """

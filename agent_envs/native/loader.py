@@ -8,8 +8,8 @@ name        module                 serves                               owner (n
 ==========  =====================  ===================================  ===========================
 "kernel"    `native.kernel`        P's lower triangle, s = P 1 and      `dynamics.laplacian`
                                    L(x) x for the symmetric kernel      (`fill_cucker_smale`)
-"lanczos"   `native.lanczos`       the Lanczos phi-action of the        `integrators.phi_functions`
-                                   frozen L(x)                          (`_lanczos_numpy`)
+"lanczos"   `native.lanczos`       the Lanczos phi-action of the        `integrators.phi_fused`
+                                   frozen L(x)                          (`phi_lanczos`)
 "fused"     `native.lanczos`       an ERB/SERB step and the next        `integrators.exponential`
             (`frozen_advance`)     kernel pass in one call; needs       (the general step)
                                    "kernel" and "lanczos"
@@ -73,7 +73,7 @@ PATHS: dict[str, CompiledPath] = {
     "lanczos": CompiledPath(
         "agent_envs.native.lanczos",
         "the Lanczos phi-action of the frozen L(x)",
-        "agent_envs.integrators.phi_functions",
+        "agent_envs.integrators.phi_fused",
     ),
     "fused": CompiledPath(
         "agent_envs.native.lanczos",
@@ -218,8 +218,9 @@ def _read_only(a: np.ndarray) -> np.ndarray:
 
 
 #: the argument types of the owners' calls that the warm-ups need besides arrays: the
-#: Lanczos's `max_step` (an int, as `phi_functions.MAX_CHECK_STEP`; its value is irrelevant
-#: here) and the empty bounds and extra vectors (read-only, as `phi_functions` passes them)
+#: Lanczos's `max_step` (an int, as `native.lanczos_rule.MAX_CHECK_STEP`; its value is
+#: irrelevant here) and the empty bounds and extra vectors (read-only, as
+#: `integrators.phi_fused` passes them)
 _MAX_STEP = 8
 _NO_BOUNDS = _read_only(np.empty(0))
 _NO_EXTRA = _read_only(np.empty((0, 0, 0)))
@@ -237,8 +238,9 @@ def _warm_up_kernel(module: Any) -> bool:
 
 
 def _warm_up_lanczos(module: Any) -> bool:
-    """One compiled call with the argument types of `phi_functions`'s calls (a read-only P, as
-    the model's workspace hands out), so that loading the machine code happens here."""
+    """One compiled call with the argument types of `integrators.phi_fused`'s calls (a
+    read-only P, as the model's workspace hands out), so that loading the machine code
+    happens here."""
     p = np.full((1, 3, 3), 0.5)
     np.fill_diagonal(p[0], 1.0)
     p = _read_only(p)
