@@ -38,8 +38,8 @@ from numba import njit
 import agent_envs  # noqa: F401  (registers the id)
 from agent_envs.dynamics.laplacian import readonly_view
 from agent_envs.envs import ENV_ID
-from agent_envs.native.lanczos_rule import MAX_CHECK_STEP
 from agent_envs.native.lanczos import frozen_advance
+from agent_envs.native.lanczos_rule import MAX_CHECK_STEP
 from agent_envs.native.noise import fill_standard_normal
 from agent_envs.native.step import epilogue, prologue
 

@@ -13,8 +13,9 @@ in `agent_envs.integrators.lanczos_stopping`):
 - where an interval [lo, hi] holding the spectrum is known (the frozen c L(x), c > 0:
   `spectrum_interval`), the bound b_m max_[lo, hi] |f| = b_m f(hi) of `error_bounds`, which the
   error reaches within a few per cent where it matters (part 2b of the former
-  benchmarks/bench_throughput.py, docs/performance-notes.md: 4.83 dimensions per member and step on the paper setting, where the smallest that meet
-  rtol are 4.78 and Saad's estimate took 6.13). Checked at m = `FIRST_BOUND_CHECK`, then at the
+  benchmarks/bench_throughput.py, docs/performance-notes.md: 4.83 dimensions per member and step
+  on the paper setting, where the smallest that meet rtol are 4.78 and Saad's estimate took 6.13).
+  Checked at m = `FIRST_BOUND_CHECK`, then at the
   dimension `next_checks` extrapolates from the last two checks;
 - elsewhere Saad's estimate b_m |e_m^T phi_p(T_m) e_1|, checked every second step from
   m_0 = min(3.5 sqrt(|A|_inf), 3.5 sqrt(w)) (about the dimension below which the Krylov
