@@ -226,10 +226,10 @@ class CallTimes:
         self.keys: list[str] = []
 
     def wrap(self, owner: Any, name: str, key: str, compiled: bool = False) -> None:
-        """Time `owner.name` (a public function or method) under `key` until `restore`."""
-        fn = getattr(owner, name, None)
-        if fn is None:
-            return
+        """Time `owner.name` (a public function or method) under `key` until `restore`;
+        AttributeError where `owner` has no such name (a renamed function would otherwise drop
+        its row from the table without a word)."""
+        fn = getattr(owner, name)
 
         def timed(*args: Any, **kwargs: Any) -> Any:
             self.stack.append(key)

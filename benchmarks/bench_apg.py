@@ -3,10 +3,10 @@
 Parts (``--parts``, any subset; every result is cached under ``--out`` and reused, so the
 script can be stopped and run again, part by part, on a small machine):
 
-- ``paper``: train at the sweep's paper setting (`agent_envs.training.presets.PAPER_ENV`:
+- ``paper``: train at the sweep's paper setting (`agent_envs.training.commands.presets.PAPER_ENV`:
   N = 100, m = 50, 20 paths, eps = 0.05, alpha = 0.1, sigma = 0.01, T = 1, xbar = 0.7, SERB,
   max_control = 25) for each training seed; evaluate the best law on the test seeds
-  10000..10019 in the env (`agent_envs.training.evaluate.evaluate_policies`, the published
+  10000..10019 in the env (`agent_envs.training.commands.evaluate.evaluate_policies`, the published
   study's rollouts) next to the references "optimal" (V: the optimal open-loop plan of
   `solve_optimal_control`, solved from each episode's start, the published study's 'gap to
   optimal') and "proportional"; per-seed gap = (cost - V) / V.
@@ -206,7 +206,7 @@ def across_n(out: Path, args) -> dict:
 def gradient_norms(args) -> dict:
     """|dJ/dtheta| at the initial (proportional) law on one training episode (4 paths), per
     integrator and eps: where the gradient through the integrator is usable."""
-    from agent_envs.envs.episode import EpisodeConfig
+    from agent_envs.envs.episode_config import EpisodeConfig
     from agent_envs.training.learners.apg_policy import SwarmFeedbackLaw
     from agent_envs.training.learners.apg_rollout import ClosedLoop, EpisodeNoise
 

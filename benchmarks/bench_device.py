@@ -14,7 +14,8 @@ setup = import + CUDA context + make + reset; cold = seconds per step of the fir
 steps; warm = the median of `--rounds` blocks of the same steps (reset with seed 0 first);
 shares of the warm step: the host's Brownian draws (`fill_brownian_increments`, each env's
 numpy generator) and the batched integrator step (`advance_paths`, synchronized with the
-device), both timed by wrapping those public functions of `agent_envs.envs.vector_env`; the
+device), both timed by wrapping those public functions where the env calls them
+(`agent_envs.envs.vector_env.fill_brownian_increments`, `vector_blocks.advance_paths`); the
 device memory peak torch allocated. The device rates are absolute and name the GPU (the
 project's standard for GPU figures); the CPU side is shown as the ratio device / CPU.
 
@@ -44,7 +45,7 @@ def worker_device(
     this fresh process: setup, cold and warm seconds, the draws' and advance's shares."""
     start = time.perf_counter()
     import agent_envs  # noqa: F401
-    from agent_envs.envs import vector_env
+    from agent_envs.envs import vector_blocks, vector_env
 
     sync: Callable[[], None] = lambda: None  # noqa: E731
     if device != "cpu":
@@ -59,15 +60,15 @@ def worker_device(
     setup = time.perf_counter() - start
     times = _timing.CallTimes()
     times.wrap(vector_env, "fill_brownian_increments", "draws")
-    advance = vector_env.advance_paths
+    advance = vector_blocks.advance_paths  # (the one the env's blocks call)
 
     def synchronized(*args: Any, **kwargs: Any) -> Any:
         out = advance(*args, **kwargs)
         sync()
         return out
 
-    vector_env.advance_paths = synchronized
-    times.wrap(vector_env, "advance_paths", "advance")
+    vector_blocks.advance_paths = synchronized
+    times.wrap(vector_blocks, "advance_paths", "advance")
     actions = _timing.batch_actions(num_envs, SETTINGS[setting]["n_agents"])
 
     def block() -> float:

@@ -11,8 +11,9 @@ calls inside it); the compiled calls (`agent_envs.native`'s public entry points)
 charged to the innermost wrapped call they ran in ("compiled in ..."). Wrapped: the episode
 core's `advance_paths`, `mean_interaction_drift`, `diverged_paths` (`agent_envs.simulator`),
 the integrator's `step` and `fused_step`, the model's `drift_and_linearization`, `drift` and
-`adopt_linearization`, and the native env's `fill_brownian_increments` and
-`mean_running_cost` (public names of `agent_envs.envs.vector_env`). The env's private
+`adopt_linearization`, and the native env's `fill_brownian_increments` (where its numpy and
+compiled steps call it: `vector_env`, `fast_step`), `mean_running_cost` (`vector_env`),
+`advance_paths` and `mean_interaction_drift` (`vector_blocks`). The env's private
 per-step helpers (its actions, observation and info arrays) are not wrapped: they are in the
 rest. SERB and EM episodes alternate, `--episodes` of each after two warm-up episodes.
 
@@ -38,7 +39,8 @@ def wrap_single(times: CallTimes, env: Any) -> None:
 
     times.wrap(episode, "advance_paths", "advance_paths")
     times.wrap(env.episode.integrator, "step", "integrator step")
-    times.wrap(env.episode.integrator, "fused_step", "fused step")
+    if hasattr(env.episode.integrator, "fused_step"):  # (the exponential schemes only)
+        times.wrap(env.episode.integrator, "fused_step", "fused step")
     for owner in (episode, simulator):  # (where the step's caller finds it)
         times.wrap(owner, "diverged_paths", "diverged_paths")
     times.wrap(episode, "mean_interaction_drift", "mean drift")
@@ -74,8 +76,7 @@ def single_env_shares(episodes: int) -> dict[str, dict[str, float]]:
 
 def native_shares(batch: int, batch_steps: int) -> dict[str, float]:
     """Seconds per batch step of each wrapped call of the native vector env."""
-    from agent_envs import simulator
-    from agent_envs.envs import episode, vector_env
+    from agent_envs.envs import episode, fast_step, vector_blocks, vector_env
 
     step = _timing.native_stepper(env_kwargs("paper", "serb", n_paths=1), batch)
     env = step.env  # type: ignore[attr-defined]
@@ -83,12 +84,14 @@ def native_shares(batch: int, batch_steps: int) -> dict[str, float]:
         step()
     times = CallTimes()
     times.wrap(env.integrator, "fused_step", "fused step")
-    times.wrap(vector_env, "advance_paths", "advance_paths (numpy step)")
+    times.wrap(vector_blocks, "advance_paths", "advance_paths (numpy step)")
     times.wrap(vector_env, "mean_running_cost", "running cost")
-    times.wrap(vector_env, "fill_brownian_increments", "draws")
-    for owner in (episode, vector_env, simulator):
+    for owner in (vector_env, fast_step):  # (the numpy step's draws, the compiled step's)
+        times.wrap(owner, "fill_brownian_increments", "draws")
+    for owner in (episode, fast_step):
         times.wrap(owner, "diverged_paths", "diverged_paths")
-    times.wrap(episode, "mean_interaction_drift", "mean drift")
+    for owner in (episode, vector_blocks):
+        times.wrap(owner, "mean_interaction_drift", "mean drift")
     _timing.wrap_compiled(times)
     start = time.perf_counter()
     for _ in range(batch_steps):

@@ -13,7 +13,7 @@ what it wrote as L(x^{n+1}) and `discard_linearization` forgets a P it wrote in 
 
 Users: the single envs' episode (`agent_envs.envs.episode.SwarmEpisode`), the native vector env
 (numpy or torch, one model per block of envs) and the analytic-policy-gradient learner's torch
-rollout (`agent_envs.training.apg_rollout.ClosedLoop`).
+rollout (`agent_envs.training.learners.apg_rollout.ClosedLoop`).
 """
 
 from __future__ import annotations

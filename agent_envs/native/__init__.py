@@ -20,7 +20,7 @@ import each other: the Lanczos uses the kernel pass's products):
 owners and checks), and runs the compiled passes on numba's threads (`call_on_threads`).
 Importing this package imports no numba. The numpy code that each path replaces stays with
 its owner (`agent_envs.dynamics.laplacian`, `agent_envs.integrators.phi_lanczos`,
-`agent_envs.simulator`, `agent_envs.envs.fast_step`), which is the reference the compiled
+`agent_envs.draws`, `agent_envs.envs.fast_step`), which is the reference the compiled
 values are checked against.
 """
 

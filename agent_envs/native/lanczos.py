@@ -58,12 +58,16 @@ change together).
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
 
+from agent_envs.native import kernel as _kernel_module
 from agent_envs.native import lanczos_rule
+from agent_envs.native import lanczos_tridiagonal as _tridiagonal_module
 from agent_envs.native.kernel import cucker_smale_drift
 from agent_envs.native.kernel import lower_products as _products
 from agent_envs.native.lanczos_rule import BREAKDOWN_RTOL, TAYLOR_TERMS, TINY
@@ -73,6 +77,31 @@ from agent_envs.native.lanczos_tridiagonal import (
     factorials,
     phi_of_tridiagonal,
 )
+
+
+def _source_stamp(*modules: object) -> int:
+    """A 62-bit hash of the source files of `modules`."""
+    digest = hashlib.sha256()
+    for module in modules:
+        digest.update(Path(module.__file__).read_bytes())  # type: ignore[attr-defined]
+    return int.from_bytes(digest.digest()[:8], "little") >> 2
+
+
+#: the hash of the other files whose code and constants this module's compiled functions link
+#: in (the rule, the tridiagonal eigenproblem, the kernel's products). numba's cache keys each
+#: function on its own file only (its documented limit: edits to other files do not invalidate
+#: it), so after an edit of one of them the cached machine code here would still run the old
+#: rule while the numpy executor reads the new one. `compiled_rule_stamp` freezes this value
+#: into the cache when the module compiles; the loader compares the two (`native.loader`'s
+#: warm-up of "lanczos") and keeps the compiled Lanczos off, with a warning, where they differ.
+RULE_STAMP = _source_stamp(lanczos_rule, _tridiagonal_module, _kernel_module)
+
+
+@njit(cache=True)
+def compiled_rule_stamp() -> int:
+    """`RULE_STAMP` as it was when this module's cached machine code was compiled."""
+    return RULE_STAMP
+
 
 _first_check = njit(cache=True, error_model="numpy")(lanczos_rule.first_check)
 _spectrum_top = njit(cache=True, error_model="numpy")(lanczos_rule.spectrum_top)
@@ -296,6 +325,7 @@ def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, lows
     rot_s = np.empty(capacity)
     rot_at = np.empty(capacity, dtype=np.int64)
     phis = np.empty(max_dim)
+    ones = np.ones(n)  # (the deflation's mean, one dot per column)
     for member in range(n_members):
         if norms.size == 0:
             norm, width = _member_bounds(p[member], s[member], n, abs(scale), peak)
@@ -306,7 +336,7 @@ def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, lows
         ok_member = _lanczos_member(
             p[member], s[member], scale / n, v, extra, extra_scale, member, order, rtol, max_dim,
             max_step, norm, width, low, fact, basis, w, alphas, betas, coeffs, eig_d, eig_e,
-            rows, rot_c, rot_s, rot_at, phis, out,
+            rows, rot_c, rot_s, rot_at, phis, out, ones,
         )  # fmt: skip
         converged[member] = ok_member
         if advance:
@@ -317,7 +347,7 @@ def _members(p, s, scale, v, order, rtol, max_dim, max_step, norms, widths, lows
 @njit(cache=True, error_model="numpy")
 def _lanczos_member(pm, sm, factor, v, extra, extra_scale, member, order, rtol, max_dim,
                     max_step, norm, width, low, fact, basis, w, alphas, betas, coeffs, eig_d,
-                    eig_e, rows, rot_c, rot_s, rot_at, phis, out) -> bool:  # fmt: skip
+                    eig_e, rows, rot_c, rot_s, rot_at, phis, out, ones) -> bool:  # fmt: skip
     """One member's phi_order(c L) (V + e c L W) into out[member] (c L = factor (P - diag s),
     factor = c / N), with its bounds (norm, width, low); returns whether it converged.
 
@@ -333,7 +363,7 @@ def _lanczos_member(pm, sm, factor, v, extra, extra_scale, member, order, rtol, 
     prev_ratio = 0.0
     tiny = BREAKDOWN_RTOL * (norm + TINY)
     beta0, means = _start_vectors(pm, sm, factor, v, extra, extra_scale, member, deflate,
-                                  basis, w)  # fmt: skip
+                                  basis, w, ones)  # fmt: skip
     ok_member = False
     stop_m = max_dim
     for j in range(max_dim):
@@ -361,7 +391,7 @@ def _lanczos_member(pm, sm, factor, v, extra, extra_scale, member, order, rtol, 
 
 
 @njit(cache=True, error_model="numpy")
-def _start_vectors(pm, sm, factor, v, extra, extra_scale, member, deflate, basis, w):
+def _start_vectors(pm, sm, factor, v, extra, extra_scale, member, deflate, basis, w, ones):
     """The k starting vectors q_0 = (u - mean(u) 1) / |u - mean(u) 1| into basis[0] for
     u = V + e c L W (W = extra[member], or u = V without `extra`), the mean 0 without
     deflation; returns (|u - mean(u) 1|, mean(u)) per column. The product P W goes two columns
@@ -388,7 +418,7 @@ def _start_vectors(pm, sm, factor, v, extra, extra_scale, member, deflate, basis
                 q0[i] = v[member, i, c]
         mean = 0.0
         if deflate:
-            mean = _dot(q0, np.ones(n), n) / n
+            mean = _dot(q0, ones, n) / n
         means[c] = mean
         for i in range(n):
             q0[i] = q0[i] - mean

@@ -48,6 +48,8 @@ from typing import Any
 
 import numpy as np
 
+from agent_envs.native.lanczos_rule import MAX_CHECK_STEP
+
 #: set to "0" to keep every numpy path even where numba is installed
 ENV_VAR = "AGENT_ENVS_NUMBA"
 
@@ -221,7 +223,7 @@ def _read_only(a: np.ndarray) -> np.ndarray:
 #: Lanczos's `max_step` (an int, as `native.lanczos_rule.MAX_CHECK_STEP`; its value is
 #: irrelevant here) and the empty bounds and extra vectors (read-only, as
 #: `integrators.phi_fused` passes them)
-_MAX_STEP = 8
+_MAX_STEP = MAX_CHECK_STEP
 _NO_BOUNDS = _read_only(np.empty(0))
 _NO_EXTRA = _read_only(np.empty((0, 0, 0)))
 
@@ -240,7 +242,19 @@ def _warm_up_kernel(module: Any) -> bool:
 def _warm_up_lanczos(module: Any) -> bool:
     """One compiled call with the argument types of `integrators.phi_fused`'s calls (a
     read-only P, as the model's workspace hands out), so that loading the machine code
-    happens here."""
+    happens here. False, with a warning, where the cached machine code was compiled against
+    another version of the files it links in (`native.lanczos.RULE_STAMP`)."""
+    if module.compiled_rule_stamp() != module.RULE_STAMP:
+        warnings.warn(
+            "the compiled Lanczos in numba's cache was built from other versions of "
+            "agent_envs/native/lanczos_rule.py, lanczos_tridiagonal.py or kernel.py than these "
+            "(numba does not see edits to other files); the numpy Lanczos runs. Delete the "
+            "cache (agent_envs/native/__pycache__/lanczos.*.nbi, *.nbc, or NUMBA_CACHE_DIR) "
+            "to compile it again",
+            RuntimeWarning,
+            stacklevel=4,
+        )
+        return False
     p = np.full((1, 3, 3), 0.5)
     np.fill_diagonal(p[0], 1.0)
     p = _read_only(p)

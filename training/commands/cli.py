@@ -30,10 +30,8 @@ Conventions shared by every subcommand:
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from collections.abc import Sequence
-from typing import Any
 
 from agent_envs.training.commands import runners
 from agent_envs.training.commands.parser import ArgumentParser, Subcommand, UsageError
@@ -42,22 +40,6 @@ from agent_envs.training.commands.parser import ArgumentParser, Subcommand, Usag
 TRAIN_EXTRA_MODULES = frozenset(
     {"torch", "stable_baselines3", "pandas", "tqdm", "supersuit", "tensorboard", "rich"}
 )
-
-
-#: Names kept importable from here, each from its home (imported when asked for):
-#: ``cli.parse_seeds`` and ``cli.parse_policy_specs`` were defined here before.
-_MOVED = {
-    "parse_seeds": "agent_envs.training.defaults",
-    "parse_policy_specs": "agent_envs.training.commands.evaluate_options",
-    "MAX_SEEDS": "agent_envs.training.defaults",
-}
-
-
-def __getattr__(name: str) -> Any:
-    """`_MOVED` names, imported from their home on first use (PEP 562)."""
-    if name in _MOVED:
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # ------------------------------------------------------------------------------------ main

@@ -66,7 +66,7 @@ from agent_envs.training.learners.apg_policy import (
     load_apg_policy,
     save_law,
 )
-from agent_envs.training.learners.apg_rollout import ClosedLoop, EpisodeNoise, with_env_kwargs
+from agent_envs.training.learners.apg_rollout import ClosedLoop, EpisodeNoise
 from agent_envs.training.learners.callbacks import (
     mean_ci95,
     read_learning_curve,
@@ -152,7 +152,7 @@ class _Trainer:
         self.env_config = env_config
         train_config = env_config
         if config.train_paths is not None:
-            train_config = with_env_kwargs(env_config, n_paths=config.train_paths)
+            train_config = env_config.replace(n_paths=config.train_paths)
         self.train_loop = ClosedLoop(train_config, config.phi_method)
         self.train_config = train_config
         self.eval_loop = ClosedLoop(env_config, config.phi_method)

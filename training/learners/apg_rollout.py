@@ -17,19 +17,19 @@ env's episode cost for that seed (up to the float32 rounding of the env's observ
 actions; `tests/test_apg.py` checks it).
 
 The closed loop needs the interaction drift L(x^n) x^n at every step, and the integrator's
-step needs L(x^n) again (its frozen linearization). The model is the envs' one
-`agent_envs.dynamics.linearization_cache.LinearizationCache`, with torch states not cached
-(``cache_tensors=False``, its default): one L(x^n) for both uses gives the same cost, but its
-backward pass adds the two uses' gradients before going through L(x^n) once, which moves the
-law's gradient by round-off (about 1e-14 on the tests' settings) and so every trained law.
-Each step therefore still builds L(x^n) twice, as the rollouts the published apg runs were
-trained with did (sharing it would save about a quarter of an episode's cost and gradient).
+step needs L(x^n) again (its frozen linearization). The model is a plain `SwarmModel`, which
+keeps nothing between calls: the envs' `agent_envs.dynamics.linearization_cache.
+LinearizationCache` could share one L(x^n) between the two uses (``cache_tensors=True``) and
+give the same cost, but its backward pass would add the two uses' gradients before going
+through L(x^n) once, which moves the law's gradient by round-off (about 1e-14 on the tests'
+settings) and so every trained law. Each step therefore builds L(x^n) twice, as the rollouts
+the published apg runs were trained with did (sharing it would save a quarter to two thirds
+of an episode's cost and gradient time, measured on two settings).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import torch
@@ -37,7 +37,7 @@ import torch
 from agent_envs.baselines.optimal_control import differentiated_phi_method
 from agent_envs.costs import discrete_cost
 from agent_envs.draws import brownian_increments, uniform_positions
-from agent_envs.dynamics.linearization_cache import LinearizationCache
+from agent_envs.dynamics.swarm import SwarmModel
 from agent_envs.envs.episode_config import EpisodeConfig
 from agent_envs.simulator import simulate
 from agent_envs.training.learners.apg_policy import SwarmFeedbackLaw
@@ -88,8 +88,8 @@ class ClosedLoop:
         self.phi_method = differentiated_phi_method(
             config.params, config.simulation.jacobian, phi_method or config.simulation.phi_method
         )
-        # torch states not cached: the gradients of the published runs (module docstring)
-        self.model = LinearizationCache(config.params, "dense")
+        # a plain model: no linearization kept between steps (module docstring)
+        self.model = SwarmModel(config.params, "dense")
         self.target = torch.as_tensor(config.params.target_vector, dtype=torch.float64)
 
     def cost(self, law: SwarmFeedbackLaw, noise: EpisodeNoise) -> tuple[torch.Tensor, bool]:
@@ -102,32 +102,23 @@ class ClosedLoop:
             drift = model.interaction_drift(x).mean(dim=0)
             return law(x.mean(dim=0), drift, target, s)
 
-        try:
-            traj = simulate(
-                self.params,
-                config.simulation.integrator,
-                jacobian=config.simulation.jacobian,
-                phi_method=self.phi_method,
-                n_steps=m,
-                n_paths=config.simulation.n_paths,
-                initial_positions=torch.as_tensor(noise.start, dtype=torch.float64),
-                increments=noise.increments,
-                control=control,
-                model=model,
-                divergence_threshold=config.divergence_threshold,
-            )
-        finally:
-            model.clear()
+        traj = simulate(
+            self.params,
+            config.simulation.integrator,
+            jacobian=config.simulation.jacobian,
+            phi_method=self.phi_method,
+            n_steps=m,
+            n_paths=config.simulation.n_paths,
+            initial_positions=torch.as_tensor(noise.start, dtype=torch.float64),
+            increments=noise.increments,
+            control=control,
+            model=model,
+            divergence_threshold=config.divergence_threshold,
+        )
         if traj.diverged:
             return torch.tensor(float("nan"), dtype=torch.float64), True
         costs = discrete_cost(traj.positions, traj.controls, target, self.params.gamma, config.dt)
         return costs.mean(), False
 
 
-def with_env_kwargs(config: EpisodeConfig, **changes: Any) -> EpisodeConfig:
-    """`config` with some `SwarmParams` fields or env options replaced (validated again):
-    `EpisodeConfig.replace`."""
-    return config.replace(**changes)
-
-
-__all__ = ["ClosedLoop", "EpisodeNoise", "with_env_kwargs"]
+__all__ = ["ClosedLoop", "EpisodeNoise"]
