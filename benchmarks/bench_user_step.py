@@ -14,8 +14,9 @@ over `--processes` fresh processes):
 1. the `gym.make` env step (OrderEnforcing > PassiveEnvChecker > TimeLimit > SwarmEnv) / the
    native env's per-env step, `gym.make_vec(..., vectorization_mode="vector_entry_point")`
    at B = 64 (its batch step / 64); the bare `SwarmEnv` (no wrapper) / the same floor; each
-   wrapper's share of the `gym.make` step (the step at its level minus the step one level in,
-   over the `gym.make` step);
+   wrapper's share of the `gym.make` step (the wrapper alone around a stub env that costs
+   nothing, minus the stub, over the `gym.make` step: a difference of two envs' steps would
+   drown a microsecond in their noise);
 2. the PettingZoo parallel env step (`agent_envs.swarm_v0.parallel_env`) at N = 100 / the same
    floor, and at N = 10 / the native per-env step at N = 10; PettingZoo's API alone as a second
    floor: building the five dicts of N entries a step returns (observations, rewards,
@@ -47,6 +48,7 @@ import argparse
 import json
 import time
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -89,8 +91,9 @@ def wrapper_chain(kwargs: dict[str, Any]) -> list[Any]:
 
 def level_stepper(kwargs: dict[str, Any], depth: int) -> Callable[[], None]:
     """One step per call of a fresh `gym.make` env entered `depth` wrappers in (0: the env a
-    user gets), fixed action (uniform in [-0.5, 0.5], default_rng(1)); at an episode's end a
-    reset at the same level with the next seed (inside the timing)."""
+    user gets, -1: the bare `SwarmEnv`), fixed action (uniform in [-0.5, 0.5],
+    default_rng(1)); at an episode's end a reset at the same level with the next seed (inside
+    the timing)."""
     env = wrapper_chain(kwargs)[depth]
     action = np.random.default_rng(1).uniform(-0.5, 0.5, env.action_space.shape)
     action = action.astype(np.float32)
@@ -157,34 +160,69 @@ def api_dicts(kwargs: dict[str, Any]) -> Callable[[], Any]:
     return build
 
 
-def user_steppers() -> tuple[dict[str, Callable[[], Any]], dict[str, int], list[str]]:
-    """The timed functions (name -> function), the env-steps of one call of each, and the
-    class names of `gym.make`'s chain (outermost first; "level_i" steps the i-th)."""
-    chain = [type(level).__name__ for level in wrapper_chain(paper())]
-    fns: dict[str, Callable[[], Any]] = {
-        f"level_{i}": level_stepper(paper(), i) for i in range(len(chain))
+def wrapper_steppers(kwargs: dict[str, Any]) -> dict[str, Callable[[], Any]]:
+    """Each of `gym.make`'s wrappers alone around a stub env that costs nothing (the swarm
+    env's spaces, `step` returns one stored tuple): "stub" and "stub_<Wrapper>"; a wrapper's
+    cost per step is its stepper's time minus the stub's."""
+    import gymnasium as gym
+    from gymnasium.wrappers import OrderEnforcing, PassiveEnvChecker, TimeLimit
+
+    swarm = wrapper_chain(kwargs)[-1]
+    observation, _ = swarm.reset(seed=0)
+    action = batch_row(swarm.action_space.shape[0])
+
+    class StubEnv(gym.Env):
+        """The swarm env's spaces; reset and step return stored values."""
+
+        observation_space, action_space = swarm.observation_space, swarm.action_space
+
+        def reset(self, *, seed: int | None = None, options: dict | None = None) -> Any:
+            super().reset(seed=seed)
+            return observation, {}
+
+        def step(self, action: Any) -> Any:
+            return observation, 0.0, False, False, {}
+
+    wrappers = {
+        "TimeLimit": lambda env: TimeLimit(env, max_episode_steps=2**62),
+        "PassiveEnvChecker": PassiveEnvChecker,
+        "OrderEnforcing": OrderEnforcing,
     }
-    fns["native"] = _timing.native_stepper(paper(), BATCH)
-    fns["parallel"] = parallel_stepper(paper())
-    fns["dicts"] = api_dicts(paper())
-    fns["native_10"] = _timing.native_stepper(paper(n_agents=10), BATCH)
-    fns["parallel_10"] = parallel_stepper(paper(n_agents=10))
-    fns["dicts_10"] = api_dicts(paper(n_agents=10))
-    fns["level_0_20"] = level_stepper(paper(n_paths=20), 0)
-    fns["native_20"] = _timing.native_stepper(paper(n_paths=20), BATCH)
+    envs = {"stub": StubEnv(), **{f"stub_{n}": w(StubEnv()) for n, w in wrappers.items()}}
+    for env in envs.values():
+        env.reset(seed=0)
+    return {name: partial(env.step, action) for name, env in envs.items()}
+
+
+def user_steppers() -> tuple[dict[str, Callable[[], Any]], dict[str, int]]:
+    """The timed functions (name -> function) and the env-steps of one call of each."""
+    fns: dict[str, Callable[[], Any]] = {
+        "gym": level_stepper(paper(), 0),
+        "bare": level_stepper(paper(), -1),
+        **wrapper_steppers(paper()),
+        "native": _timing.native_stepper(paper(), BATCH),
+        "parallel": parallel_stepper(paper()),
+        "dicts": api_dicts(paper()),
+        "native_10": _timing.native_stepper(paper(n_agents=10), BATCH),
+        "parallel_10": parallel_stepper(paper(n_agents=10)),
+        "dicts_10": api_dicts(paper(n_agents=10)),
+        "gym_20": level_stepper(paper(n_paths=20), 0),
+        "native_20": _timing.native_stepper(paper(n_paths=20), BATCH),
+    }
     per_call = {name: BATCH if name.startswith("native") else 1 for name in fns}
-    return fns, per_call, chain
+    return fns, per_call
 
 
 # ----------------------------------------------------------------------------- workers
 def worker_steps(seconds: float, rounds: int, cold_steps: int) -> dict[str, Any]:
     """In a fresh process: seconds per env-step of every stepper ("warm", medians of
     interleaved rounds), of the `gym.make` env's first `cold_steps` steps ("cold", before
-    anything else steps), and `gym.make`'s chain."""
-    fns, per_call, chain = user_steppers()
+    anything else steps), and `gym.make`'s chain of wrappers (class names, outermost first)."""
+    fns, per_call = user_steppers()
+    chain = [type(level).__name__ for level in wrapper_chain(paper())]
     start = time.perf_counter()
     for _ in range(cold_steps):
-        fns["level_0"]()
+        fns["gym"]()
     cold = (time.perf_counter() - start) / cold_steps
     warm = _timing.interleaved_for(fns, seconds, rounds)
     warm = {name: t / per_call[name] for name, t in warm.items()}
@@ -207,7 +245,7 @@ WORKERS = {"steps": worker_steps, "ppo": worker_ppo}
 #: (figure, numerator, denominators): seconds per env-step of the numerator over the sum of
 #: the denominators', per process
 STEP_RATIOS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
-    (f"`gym.make` env step / native per-env step (B = {BATCH}), 1 path", "level_0", ("native",)),
+    (f"`gym.make` env step / native per-env step (B = {BATCH}), 1 path", "gym", ("native",)),
     ("bare `SwarmEnv` step (no wrapper) / native per-env step", "bare", ("native",)),
     ("PettingZoo step, N = 100 / native per-env step", "parallel", ("native",)),
     ("PettingZoo step, N = 100 / its five dicts alone", "parallel", ("dicts",)),
@@ -217,31 +255,25 @@ STEP_RATIOS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("PettingZoo step, N = 10 / its five dicts alone", "parallel_10", ("dicts_10",)),
     ("PettingZoo step, N = 10 / (native per-env step + five dicts)", "parallel_10",
      ("native_10", "dicts_10")),
-    ("`gym.make` env step / native per-env step, 20 paths", "level_0_20", ("native_20",)),
+    ("`gym.make` env step / native per-env step, 20 paths", "gym_20", ("native_20",)),
 )  # fmt: skip
-
-
-def with_bare(warm: dict[str, float]) -> dict[str, float]:
-    """`warm` with "bare": the innermost level of `gym.make`'s chain."""
-    levels = [int(name[6:]) for name in warm if name.startswith("level_") and name[6:].isdigit()]
-    return {**warm, "bare": warm[f"level_{max(levels)}"]}
 
 
 def step_rows(answers: dict[str, list[Any]]) -> list[dict[str, Any]]:
     """The step figures: per figure the median over the new processes of its ratio, and where
     there is a baseline the median old seconds over the median new seconds of its numerator."""
-    new = [with_bare(a["warm"]) for a in answers["new"]]
-    old = [with_bare(a["warm"]) for a in answers.get("old", [])]
+    new = [a["warm"] for a in answers["new"]]
+    old = [a["warm"] for a in answers.get("old", [])]
     rows = []
     for figure, num, dens in STEP_RATIOS:
         ratios = [w[num] / sum(w[d] for d in dens) for w in new]
         rows.append({"figure": figure, "value": float(np.median(ratios)), **ab(num, new, old)})
-    chain = answers["new"][0]["chain"]
-    for i, wrapper in enumerate(chain[:-1]):
-        shares = [(w[f"level_{i}"] - w[f"level_{i + 1}"]) / w["level_0"] for w in new]
-        rows.append({"figure": f"{wrapper}'s share of the `gym.make` step", "percent": True,
-                     "value": float(np.median(shares))})  # fmt: skip
-    colds = [a["cold"] / a["warm"]["level_0"] for a in answers["new"]]
+    for wrapper in answers["new"][0]["chain"][:-1]:
+        if f"stub_{wrapper}" in new[0]:
+            shares = [(w[f"stub_{wrapper}"] - w["stub"]) / w["gym"] for w in new]
+            rows.append({"figure": f"{wrapper}'s share of the `gym.make` step", "percent": True,
+                         "value": float(np.median(shares))})  # fmt: skip
+    colds = [a["cold"] / a["warm"]["gym"] for a in answers["new"]]
     rows.append({"figure": "`gym.make` env, first steps of a fresh process / warm",
                  "value": float(np.median(colds))})  # fmt: skip
     return rows
@@ -276,12 +308,14 @@ def print_tables(steps: list[dict[str, Any]], ppo: list[dict[str, Any]], baselin
     header += ["A/B: old / new seconds of the step"] if baseline else []
     rows = []
     for row in steps:
-        value = f"{100 * row['value']:.0f} %" if row.get("percent") else f"{row['value']:.2f}"
+        value = f"{100 * row['value']:.1f} %" if row.get("percent") else f"{row['value']:.2f}"
         cells = [row["figure"], value]
         if baseline:
             cells.append(f"{row['old_over_new']:.2f}" if "old_over_new" in row else "")
         rows.append(cells)
     _timing.print_table(header, rows)
+    if not ppo:
+        return
     header = ["PPO end to end", "swarm env-steps/s of learn (this host)",
               "env's share of learn"]  # fmt: skip
     header += ["A/B: new / old env-steps/s"] if baseline else []
