@@ -308,7 +308,8 @@ def print_tables(steps: list[dict[str, Any]], ppo: list[dict[str, Any]], baselin
     header += ["A/B: old / new seconds of the step"] if baseline else []
     rows = []
     for row in steps:
-        value = f"{100 * row['value']:.1f} %" if row.get("percent") else f"{row['value']:.2f}"
+        percent = round(100 * row["value"], 1) + 0.0  # (+ 0.0: no "-0.0 %")
+        value = f"{percent:.1f} %" if row.get("percent") else f"{row['value']:.2f}"
         cells = [row["figure"], value]
         if baseline:
             cells.append(f"{row['old_over_new']:.2f}" if "old_over_new" in row else "")
