@@ -29,13 +29,16 @@ over `--processes` fresh processes):
 5. parameter-shared PPO through SuperSuit (one sub-env per agent, the builder `agent-envs
    train` uses; batch 640 as `training/hyperparams/ppo.yml`), the same figures.
 
-Cold: the first `--cold-steps` (50) steps of the `gym.make` env, the first thing a fresh
-process steps, over its warm step. A/B: `--baseline-python PY` runs every fresh process also
-with the interpreter PY (say the venv of an older checkout; this script and its helpers run
-there against that checkout's `agent_envs`), alternating the two within each round, and adds
-old / new seconds of each user step and new / old env-steps/s of each PPO run.
+Cold: the first `--cold-steps` (50) steps of a `gym.make` env, the first thing a fresh process
+steps, over the same steps of a new env once the process is warm (median of `--rounds` envs).
 
-    python benchmarks/bench_user_step.py              # 3 processes, ~3 min
+A/B: `--baseline-python PY` runs every fresh process also with the interpreter PY (say the venv
+of an older checkout; this script and its helpers run there against that checkout's
+`agent_envs`), alternating the two within each round, and adds old / new seconds of each user
+step and new / old env-steps/s of each PPO run. Two runs of one tree read 0.8-1.25 on the PPO
+rows on a shared 2-core machine: use `--processes 5` or more to see a change under 1.5x.
+
+    python benchmarks/bench_user_step.py              # 3 processes, ~2 min (A/B: ~5 min)
     python benchmarks/bench_user_step.py --quick      # 1 process, tiny PPO budgets (~30 s)
     python benchmarks/bench_user_step.py --baseline-python OLD/.venv/bin/python --json out.json
 """
@@ -214,19 +217,28 @@ def user_steppers() -> tuple[dict[str, Callable[[], Any]], dict[str, int]]:
 
 
 # ----------------------------------------------------------------------------- workers
+def first_steps(steps: int) -> float:
+    """Seconds per step of the first `steps` steps of a new `gym.make` env (seeds 0, 1, ...)."""
+    step = level_stepper(paper(), 0)
+    start = time.perf_counter()
+    for _ in range(steps):
+        step()
+    return (time.perf_counter() - start) / steps
+
+
 def worker_steps(seconds: float, rounds: int, cold_steps: int) -> dict[str, Any]:
-    """In a fresh process: seconds per env-step of every stepper ("warm", medians of
-    interleaved rounds), of the `gym.make` env's first `cold_steps` steps ("cold", before
-    anything else steps), and `gym.make`'s chain of wrappers (class names, outermost first)."""
+    """In a fresh process: seconds per step of the first `cold_steps` steps of a `gym.make`
+    env, the first thing the process steps ("cold"), and of the same steps of a new env once
+    the process is warm ("warm_first", the median of `rounds` envs); seconds per env-step of
+    every stepper ("warm", medians of interleaved rounds); `gym.make`'s chain of wrappers
+    (class names, outermost first)."""
+    cold = first_steps(cold_steps)
     fns, per_call = user_steppers()
     chain = [type(level).__name__ for level in wrapper_chain(paper())]
-    start = time.perf_counter()
-    for _ in range(cold_steps):
-        fns["gym"]()
-    cold = (time.perf_counter() - start) / cold_steps
     warm = _timing.interleaved_for(fns, seconds, rounds)
     warm = {name: t / per_call[name] for name, t in warm.items()}
-    return {"warm": warm, "cold": cold, "chain": chain}
+    warm_first = float(np.median([first_steps(cold_steps) for _ in range(rounds)]))
+    return {"warm": warm, "cold": cold, "warm_first": warm_first, "chain": chain}
 
 
 def worker_ppo(
@@ -273,7 +285,7 @@ def step_rows(answers: dict[str, list[Any]]) -> list[dict[str, Any]]:
             shares = [(w[f"stub_{wrapper}"] - w["stub"]) / w["gym"] for w in new]
             rows.append({"figure": f"{wrapper}'s share of the `gym.make` step", "percent": True,
                          "value": float(np.median(shares))})  # fmt: skip
-    colds = [a["cold"] / a["warm"]["gym"] for a in answers["new"]]
+    colds = [a["cold"] / a["warm_first"] for a in answers["new"]]
     rows.append({"figure": "`gym.make` env, first steps of a fresh process / warm",
                  "value": float(np.median(colds))})  # fmt: skip
     return rows
