@@ -64,7 +64,7 @@ PAPER: dict[str, Any] = {
 }  # fmt: skip
 #: envs in the native vector env whose per-env step is the floor
 BATCH = 64
-#: (vector env, envs, n_steps, budget in swarm env-steps, batch_size) of the PPO runs
+#: --quick -> (vector env, envs, n_steps, budget in swarm env-steps, batch_size) of the PPO runs
 PPO_RUNS = {
     False: (("dummy", 4, 512, 4096, None), ("native", 4, 512, 4096, None),
             ("supersuit", 1, 128, 256, 640)),
