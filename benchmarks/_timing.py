@@ -13,9 +13,11 @@ inherit the setting. It uses public names of `agent_envs` only.
   step, the kernel matrix p_kl = w / (alpha^2 + (x_l - x_k)^2) and the drift
   (P x - (P 1) * x) / N for x (paths, N, 1).
 - `interleaved`: the median seconds per call of several functions timed in alternating rounds
-  (one machine speed for every side of a ratio).
+  (one machine speed for every side of a ratio); `interleaved_for`: the same with each
+  function's own number of calls (about the same seconds a round each).
 - `CallTimes`, `wrap_compiled`: seconds inside wrapped public functions (the compiled calls).
-- `run_fresh`, `serve_worker`: a worker function in a fresh interpreter (cold figures).
+- `run_fresh`, `serve_worker`: a worker function in a fresh interpreter (cold figures);
+  `alternate_fresh`: one worker in several interpreters, fresh processes in turn (A/B runs).
 - `print_table`: a Markdown table.
 """
 
@@ -207,6 +209,23 @@ def interleaved(fns: dict[str, Callable[[], Any]], calls: int, rounds: int) -> d
     return {name: float(np.median(t)) for name, t in times.items()}
 
 
+def interleaved_for(
+    fns: dict[str, Callable[[], Any]], seconds: float, rounds: int
+) -> dict[str, float]:
+    """Median over `rounds` interleaved rounds of the seconds per call of each function, each
+    called `calls_for(fn, seconds)` times a round (so a slow and a fast function both take
+    about `seconds` a round; the two calls that size it come first, untimed)."""
+    calls = {name: calls_for(fn, seconds, least=1) for name, fn in fns.items()}
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    for _ in range(rounds):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            for _ in range(calls[name]):
+                fn()
+            times[name].append((time.perf_counter() - start) / calls[name])
+    return {name: float(np.median(t)) for name, t in times.items()}
+
+
 def calls_for(fn: Callable[[], Any], seconds: float, least: int = 2) -> int:
     """How many calls of `fn` take about `seconds` (from one timed call after a warm-up)."""
     fn()
@@ -307,6 +326,19 @@ def run_fresh(script: str, worker: str, python: str | None = None, **kwargs: Any
     if done.returncode != 0:
         raise RuntimeError(f"worker {worker} failed:\n{done.stderr[-3000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def alternate_fresh(
+    script: str, worker: str, pythons: dict[str, str | None], processes: int, **kwargs: Any
+) -> dict[str, list[Any]]:
+    """`processes` rounds of `worker` in a fresh process of each interpreter of `pythons`
+    (label -> path, None for this one), in turn within a round (the sides of an A/B share the
+    machine's load): label -> the answers, in round order."""
+    answers: dict[str, list[Any]] = {label: [] for label in pythons}
+    for _ in range(processes):
+        for label, python in pythons.items():
+            answers[label].append(run_fresh(script, worker, python, **kwargs))
+    return answers
 
 
 def add_worker_arguments(parser: argparse.ArgumentParser, workers: Sequence[str]) -> None:

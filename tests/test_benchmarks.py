@@ -8,6 +8,7 @@ checks that a script exits 0 and prints its table, not its figures (they move wi
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -28,7 +29,10 @@ QUICK_TABLES = {
     "bench_step_breakdown.py": "call (share of the step)",
     "bench_device.py": "",  # (without CUDA: says so and exits 0)
     "bench_vector_env.py": "native / sync",
+    "bench_user_step.py": "native per-env step",
 }
+#: the benchmarks' own helper modules (public names of agent_envs only, like the scripts)
+HELPERS = ("_timing.py", "_ppo_timing.py")
 
 
 def test_every_throughput_benchmark_is_listed():
@@ -48,12 +52,14 @@ def test_every_throughput_benchmark_is_listed():
 
 
 def test_benchmarks_use_public_names_of_agent_envs_only():
-    """No `module._private` access into agent_envs from the benchmark scripts (the helper
-    `_timing` is the benchmarks' own module)."""
+    """No `module._private` access into agent_envs from the benchmark scripts (the helpers
+    `_timing` and `_ppo_timing` are the benchmarks' own modules)."""
     for name in QUICK_TABLES:
         text = (BENCHMARKS / name).read_text()
         assert not re.findall(r"\b(?!_timing\b)[a-z]\w*\._[a-z]\w*", text), name
-    assert not re.findall(r"\b[a-z]\w*\._[a-z]\w*", (BENCHMARKS / "_timing.py").read_text())
+    for name in HELPERS:
+        text = (BENCHMARKS / name).read_text()
+        assert not re.findall(r"\b[a-z]\w*\._[a-z]\w*", text), name
 
 
 @pytest.mark.slow
@@ -67,3 +73,22 @@ def test_quick_mode_runs(script):
     )
     assert done.returncode == 0, done.stderr[-2000:] + done.stdout[-2000:]
     assert QUICK_TABLES[script] in done.stdout
+
+
+@pytest.mark.slow
+def test_user_step_ab_mode_writes_its_figures(tmp_path):
+    """`bench_user_step.py --baseline-python` runs both interpreters and adds the A/B column
+    (here the same interpreter twice: the column is there, its values near 1)."""
+    out = tmp_path / "figures.json"
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "bench_user_step.py"), "--quick", "--skip-ppo",
+         "--baseline-python", sys.executable, "--json", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:] + done.stdout[-2000:]
+    assert "A/B: old / new seconds of the step" in done.stdout
+    figures = json.loads(out.read_text())
+    assert len(figures["raw"]["steps"]["old"]) == len(figures["raw"]["steps"]["new"]) == 1
+    assert all(row["old_over_new"] > 0 for row in figures["steps"] if "old_over_new" in row)
