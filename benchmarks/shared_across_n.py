@@ -4,8 +4,8 @@ A per-agent policy (PettingZoo training; its observation is one agent's row, her
 ``"swarm"`` layout of docs/env-options.md) runs at any N: `PerAgentPolicy` builds the N rows
 from the Gymnasium observation. This script evaluates the final models of the given runs with
 `agent_envs.training.commands.evaluate.evaluate_policies` on the paper setting
-(`training.commands.presets.PAPER_ENV`) with ``n_agents`` replaced, next to the proportional and zero
-controllers on the same test seeds, and prints the mean cost of each and the ratio to the
+(`training.commands.presets.PAPER_ENV`) with ``n_agents`` replaced, next to the proportional
+and zero controllers on the same test seeds, and prints the mean cost of each and the ratio to the
 proportional controller (the issue's target at N = 10^4: within 2x).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/shared_across_n.py RUN [RUN ...] \\
