@@ -92,3 +92,18 @@ def test_user_step_ab_mode_writes_its_figures(tmp_path):
     figures = json.loads(out.read_text())
     assert len(figures["raw"]["steps"]["old"]) == len(figures["raw"]["steps"]["new"]) == 1
     assert all(row["old_over_new"] > 0 for row in figures["steps"] if "old_over_new" in row)
+
+
+@pytest.mark.slow
+def test_device_benchmark_measures_on_the_cpu_when_asked():
+    """Without CUDA the default quick run measures nothing, so the worker that wraps the env's
+    functions (draws, advance) would never run here: on the CPU device it does, and its
+    shares come out (a wrapped name that moved raises instead of dropping its row)."""
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "bench_device.py"), "--quick", "--device", "cpu"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:] + done.stdout[-2000:]
+    assert "device env-steps/s (warm)" in done.stdout and "failed" not in done.stdout
