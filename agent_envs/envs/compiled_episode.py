@@ -1,0 +1,167 @@
+"""The single envs' step on the compiled envelope: `SwarmEpisode.step` in three compiled calls.
+
+Where the episode's plan says so (`StepPlan.envelope` "compiled-step" or
+"compiled-step+numpy-tail" for a single env: `step_plan.resolve_step_plan`), the Gymnasium
+and the PettingZoo env step one episode of P paths (x^n of shape (P, N, d)) with the native
+vector env's compiled prologue and epilogue (`agent_envs.envs.fast_step`, the compiled path
+"step") around the integrator's fused step, as a batch of one env (B = 1)::
+
+    u^n, c(x^n, u^n), F = L(x^n) x^n + u^n      compiled_prologue (from the action)
+    dW^n ~ N(0, tau I) (P, N, d)                  the env's generator, as `brownian_increments`
+    x^{n+1}                                       the integrator's fused step (SERB/ERB) or
+                                                  Euler-Maruyama's x + tau F + sigma dW
+    E x^{n+1}, E L(x^{n+1}) x^{n+1}, diverged,    compiled_epilogue
+    the "absolute" observation
+
+These are the numpy step's values bit for bit (`fast_step.same_as_numpy` checks the two
+compiled calls when the path loads; tests/test_compiled_episode.py checks whole episodes). The
+call returns None, before any draw, wherever it does not apply (an action that is not a
+float32/float64 numpy array of the action's shape, or not finite; a state whose L(x) the model
+does not keep; the path "step" switched off after the env was made): the numpy step
+(`SwarmEpisode.step`) then runs and validates as before. A fused step that does not apply
+or gives up takes the integrator's general step with the same draws (counted in the env's
+``plan_fallbacks``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+
+from agent_envs import arrays, native
+from agent_envs.envs.episode import StepOutcome, advance_paths, checked_advance
+from agent_envs.envs.fast_step import compiled_epilogue, compiled_prologue
+from agent_envs.integrators.exponential import GAVE_UP
+
+if TYPE_CHECKING:
+    from agent_envs.envs.episode import SwarmEpisode
+
+_FLOATS = (np.float32, np.float64)
+
+
+class CompiledOutcome(NamedTuple):
+    """What one compiled episode step did: the `StepOutcome`, and (where the step did not
+    diverge) the path means E x^{n+1} (N, d) and, for the "absolute" layout, the observation
+    (2 N d + d + 1,) float32 (None otherwise: the adapter builds its layout from the means)."""
+
+    outcome: StepOutcome
+    mean_positions: np.ndarray | None
+    observation: np.ndarray | None
+
+
+def compiled_episode_step(
+    episode: SwarmEpisode,
+    rng: np.random.Generator,
+    action: Any,
+    bounds: tuple[np.ndarray, np.ndarray],
+    absolute: bool,
+) -> CompiledOutcome | None:
+    """One step of `episode` from the raw `action` (rows d entries, (rows d,) or (rows, d);
+    rows = N, or 1 for the "common" basis) on the compiled envelope (module docstring), or
+    None before any draw where it does not apply. `bounds` are the Gymnasium observation
+    space's (low, high) (2 N d + d + 1,) float32 (the global state's, for the PettingZoo env);
+    `absolute` asks for that observation."""
+    if type(action) is not np.ndarray or action.dtype not in _FLOATS:
+        return None
+    shapes, rows, d = episode.action_shapes
+    x = episode.positions
+    if action.shape not in shapes or x is None or episode.done:
+        return None
+    model = episode.model
+    cached = model.cached_linearization(x)
+    module = native.loaded("step")
+    if cached is None or module is False or not x.flags.c_contiguous:
+        return None
+    operator, drift = cached
+    spec, params = episode.config.simulation, episode.params
+    targets = episode.targets
+    found = compiled_prologue(
+        module,
+        np.ascontiguousarray(action).reshape(1, rows, d),
+        spec.max_control,
+        x[None],
+        drift[None],
+        targets,
+        params.gamma,
+    )
+    if found is None:
+        return None  # (a non-finite action: the numpy step raises)
+    controls, costs, rhs = found
+    control = controls[0]
+    dt = episode.dt
+    dw = rng.standard_normal(x.shape)  # `brownian_increments`: the same draws and bits
+    dw *= np.sqrt(dt)
+    x_next = _advance(episode, operator, rhs.reshape(x.shape), x, model.sigma * dw)
+    if x_next is None or x_next is GAVE_UP:
+        return _general_advance(episode, x, control, costs, dw, x_next is GAVE_UP)
+    drift_next = model.cached_linearization(x_next)[1]
+    means, mean_drift, observations, diverged = compiled_epilogue(
+        module,
+        x_next[None],
+        drift_next[None],
+        episode.config.divergence_threshold,
+        targets,
+        np.array([(episode.step_index + 1) / spec.n_steps]),
+        bounds,
+        absolute,
+    )
+    cost = float(costs[0])
+    if diverged[0]:
+        episode.diverged = True
+        return CompiledOutcome(StepOutcome(x, control, cost, True, False), None, None)
+    episode.positions, episode._mean_drift = x_next, mean_drift[0]
+    episode.step_index += 1
+    truncated = episode.step_index >= spec.n_steps
+    outcome = StepOutcome(x, control, cost, False, truncated)
+    return CompiledOutcome(outcome, means[0], observations[0] if absolute else None)
+
+
+def _advance(episode: SwarmEpisode, operator: Any, rhs: Any, x: Any, noise: Any) -> Any:
+    """x^{n+1} from x with rhs F(x, u) (P, N, d) and noise sigma dW: the integrator's fused
+    step (None or `GAVE_UP` where it does not apply or gives up), or Euler-Maruyama's
+    x + tau F + sigma dW and the kernel pass at x^{n+1} (its L(x^{n+1}) then kept by the
+    model), as `CompiledVectorStep._compiled_advance`."""
+    if episode.plan.fused:
+        return episode.integrator.fused_step(episode.model, operator, rhs, x, episode.dt, noise)
+    with np.errstate(over="ignore", invalid="ignore"):
+        x_next = x + episode.dt * rhs + noise
+        x_next.flags.writeable = False
+        episode.model.interaction_drift(x_next)
+    return x_next
+
+
+def _general_advance(
+    episode: SwarmEpisode,
+    x: np.ndarray,
+    control: np.ndarray,
+    costs: np.ndarray,
+    dw: np.ndarray,
+    gave_up: bool,
+) -> CompiledOutcome:
+    """The rest of the step where the fused step did not apply (`advance_paths`: the
+    integrator's step, which counts "fused-declined") or gave up (counted "fused-gave-up" by
+    the model: the integrator's general step, as its own `step` takes it then), with the same
+    draws dW; the numpy step's state update and outcome."""
+    spec = episode.config.simulation
+    t, dt, threshold = episode.time, episode.dt, episode.config.divergence_threshold
+    with arrays.hot_path_threads():
+        if gave_up:
+            with np.errstate(over="ignore", invalid="ignore"):
+                x_next = episode.integrator.general_step(
+                    episode.model, x, control[None], t, dt, episode.model.sigma * dw
+                )
+            x_next, drift, flag = checked_advance(episode.model, x_next, threshold)
+        else:
+            x_next, drift, flag = advance_paths(
+                episode.integrator, episode.model, x, control, t, dt, dw, threshold
+            )
+    diverged = bool(flag)
+    if diverged:
+        episode.diverged = True
+    else:
+        episode.positions, episode._mean_drift = x_next, drift
+        episode.step_index += 1
+    truncated = not diverged and episode.step_index >= spec.n_steps
+    outcome = StepOutcome(x, control, float(costs[0]), diverged, truncated)
+    return CompiledOutcome(outcome, None, None)
