@@ -13,6 +13,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from agent_envs.envs.attributes import EpisodeAttributes
+from agent_envs.envs.compiled_episode import compiled_episode_step
 from agent_envs.envs.episode import SwarmEpisode
 from agent_envs.envs.episode_config import EpisodeConfig, reset_options
 from agent_envs.envs.observation import (
@@ -145,6 +146,9 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             if self.render_mode is None
             else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
         )
+        # the compiled step's constants (`compiled_episode_step`)
+        self._compiled_step = self.plan.compiled_step
+        self._state_bounds = (self.state_space.low, self.state_space.high)
 
     def __repr__(self) -> str:
         # (str(env) stays PettingZoo's, the metadata name)
@@ -165,12 +169,16 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         return self._np_random
 
     # ------------------------------------------------------------------ API
-    def _observations(self) -> dict[str, np.ndarray]:
+    def _observations(self, mean_positions: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Every agent's observation, rows (views) of one (N, size) array, from the current
+        state (its path means E x where given: a compiled step's)."""
         ep = self.episode
+        if mean_positions is None:
+            mean_positions = ep.mean_positions
         rows = agent_observations(
-            ep.mean_positions,
-            ep.mean_interaction_drift,
-            ep.target,
+            mean_positions,
+            ep._mean_drift,
+            ep._target,
             ep.time_fraction,
             self._obs_space,
             self.config.observation,
@@ -200,39 +208,40 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         }
         return self._observations(), infos
 
-    def _control(self, actions: dict[str, Any]) -> np.ndarray:
+    def _stacked_actions(self, actions: dict[str, Any]) -> Any:
+        """The live agents' actions stacked (N, d) (or (N,) for d = 1 scalars) in agent order,
+        after the checks of the dict: every live agent and no other, each a numpy array of a
+        real dtype (stacking would promote a bool or an int action among float ones silently,
+        so every value's own dtype is checked). Where a value is not, each agent's action is
+        checked alone, so that the error names the agent."""
         if not self.agents:
             raise RuntimeError("the episode is over (no live agents); call reset() first")
         if not isinstance(actions, dict):
             raise TypeError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        missing = [a for a in self.agents if a not in actions]
-        extra = [a for a in actions if a not in self._agent_index]
-        if missing or extra:
+        if actions.keys() != self._agent_index.keys():  # (every agent is live while any is)
+            missing = [a for a in self.agents if a not in actions]
+            extra = [a for a in actions if a not in self._agent_index]
             raise ValueError(
                 f"actions must hold one action per live agent; missing {missing[:5]}"
                 f"{'...' if len(missing) > 5 else ''}, unknown {extra[:5]}"
             )
         n, d = self.config.params.n_agents, self.config.params.dim
-        agent_shapes = ((d,), ()) if d == 1 else ((d,),)
         values = [actions[a] for a in self.possible_agents]
-        # fast path: numpy arrays of a real dtype (stacking would promote a bool or an int
-        # action among float ones silently, so every value's own dtype is checked)
-        stacked = None
         if all(isinstance(v, (np.ndarray, np.generic)) and v.dtype.kind in "iuf" for v in values):
             try:
                 stacked = np.asarray(values)
             except ValueError:  # ragged: the slow path names the agent
                 stacked = None
-        fast = stacked is not None and stacked.shape in ((n, d), (n,) if d == 1 else (n, d))
-        if not fast:  # slow path: check every agent's action to name the offending one
-            rows = []
-            for agent in self.possible_agents:
-                arr = real_array(f"actions[{agent!r}]", actions[agent])  # names the agent
-                if arr.shape not in agent_shapes:
-                    raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {arr.shape}")
-                rows.append(arr.reshape(d))
-            stacked = np.stack(rows)
-        return self.episode.control_from_action(stacked, name="actions")
+            if stacked is not None and stacked.shape in ((n, d), (n,) if d == 1 else (n, d)):
+                return stacked
+        agent_shapes = ((d,), ()) if d == 1 else ((d,),)
+        rows = []
+        for agent in self.possible_agents:
+            arr = real_array(f"actions[{agent!r}]", actions[agent])  # names the agent
+            if arr.shape not in agent_shapes:
+                raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {arr.shape}")
+            rows.append(arr.reshape(d))
+        return np.stack(rows)
 
     def step(
         self, actions: dict[str, Any]
@@ -243,23 +252,39 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         dict[str, bool],
         dict[str, dict[str, Any]],
     ]:
-        control = self._control(actions)
-        outcome = self.episode.step(self.np_random, control)
-        self.last_control = control
-        rewards_arr = self.episode.agent_rewards(outcome)
-        costs = self.episode.agent_costs(outcome)
+        episode = self.episode
+        stacked = self._stacked_actions(actions)
+        found = None
+        if self._compiled_step:  # the plan's compiled envelope (`compiled_episode_step`)
+            found = compiled_episode_step(
+                episode, self.np_random, stacked, self._state_bounds, False
+            )
+            if found is None:
+                episode.fallbacks["compiled-step-declined"] += 1
+        if found is None:
+            control = episode.control_from_action(stacked, name="actions")
+            outcome = episode.step(self.np_random, control)
+            means = None
+        else:
+            outcome, means = found.outcome, found.mean_positions
+        self.last_control = outcome.control
+        costs = episode.agent_costs(outcome)
+        if self.config.agent_reward == "team":
+            rewards_arr = np.full(self.config.params.n_agents, episode.reward(outcome))
+        else:  # (`SwarmEpisode.agent_rewards`, from the costs taken once)
+            rewards_arr = -(episode.dt / episode.n_agents) * costs
         agents = self.agents
-        rewards = {a: float(r) for a, r in zip(agents, rewards_arr, strict=True)}
+        rewards = dict(zip(agents, rewards_arr.tolist(), strict=True))
         terminations = dict.fromkeys(agents, outcome.diverged)
         truncations = dict.fromkeys(agents, outcome.truncated)
-        time = self.episode.time
+        time, diverged = episode.time, outcome.diverged
         infos = {
-            a: {"time": time, "running_cost": float(c), "diverged": outcome.diverged}
-            for a, c in zip(agents, costs, strict=True)
+            a: {"time": time, "running_cost": c, "diverged": diverged}
+            for a, c in zip(agents, costs.tolist(), strict=True)
         }
-        observations = self._observations()
+        observations = self._observations(means)
         if self._renderer is not None and not outcome.diverged:
-            self._renderer.record(time, self.episode.mean_positions)
+            self._renderer.record(time, episode.mean_positions)
             if self.render_mode == "human":
                 self.render()
         if outcome.diverged or outcome.truncated:
