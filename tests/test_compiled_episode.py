@@ -106,12 +106,26 @@ def test_gymnasium_layouts_and_bases(observation, action_basis):
     "kwargs",
     [{"dim": 2}, {"n_paths": 3}, {"dim": 2, "n_paths": 4, "action_basis": "common"},
      {"integrator": "em"}, {"integrator": "erb"}, {"n_paths": 20, "n_agents": 100},
-     {"target": 0.3, "gamma": 0.2}],
+     {"target": 0.3, "gamma": 0.2}, {"integrator": "heun", "dim": 2}, {"integrator": "ee"},
+     {"n_agents": 10}, {"n_agents": 60, "dim": 2, "action_basis": "common"},
+     {"jacobian": "exact"}, {"phi_method": "eigh", "n_paths": 2}],
 )  # fmt: skip
 def test_gymnasium_shapes_and_schemes(kwargs):
     fast, slow = gym_pair(**{**SMALL, **kwargs})
     assert fast.unwrapped.plan.compiled_step
     run_gym(fast, slow)
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"action_basis": "modes"}, {"kernel": "nonsymmetric"}, {"n_agents": 2000}]
+)
+def test_where_the_plan_keeps_numpy(kwargs):
+    """The "modes" basis, a kernel without the compiled pass, a matrix-free swarm: numpy."""
+    env = gym.make(ENV_ID, **{**SMALL, **kwargs}).unwrapped
+    assert env.plan.envelope == "numpy" and not env._compiled_step
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    assert not env.plan_fallbacks
 
 
 def test_gymnasium_divergence_and_reset_options():
@@ -201,9 +215,9 @@ def run_pz(fast, slow, steps: int = 16, seed: int = 2, push: bool = False) -> tu
 
 @pytest.mark.parametrize("observation", ["absolute", "relative", "swarm"])
 @pytest.mark.parametrize("agent_reward", ["own", "team"])
-@pytest.mark.parametrize("shape", [{}, {"dim": 2, "n_paths": 3}])
+@pytest.mark.parametrize("shape", [{}, {"dim": 2, "n_paths": 3}, {"n_agents": 10}])
 def test_pettingzoo_layouts_and_rewards(observation, agent_reward, shape):
-    fast, slow = pz_pair(observation=observation, agent_reward=agent_reward, **SMALL, **shape)
+    fast, slow = pz_pair(observation=observation, agent_reward=agent_reward, **{**SMALL, **shape})
     assert fast.plan.envelope == "compiled-step+numpy-tail"
     assert run_pz(fast, slow)[0] >= 2
     assert not fast.plan_fallbacks

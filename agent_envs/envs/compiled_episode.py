@@ -8,8 +8,8 @@ vector env's compiled prologue and epilogue (`agent_envs.envs.fast_step`, the co
 
     u^n, c(x^n, u^n), F = L(x^n) x^n + u^n      compiled_prologue (from the action)
     dW^n ~ N(0, tau I) (P, N, d)                  the env's generator, as `brownian_increments`
-    x^{n+1}                                       the integrator's fused step (SERB/ERB) or
-                                                  Euler-Maruyama's x + tau F + sigma dW
+    x^{n+1}                                       the integrator's fused step (SERB/ERB on
+                                                  the Lanczos) or its own step (numpy)
     E x^{n+1}, E L(x^{n+1}) x^{n+1}, diverged,    compiled_epilogue
     the "absolute" observation
 
@@ -89,10 +89,9 @@ def compiled_episode_step(
         return None  # (a non-finite action: the numpy step raises)
     controls, costs, rhs = found
     control = controls[0]
-    dt = episode.dt
     dw = rng.standard_normal(x.shape)  # `brownian_increments`: the same draws and bits
-    dw *= np.sqrt(dt)
-    x_next = _advance(episode, operator, rhs.reshape(x.shape), x, model.sigma * dw)
+    dw *= np.sqrt(episode.dt)
+    x_next = _advance(episode, operator, rhs.reshape(x.shape), x, control, dw)
     if x_next is None or x_next is GAVE_UP:
         return _general_advance(episode, x, control, costs, dw, x_next is GAVE_UP)
     drift_next = model.cached_linearization(x_next)[1]
@@ -117,17 +116,19 @@ def compiled_episode_step(
     return CompiledOutcome(outcome, means[0], observations[0] if absolute else None)
 
 
-def _advance(episode: SwarmEpisode, operator: Any, rhs: Any, x: Any, noise: Any) -> Any:
-    """x^{n+1} from x with rhs F(x, u) (P, N, d) and noise sigma dW: the integrator's fused
-    step (None or `GAVE_UP` where it does not apply or gives up), or Euler-Maruyama's
-    x + tau F + sigma dW and the kernel pass at x^{n+1} (its L(x^{n+1}) then kept by the
-    model), as `CompiledVectorStep._compiled_advance`."""
+def _advance(episode: SwarmEpisode, operator: Any, rhs: Any, x: Any, control: Any, dw: Any) -> Any:
+    """x^{n+1} from x (P, N, d) under the control u (N, d) with F(x, u) = `rhs` and the draws
+    dW: the integrator's fused step (None or `GAVE_UP` where it does not apply or gives up),
+    or its own `step` (the numpy step's call: any scheme, any phi-action) and the kernel pass
+    at x^{n+1} (its L(x^{n+1}) then kept by the model for the epilogue and the next step)."""
+    model, integrator, dt = episode.model, episode.integrator, episode.dt
     if episode.plan.fused:
-        return episode.integrator.fused_step(episode.model, operator, rhs, x, episode.dt, noise)
+        return integrator.fused_step(model, operator, rhs, x, dt, model.sigma * dw)
     with np.errstate(over="ignore", invalid="ignore"):
-        x_next = x + episode.dt * rhs + noise
+        with arrays.hot_path_threads():
+            x_next = integrator.step(model, x, control[None], episode.time, dt, dw)
         x_next.flags.writeable = False
-        episode.model.interaction_drift(x_next)
+        model.interaction_drift(x_next)
     return x_next
 
 

@@ -262,12 +262,11 @@ def _envelope(
     numpy_tail: bool,
     one_at_a_time: bool,
 ) -> str:
-    """The envelope of the native vector env (`SwarmVectorEnv._step_compiled`) or of a single
-    env (`compiled_episode.compiled_episode_step`): numpy, one block, every pass member by
-    member, SERB or ERB on the fused step or Euler-Maruyama, the "agents" or "common" action
-    basis ("modes" transforms its actions by numpy), and the path "step" available (checked
-    by `fast_step.same_as_numpy`); with the numpy tail for a layout other than "absolute" or
-    `numpy_tail` (SAME_STEP autoresets, the PettingZoo env's per-agent outputs)."""
+    """The native vector env's envelope (`SwarmVectorEnv._step_compiled`): numpy, one block,
+    every pass member by member, SERB or ERB on the fused step or Euler-Maruyama, the
+    "agents" or "common" action basis ("modes" transforms its actions by numpy), and the path
+    "step" available (checked by `fast_step.same_as_numpy`); with the numpy tail for a layout
+    other than "absolute" or `numpy_tail` (SAME_STEP autoresets)."""
     if not numpy or blocks != 1 or config.action_basis not in ("agents", "common"):
         return "numpy"
     if not one_at_a_time:
@@ -278,6 +277,27 @@ def _envelope(
     if not native.available("step"):
         return "numpy"
     if config.observation != "absolute" or numpy_tail:
+        return "compiled-step+numpy-tail"
+    return "compiled-step"
+
+
+def _single_envelope(config: EpisodeConfig, model: SwarmModel, env: str) -> str:
+    """A single env's envelope (`compiled_episode.compiled_episode_step`): the compiled
+    prologue and epilogue around the integrator's step (fused, or its own: any scheme) where
+    the kernel pass is the compiled one on the dense workspace (the model then keeps L(x) of
+    every state the step starts from), the action basis "agents" or "common" and the path
+    "step" available; with the numpy tail for a layout other than "absolute" and for the
+    PettingZoo env (its per-agent observations)."""
+    p, n, d = config.simulation.n_paths, config.params.n_agents, config.params.dim
+    like = _like(p, n, d)
+    if (
+        config.action_basis not in ("agents", "common")
+        or model.compiled_pass_parameters(like) is None
+        or not model._uses_workspace(like)
+        or not native.available("step")
+    ):
+        return "numpy"
+    if config.observation != "absolute" or env == "pettingzoo":
         return "compiled-step+numpy-tail"
     return "compiled-step"
 
@@ -320,8 +340,7 @@ def resolve_step_plan(
         blocks = -(-num_envs // per_block)
         envelope = _envelope(config, numpy, phi, blocks, same_step_autoreset, one_at_a_time)
     else:
-        one_at_a_time = numpy and member_by_member(config, model, 1)
-        envelope = _envelope(config, numpy, phi, 1, env == "pettingzoo", one_at_a_time)
+        envelope = _single_envelope(config, model, env)
     return StepPlan(
         env=env,
         integrator=config.simulation.integrator,

@@ -5,6 +5,7 @@ Exposed as the versioned module `agent_envs.swarm_v0` (`parallel_env`, `env`, `r
 
 from __future__ import annotations
 
+import operator
 from typing import Any, ClassVar
 
 import numpy as np
@@ -24,6 +25,18 @@ from agent_envs.envs.observation import (
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
 from agent_envs.validation import check_seed, real_array
+
+_DTYPE = operator.attrgetter("dtype")
+_REAL_KINDS = frozenset("iuf")
+
+
+def _real_numpy_values(values: list[Any]) -> bool:
+    """Whether every value is a numpy array or scalar of a real dtype (signed or unsigned int,
+    float): the types and dtypes of the N actions collected by C-level maps into sets, then
+    checked once per distinct type and dtype."""
+    if not all(issubclass(t, (np.ndarray, np.generic)) for t in set(map(type, values))):
+        return False
+    return all(dtype.kind in _REAL_KINDS for dtype in set(map(_DTYPE, values)))
 
 
 class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarray]):
@@ -226,8 +239,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
                 f"{'...' if len(missing) > 5 else ''}, unknown {extra[:5]}"
             )
         n, d = self.config.params.n_agents, self.config.params.dim
-        values = [actions[a] for a in self.possible_agents]
-        if all(isinstance(v, (np.ndarray, np.generic)) and v.dtype.kind in "iuf" for v in values):
+        values = list(map(actions.__getitem__, self.possible_agents))
+        if _real_numpy_values(values):
             try:
                 stacked = np.asarray(values)
             except ValueError:  # ragged: the slow path names the agent
