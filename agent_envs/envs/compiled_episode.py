@@ -91,7 +91,9 @@ def compiled_episode_step(
     control = controls[0]
     dw = rng.standard_normal(x.shape)  # `brownian_increments`: the same draws and bits
     dw *= np.sqrt(episode.dt)
-    x_next = _advance(episode, operator, rhs.reshape(x.shape), x, control, dw)
+    rhs = rhs.reshape(x.shape)
+    rhs.flags.writeable = False  # (read-only: the fused step's compiled call takes it as is)
+    x_next = _advance(episode, operator, rhs, x, control, dw)
     if x_next is None or x_next is GAVE_UP:
         return _general_advance(episode, x, control, costs, dw, x_next is GAVE_UP)
     drift_next = model.cached_linearization(x_next)[1]
@@ -123,7 +125,9 @@ def _advance(episode: SwarmEpisode, operator: Any, rhs: Any, x: Any, control: An
     at x^{n+1} (its L(x^{n+1}) then kept by the model for the epilogue and the next step)."""
     model, integrator, dt = episode.model, episode.integrator, episode.dt
     if episode.plan.fused:
-        return integrator.fused_step(model, operator, rhs, x, dt, model.sigma * dw)
+        noise = model.sigma * dw
+        noise.flags.writeable = False
+        return integrator.fused_step(model, operator, rhs, x, dt, noise)
     with np.errstate(over="ignore", invalid="ignore"):
         with arrays.hot_path_threads():
             x_next = integrator.step(model, x, control[None], episode.time, dt, dw)

@@ -27,6 +27,7 @@ from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
 from agent_envs.validation import check_seed, real_array
 
 _DTYPE = operator.attrgetter("dtype")
+_NDIM = operator.attrgetter("ndim")
 _REAL_KINDS = frozenset("iuf")
 
 
@@ -37,6 +38,28 @@ def _real_numpy_values(values: list[Any]) -> bool:
     if not all(issubclass(t, (np.ndarray, np.generic)) for t in set(map(type, values))):
         return False
     return all(dtype.kind in _REAL_KINDS for dtype in set(map(_DTYPE, values)))
+
+
+def _joined_rows(values: list[Any], n: int, d: int) -> np.ndarray | None:
+    """The N actions as one new writable (N, d) array where each is a C-contiguous numpy array
+    of shape (d,) and all share one real dtype (the common case): their bytes joined in one
+    C-level call, the array ``np.asarray(values)`` gives, in a third of its time; None
+    otherwise (`_stacked_actions` then stacks and checks as before)."""
+    if set(map(type, values)) != {np.ndarray}:
+        return None
+    dtypes = set(map(_DTYPE, values))
+    if len(dtypes) != 1:
+        return None
+    (dtype,) = dtypes
+    if dtype.kind not in _REAL_KINDS or not dtype.isnative or set(map(_NDIM, values)) != {1}:
+        return None
+    if set(map(len, values)) != {d}:
+        return None
+    try:
+        joined = b"".join(values)
+    except (BufferError, TypeError, ValueError):  # (a row that is not C-contiguous)
+        return None
+    return np.frombuffer(bytearray(joined), dtype=dtype).reshape(n, d)
 
 
 class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarray]):
@@ -240,6 +263,9 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             )
         n, d = self.config.params.n_agents, self.config.params.dim
         values = list(map(actions.__getitem__, self.possible_agents))
+        stacked = _joined_rows(values, n, d)
+        if stacked is not None:
+            return stacked
         if _real_numpy_values(values):
             try:
                 stacked = np.asarray(values)
