@@ -177,7 +177,9 @@ def test_a_fused_step_that_gives_up_takes_the_general_step(monkeypatch):
 
 
 def test_with_every_compiled_path_off():
-    """numba switched off: the plan says numpy, and the steps are the compiled env's."""
+    """Every compiled path switched off: the plan says numpy, and the steps are the compiled
+    env's (N = 100, d = 1, one path: the compiled kernel pass and fused Lanczos give numpy's
+    bits here; at d = 2 they differ by round-off, as before the compiled envelope)."""
     fast = gym.make(ENV_ID, **SMALL)
     with switched_off("step", "kernel", "lanczos", "fused", "noise"):
         slow = gym.make(ENV_ID, **SMALL)
@@ -226,3 +228,49 @@ def test_pettingzoo_layouts_and_rewards(observation, agent_reward, shape):
 def test_pettingzoo_divergence():
     fast, slow = pz_pair(n_agents=100, **DIVERGING)
     assert run_pz(fast, slow, steps=30, push=True)[1] >= 1
+
+
+_TRAJECTORY = """
+import hashlib, pickle
+import gymnasium as gym, numpy as np
+import agent_envs
+from agent_envs import swarm_v0
+
+def trajectory(kwargs):
+    env = gym.make("agent_envs/Swarm-v0", **kwargs)
+    par = swarm_v0.parallel_env(**kwargs)
+    rng = np.random.default_rng(1)
+    out = [env.reset(seed=4), par.reset(seed=4), env.unwrapped.plan.envelope, par.plan.envelope]
+    for _ in range(kwargs["n_steps"] + 1):
+        a = rng.uniform(-1.2, 1.2, env.action_space.shape).astype(np.float32)
+        out.append(env.step(a) if not env.unwrapped.episode.done else env.reset(seed=5))
+        acts = dict(zip(par.possible_agents, a.reshape(len(par.possible_agents), -1)))
+        out.append(par.step(acts) if par.agents else par.reset(seed=5))
+    return out
+"""
+
+
+def test_numba_off_in_a_fresh_process_gives_the_same_bits():
+    """AGENT_ENVS_NUMBA=0 (no compiled path, numba never imported): the Gymnasium and the
+    PettingZoo env's plans say numpy, and their outputs over an episode and a reset are those
+    of envs made and stepped here with every compiled path switched off (the compiled kernel
+    pass and Lanczos round differently from numpy's at d = 2: numba on and off differ by
+    round-off, as they did before the compiled envelope; the envelope itself changes nothing,
+    `test_with_every_compiled_path_off`)."""
+    import pickle
+    import subprocess
+    import sys
+
+    kwargs = {"n_agents": 100, "n_steps": 4, "dim": 2, "n_paths": 2}
+    code = _TRAJECTORY + f"import sys; sys.stdout.buffer.write(pickle.dumps(trajectory({kwargs})))"
+    env = {"AGENT_ENVS_NUMBA": "0", "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    slow = pickle.loads(done.stdout)
+    namespace: dict = {}
+    exec(_TRAJECTORY, namespace)  # (the same function in this process)
+    assert namespace["trajectory"](kwargs)[2:4] == ["compiled-step", "compiled-step+numpy-tail"]
+    with switched_off("step", "kernel", "lanczos", "fused", "noise"):
+        here = namespace["trajectory"](kwargs)
+    assert slow[2:4] == here[2:4] == ["numpy", "numpy"]
+    assert _same(here, slow)
