@@ -13,8 +13,10 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from agent_envs import native
 from agent_envs.envs.attributes import EpisodeAttributes
-from agent_envs.envs.compiled_episode import compiled_episode_step
+from agent_envs.envs.compiled_agents import compiled_agent_costs, compiled_agent_rows
+from agent_envs.envs.compiled_episode import CompiledOutcome, compiled_episode_step
 from agent_envs.envs.episode import SwarmEpisode
 from agent_envs.envs.episode_config import EpisodeConfig, reset_options
 from agent_envs.envs.observation import (
@@ -185,6 +187,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         # the compiled step's constants (`compiled_episode_step`)
         self._compiled_step = self.plan.compiled_step
         self._state_bounds = (self.state_space.low, self.state_space.high)
+        self._obs_bounds = (self._obs_space.low, self._obs_space.high)
 
     def __repr__(self) -> str:
         # (str(env) stays PettingZoo's, the metadata name)
@@ -303,11 +306,11 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         if found is None:
             control = episode.control_from_action(stacked, name="actions")
             outcome = episode.step(self.np_random, control)
-            means = None
+            costs, observations = episode.agent_costs(outcome), None
         else:
-            outcome, means = found.outcome, found.mean_positions
+            outcome = found.outcome
+            costs, observations = self._compiled_agent_outputs(found)
         self.last_control = outcome.control
-        costs = episode.agent_costs(outcome)
         if self.config.agent_reward == "team":
             rewards_arr = np.full(self.config.params.n_agents, episode.reward(outcome))
         else:  # (`SwarmEpisode.agent_rewards`, from the costs taken once)
@@ -321,7 +324,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             a: {"time": time, "running_cost": c, "diverged": diverged}
             for a, c in zip(agents, costs.tolist(), strict=True)
         }
-        observations = self._observations(means)
+        if observations is None:
+            observations = self._observations()
         if self._renderer is not None and not outcome.diverged:
             self._renderer.record(time, episode.mean_positions)
             if self.render_mode == "human":
@@ -329,6 +333,29 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         if outcome.diverged or outcome.truncated:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
+
+    def _compiled_agent_outputs(
+        self, found: CompiledOutcome
+    ) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
+        """After a compiled step: the per-agent costs (N,) and, where the step moved the state,
+        the observations (`compiled_agents`: compiled for the "absolute" and "relative"
+        layouts, numpy's `agent_observations` for "swarm"; None after a diverged or general
+        step: `_observations` of the state)."""
+        ep, outcome = self.episode, found.outcome
+        module = native.loaded("step")
+        costs = compiled_agent_costs(
+            module, outcome.start_positions[None], outcome.control[None], ep.targets,
+            ep.params.gamma,
+        )[0]  # fmt: skip
+        if found.mean_positions is None:
+            return costs, None
+        if self.config.observation == "swarm":
+            return costs, self._observations(found.mean_positions)
+        rows = compiled_agent_rows(
+            module, found.mean_positions[None], ep._mean_drift[None], ep.targets,
+            np.array([ep.time_fraction]), self._obs_bounds, self.config.observation == "relative",
+        )  # fmt: skip
+        return costs, dict(zip(self.possible_agents, rows[0], strict=True))
 
     def render(self) -> np.ndarray | None:
         if self._renderer is None:
