@@ -19,6 +19,7 @@ import pytest
 
 from agent_envs import swarm_v0
 from agent_envs.envs import fast_step
+from agent_envs.envs.compiled_agents import agents_same_as_numpy
 from agent_envs.envs.swarm_env import ENV_ID
 from agent_envs.native import loader
 
@@ -165,6 +166,21 @@ def test_other_actions_and_bad_ones_take_the_numpy_step():
         fast.step(np.zeros(99, np.float32))
 
 
+def test_strided_and_fortran_actions_take_the_compiled_step():
+    """Actions that are views (every other entry of a longer array, a Fortran-ordered (N, d)):
+    copied contiguous, the compiled step, the numpy step's bits."""
+    fast, slow = gym_pair(**{**SMALL, "dim": 2})
+    for env in (fast, slow):
+        env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        wide = rng.uniform(-1, 1, 400).astype(np.float32)
+        fortran = np.asfortranarray(rng.uniform(-1, 1, (100, 2)))
+        for a in (wide[::2], fortran):
+            assert _same(fast.step(a), slow.step(np.array(a)))
+    assert not fast.unwrapped.plan_fallbacks
+
+
 def test_a_fused_step_that_gives_up_takes_the_general_step(monkeypatch):
     """A member's Lanczos that does not converge: the integrator's general step with the same
     draws, counted once ("fused-gave-up"), as the numpy step does."""
@@ -274,3 +290,35 @@ def test_numba_off_in_a_fresh_process_gives_the_same_bits():
         here = namespace["trajectory"](kwargs)
     assert slow[2:4] == here[2:4] == ["numpy", "numpy"]
     assert _same(here, slow)
+
+
+@pytest.mark.parametrize(
+    "shape", [(1, 1, 100, 1), (2, 20, 100, 1), (1, 3, 129, 2), (1, 2, 20, 8), (1, 1, 3, 16)]
+)
+def test_the_per_agent_calls_equal_numpy_bit_for_bit(shape):
+    """`compiled_agents.agents_same_as_numpy` (part of the path's load check) on more shapes:
+    d below and above 8, N beyond numpy's pairwise block, one and many paths."""
+    assert agents_same_as_numpy(loader.loaded("step"), shapes=(shape,))
+
+
+class _OffByOneUlp:
+    """The compiled module with the per-agent costs or rows nudged by one ulp: the check sees
+    it."""
+
+    def __init__(self, what: str) -> None:
+        self.module, self.what = loader.loaded("step"), what
+
+    def agent_costs(self, *args):
+        self.module.agent_costs(*args)
+        if self.what == "costs":
+            args[-1].flat[-1] = np.nextafter(args[-1].flat[-1], np.inf)
+
+    def agent_rows(self, *args):
+        self.module.agent_rows(*args)
+        if self.what == "rows":
+            args[-1].flat[0] = np.nextafter(args[-1].flat[0], np.float32(np.inf))
+
+
+@pytest.mark.parametrize("what", ["costs", "rows"])
+def test_the_per_agent_check_sees_one_ulp(what):
+    assert not agents_same_as_numpy(_OffByOneUlp(what))

@@ -76,9 +76,11 @@ def compiled_episode_step(
     operator, drift = cached
     spec, params = episode.config.simulation, episode.params
     targets = episode.targets
+    if not action.flags.c_contiguous:
+        action = np.ascontiguousarray(action)
     found = compiled_prologue(
         module,
-        np.ascontiguousarray(action).reshape(1, rows, d),
+        action.reshape(1, rows, d),
         spec.max_control,
         x[None],
         drift[None],

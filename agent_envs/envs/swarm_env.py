@@ -304,7 +304,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
         }
         if observation is None:
             observation = self._observation()
-        reward = float(-self.dt * outcome.running_cost)  # (`SwarmEpisode.reward`)
+        reward = float(-episode.dt * outcome.running_cost)  # (`SwarmEpisode.reward`)
         return observation, reward, outcome.diverged, outcome.truncated, info
 
     def _compiled_observation(self, found: CompiledOutcome) -> np.ndarray | None:
