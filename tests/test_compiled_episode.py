@@ -241,6 +241,28 @@ def test_pettingzoo_layouts_and_rewards(observation, agent_reward, shape):
     assert not fast.plan_fallbacks
 
 
+def test_pettingzoo_actions_in_any_order_and_of_mixed_types():
+    """A dict keyed in another order than the agents', mixed float32/float64 and int actions
+    and scalars for d = 1: the same stacked actions (or the numpy step), the same bits."""
+    fast, slow = pz_pair(**SMALL)
+    for env in (fast, slow):
+        env.reset(seed=7)
+    rng = np.random.default_rng(7)
+    agents = fast.possible_agents
+    choices = (
+        lambda k: rng.uniform(-1, 1, 1).astype(np.float32),
+        lambda k: rng.uniform(-1, 1, 1),
+        lambda k: np.float32(rng.uniform(-1, 1)),
+        lambda k: np.array([k % 3 - 1]),
+    )
+    for i, kind in enumerate((0, 1, 2, 3, 4)):
+        if kind < 4:
+            acts = {a: choices[kind](k) for k, a in reversed(list(enumerate(agents)))}
+        else:  # mixed dtypes: stacking promotes to float64
+            acts = {a: choices[k % 2](k) for k, a in enumerate(agents)}
+        assert all(_same(g, w) for g, w in zip(fast.step(acts), slow.step(acts), strict=True)), i
+
+
 def test_pettingzoo_divergence():
     fast, slow = pz_pair(n_agents=100, **DIVERGING)
     assert run_pz(fast, slow, steps=30, push=True)[1] >= 1

@@ -257,15 +257,18 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             raise RuntimeError("the episode is over (no live agents); call reset() first")
         if not isinstance(actions, dict):
             raise TypeError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        if actions.keys() != self._agent_index.keys():  # (every agent is live while any is)
+        if type(actions) is dict and list(actions) == self.possible_agents:
+            values = list(actions.values())  # (the common case: keyed in the agents' order)
+        elif actions.keys() != self._agent_index.keys():  # (every agent is live while any is)
             missing = [a for a in self.agents if a not in actions]
             extra = [a for a in actions if a not in self._agent_index]
             raise ValueError(
                 f"actions must hold one action per live agent; missing {missing[:5]}"
                 f"{'...' if len(missing) > 5 else ''}, unknown {extra[:5]}"
             )
+        else:
+            values = list(map(actions.__getitem__, self.possible_agents))
         n, d = self.config.params.n_agents, self.config.params.dim
-        values = list(map(actions.__getitem__, self.possible_agents))
         stacked = _joined_rows(values, n, d)
         if stacked is not None:
             return stacked
