@@ -145,6 +145,7 @@ def test_gymnasium_divergence_and_reset_options():
                 diverged += got[2]
                 break
     assert diverged >= 1
+    assert fast.unwrapped.plan_fallbacks == {"numpy-tail": diverged}
 
 
 def test_other_actions_and_bad_ones_take_the_numpy_step():

@@ -112,6 +112,8 @@ def compiled_episode_step(
     cost = float(costs[0])
     if diverged[0]:
         episode.diverged = True
+        if episode.plan.envelope == "compiled-step":  # (the numpy observation of x^n follows)
+            episode.fallbacks["numpy-tail"] += 1
         return CompiledOutcome(StepOutcome(x, control, cost, True, False), None, None)
     episode.positions, episode._mean_drift = x_next, mean_drift[0]
     episode.step_index += 1

@@ -50,11 +50,13 @@ FALLBACKS = {
     "fused-declined": "the plan's fused step did not apply to this state (say the path 'fused' "
     "was switched off after the env was made); the general step ran (in the native vector "
     "env's compiled step: the numpy step's advance, with the same draws)",
-    "compiled-step-declined": "the native vector env's compiled step did not take this call "
-    "(actions not a float32/float64 array of the batch's shape, non-finite actions, or no "
-    "cached L(x) of the state); the numpy step ran",
-    "numpy-tail": "the native vector env's compiled step: an env diverged, so the step ended "
-    "in the numpy step's tail (`_finish_step`)",
+    "compiled-step-declined": "the compiled step (the native vector env's, or a single env's) "
+    "did not take this call (actions not a float32/float64 array of the batch's or the "
+    "action's shape, non-finite actions, no cached L(x) of the state, or no state to step); "
+    "the numpy step ran",
+    "numpy-tail": "the compiled step on the envelope 'compiled-step': an env diverged, so the "
+    "step ended in the numpy step's tail (the native vector env's `_finish_step`; a single "
+    "env's observation of the state it keeps)",
 }
 
 #: `StepPlan.envelope` values: the compiled prologue and epilogue around the integrator's step
