@@ -193,6 +193,17 @@ def test_a_fused_step_that_gives_up_takes_the_general_step(monkeypatch):
     assert fast.unwrapped.plan_fallbacks["fused-gave-up"] == 8
 
 
+def test_a_fused_step_switched_off_after_the_env_was_made():
+    """The path "fused" off after the envs were made: the plan keeps the fused step, which
+    declines in every step; the integrator's general step with the same draws, counted once
+    per step ("fused-declined") as the numpy step counts it."""
+    fast, slow = gym_pair(**SMALL)
+    with switched_off("fused"):
+        run_gym(fast, slow, steps=8)
+    assert fast.unwrapped.plan_fallbacks == slow.unwrapped.plan_fallbacks
+    assert fast.unwrapped.plan_fallbacks["fused-declined"] == 8
+
+
 def test_with_every_compiled_path_off():
     """Every compiled path switched off: the plan says numpy, and the steps are the compiled
     env's (N = 100, d = 1, one path: the compiled kernel pass and fused Lanczos give numpy's

@@ -98,11 +98,13 @@ def compiled_episode_step(
     x_next = _advance(episode, operator, rhs, x, control, dw)
     if x_next is None or x_next is GAVE_UP:
         return _general_advance(episode, x, control, costs, dw, x_next is GAVE_UP)
-    drift_next = model.cached_linearization(x_next)[1]
+    cached_next = model.cached_linearization(x_next)
+    if cached_next is None or not (x_next.flags.c_contiguous and cached_next[1].flags.c_contiguous):
+        return _numpy_tail(episode, x, x_next, control, costs)  # (not expected: no such step)
     means, mean_drift, observations, diverged = compiled_epilogue(
         module,
         x_next[None],
-        drift_next[None],
+        cached_next[1][None],
         episode.config.divergence_threshold,
         targets,
         np.array([(episode.step_index + 1) / spec.n_steps]),
@@ -152,7 +154,6 @@ def _general_advance(
     integrator's step, which counts "fused-declined") or gave up (counted "fused-gave-up" by
     the model: the integrator's general step, as its own `step` takes it then), with the same
     draws dW; the numpy step's state update and outcome."""
-    spec = episode.config.simulation
     t, dt, threshold = episode.time, episode.dt, episode.config.divergence_threshold
     with arrays.hot_path_threads():
         if gave_up:
@@ -160,11 +161,31 @@ def _general_advance(
                 x_next = episode.integrator.general_step(
                     episode.model, x, control[None], t, dt, episode.model.sigma * dw
                 )
-            x_next, drift, flag = checked_advance(episode.model, x_next, threshold)
-        else:
-            x_next, drift, flag = advance_paths(
-                episode.integrator, episode.model, x, control, t, dt, dw, threshold
-            )
+            return _numpy_tail(episode, x, x_next, control, costs)
+        found = advance_paths(episode.integrator, episode.model, x, control, t, dt, dw, threshold)
+    return _finish(episode, x, control, costs, *found)
+
+
+def _numpy_tail(
+    episode: SwarmEpisode, x: np.ndarray, x_next: np.ndarray, control: np.ndarray, costs: Any
+) -> CompiledOutcome:
+    """The numpy step's checks and path means at x^{n+1} (`checked_advance`), then `_finish`."""
+    found = checked_advance(episode.model, x_next, episode.config.divergence_threshold)
+    return _finish(episode, x, control, costs, *found)
+
+
+def _finish(
+    episode: SwarmEpisode,
+    x: np.ndarray,
+    control: np.ndarray,
+    costs: Any,
+    x_next: np.ndarray,
+    drift: np.ndarray,
+    flag: Any,
+) -> CompiledOutcome:
+    """`SwarmEpisode.step`'s state update and outcome from x^{n+1}, its mean drift and the
+    divergence flag (the adapter then builds the observation by numpy)."""
+    spec = episode.config.simulation
     diverged = bool(flag)
     if diverged:
         episode.diverged = True
