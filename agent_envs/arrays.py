@@ -109,6 +109,8 @@ def _torch_xp() -> Any:
 
 def is_torch(x: Any) -> bool:
     """True for a torch tensor (never imports torch)."""
+    if type(x) is np.ndarray:  # (the hot path's answer, without the module lookup)
+        return False
     return sys.modules.get("torch") is not None and is_torch_array(x)
 
 
@@ -118,7 +120,7 @@ def namespace(*arrays: Any) -> Any:
     numpy (itself) when no torch tensor is among them, `array_api_compat.torch` otherwise.
     """
     for a in arrays:
-        if is_torch(a):
+        if type(a) is not np.ndarray and is_torch(a):
             return _torch_xp()
     return _NUMPY_XP
 
@@ -241,7 +243,13 @@ def mean_axis(a: Any, axis: int) -> Any:
 
 def _reduce_axis(a: Any, axis: int, reduction: str) -> Any:
     """xp.sum or xp.mean (`reduction`) over `axis`; over one entry of a real floating array,
-    that entry + 0 in a's own dtype, a new array (numpy 1.x would promote a 0-d float32 + 0.0)."""
+    that entry + 0 in a's own dtype, a new array (numpy 1.x would promote a 0-d float32 + 0.0).
+    A numpy array takes the same calls without the namespace's dispatch."""
+    if type(a) is np.ndarray:
+        if a.shape[axis] == 1 and a.dtype.kind == "f":
+            one = a.squeeze(axis)
+            return np.add(one, 0.0, dtype=one.dtype)
+        return getattr(_NUMPY_XP, reduction)(a, axis=axis)
     xp = namespace(a)
     if a.shape[axis] == 1 and _real_floating(a):
         one = xp.squeeze(a, axis=axis)

@@ -101,8 +101,22 @@ MODULES: dict[str, tuple[str, list[str]]] = {
         "agent_envs/envs/step_plan.py",
         ["tests/test_step_plan.py", "tests/test_native_switch.py"],
     ),
-    "swarm_env": ("agent_envs/envs/swarm_env.py", ["tests/test_envs_gym.py"]),
-    "swarm_parallel": ("agent_envs/envs/swarm_parallel.py", ["tests/test_envs_pettingzoo.py"]),
+    "swarm_env": (
+        "agent_envs/envs/swarm_env.py",
+        ["tests/test_envs_gym.py", "tests/test_compiled_episode.py"],
+    ),
+    "swarm_parallel": (
+        "agent_envs/envs/swarm_parallel.py",
+        ["tests/test_envs_pettingzoo.py", "tests/test_compiled_episode.py"],
+    ),
+    "compiled_episode": (
+        "agent_envs/envs/compiled_episode.py",
+        ["tests/test_compiled_episode.py", "tests/test_step_plan.py"],
+    ),
+    "compiled_agents": (
+        "agent_envs/envs/compiled_agents.py",
+        ["tests/test_compiled_episode.py", "tests/test_envs_pettingzoo.py"],
+    ),
     "observation": (
         "agent_envs/envs/observation.py",
         ["tests/test_envs_gym.py", "tests/test_env_options.py", "tests/test_envs_pettingzoo.py"],

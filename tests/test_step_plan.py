@@ -91,17 +91,25 @@ def assert_same_bits(a: list, b: list) -> None:
     ],
 )  # fmt: skip
 def test_the_single_envs_plans(kwargs, want):
-    """The Gymnasium and the PettingZoo env resolve the same plan (their `env` aside), and
-    their integrator is built with its `phi_method`."""
+    """The Gymnasium and the PettingZoo env resolve the same plan (their `env` and envelope
+    aside: the PettingZoo env builds its per-agent outputs by numpy), and their integrator is
+    built with its `phi_method`. Their envelope is the compiled step wherever the compiled
+    kernel pass serves the dense workspace (`compiled_episode.compiled_episode_step`)."""
     plan = make(**kwargs).unwrapped.plan
     assert isinstance(plan, StepPlan)
     assert {key: getattr(plan, key) for key in want} == want
+    compiled = (
+        native_paths.available("step")
+        and plan.kernel_pass == "compiled"
+        and plan.linear_operator == "dense"
+    )
     assert (plan.env, plan.envelope, plan.num_envs, plan.blocks, plan.n_paths) == (
-        "gymnasium", "numpy", 1, 1, 1
+        "gymnasium", "compiled-step" if compiled else "numpy", 1, 1, 1
     )  # fmt: skip
     assert (plan.backend, plan.device, plan.threads) == ("numpy", "cpu", 1)
     parallel = swarm_v0.parallel_env(**kwargs)
-    assert parallel.plan == dataclasses.replace(plan, env="pettingzoo")
+    envelope = "compiled-step+numpy-tail" if compiled else "numpy"
+    assert parallel.plan == dataclasses.replace(plan, env="pettingzoo", envelope=envelope)
     integrator = parallel.episode.integrator
     assert getattr(integrator, "phi_method", plan.phi_method) == plan.phi_method
 

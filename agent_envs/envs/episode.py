@@ -108,9 +108,18 @@ def advance_paths(
         flags "diverged": some path of the env left the divergence threshold, or it or the
         interaction drift became non-finite. Entries of diverged envs are meaningless.
     """
-    xp = arrays.namespace(x)
     with _quiet_overflow(x):
         x_next = integrator.step(model, x, control[..., None, :, :], t, dt, dw)
+    return checked_advance(model, x_next, divergence_threshold)
+
+
+def checked_advance(
+    model: SwarmModel, x_next: Any, divergence_threshold: float
+) -> tuple[Any, Any, Any]:
+    """`advance_paths` after the integrator's step: x^{n+1} (..., P, N, d), E interaction
+    drift at x^{n+1} (..., N, d), and the (...) flags "diverged" (some path beyond the
+    threshold or non-finite, or the drift non-finite)."""
+    xp = arrays.namespace(x_next)
     diverged = xp.any(diverged_paths(x_next, divergence_threshold), axis=-1)
     drift = mean_interaction_drift(model, x_next)
     diverged = diverged | ~xp.all(xp.isfinite(drift), axis=(-2, -1))
@@ -171,6 +180,12 @@ class SwarmEpisode:
         self.diverged = False
         self._mean_drift: np.ndarray | None = None
         self._target = self.params.target_vector
+        n, d = self.params.n_agents, self.params.dim
+        rows = action_rows(config.action_basis, n)
+        #: the action's accepted shapes, its rows and d (the compiled step's check)
+        self.action_shapes = (((rows * d,), (rows, d)), rows, d)
+        #: xbar as a (1, d) float64 array (the compiled step's batch of one env)
+        self.targets = np.ascontiguousarray(self._target, dtype=np.float64)[None]
 
     # ----------------------------------------------------------------- state
     @property
@@ -243,6 +258,7 @@ class SwarmEpisode:
                 )
             self.params = params
             self._target = params.target_vector
+            self.targets = np.ascontiguousarray(self._target, dtype=np.float64)[None]
         x = np.broadcast_to(x0, (self.config.simulation.n_paths, n, d)).copy()
         drift = mean_interaction_drift(self.model, x)
         if not np.all(np.isfinite(drift)):

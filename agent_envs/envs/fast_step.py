@@ -8,17 +8,18 @@ path means, observations and divergence flags in another. `CompiledVectorStep`, 
 integrator's fused step, epilogue), taken where its plan's envelope is the compiled step
 (`StepPlan.envelope`).
 
-`same_as_numpy` is registered with the loader (`agent_envs.native.register_check`) when this
-module is imported; the loader runs it when the path first loads, when a native vector env
-that can use it is made. It checks the module against the numpy calls it replaces, on fixed
-random data of several shapes: the controls ("agents" and "common" bases), running costs and
-right-hand sides of `prologue` against `controls_from_actions`, `mean_running_cost` and F =
-L(x) x + u; the path means, observations and divergence flags of `epilogue` against
-`arrays.mean_axis`, `global_observation` and `advance_paths`'s checks, every value bit for bit
-(signed zeros included, values the clip cuts), on read-only states as the env passes them.
-Where numba is missing or switched off (``AGENT_ENVS_NUMBA=0``) the path is off; where a value
-differs (a numpy that sums in another order), or the module does not compile, off with a
-warning; the env then steps with its numpy calls.
+`same_as_numpy` (with `compiled_agents.agents_same_as_numpy`: `step_path_check`) is registered
+with the loader (`agent_envs.native.register_check`) when this module is imported; the loader
+runs it when the path first loads, when an env that can use it is made. It checks the module
+against the numpy calls it replaces, on fixed random data of several shapes: the controls
+("agents" and "common" bases), running costs and right-hand sides of `prologue` against
+`controls_from_actions`, `mean_running_cost` and F = L(x) x + u; the path means, observations
+and divergence flags of `epilogue` against `arrays.mean_axis`, `global_observation` and
+`advance_paths`'s checks, every value bit for bit (signed zeros included, values the clip
+cuts), on read-only states as the env passes them. Where numba is missing or switched off
+(``AGENT_ENVS_NUMBA=0``) the path is off; where a value differs (a numpy that sums in another
+order), or the module does not compile, off with a warning; the env then steps with its numpy
+calls.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import numpy as np
 
 from agent_envs import arrays, native
 from agent_envs.draws import GeneratorHandles, fill_brownian_increments
+from agent_envs.envs.compiled_agents import agents_same_as_numpy
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import global_observation, observation_space
@@ -303,4 +305,10 @@ def same_as_numpy(
     return True
 
 
-native.register_check("step", same_as_numpy, "the native vector env steps with numpy calls")
+def step_path_check(module: Any) -> bool:
+    """The load check of the path "step": `same_as_numpy` (the prologue and epilogue) and
+    `compiled_agents.agents_same_as_numpy` (the PettingZoo env's per-agent costs and rows)."""
+    return same_as_numpy(module) and agents_same_as_numpy(module)
+
+
+native.register_check("step", step_path_check, "the envs step with numpy calls")

@@ -50,16 +50,19 @@ FALLBACKS = {
     "fused-declined": "the plan's fused step did not apply to this state (say the path 'fused' "
     "was switched off after the env was made); the general step ran (in the native vector "
     "env's compiled step: the numpy step's advance, with the same draws)",
-    "compiled-step-declined": "the native vector env's compiled step did not take this call "
-    "(actions not a float32/float64 array of the batch's shape, non-finite actions, or no "
-    "cached L(x) of the state); the numpy step ran",
-    "numpy-tail": "the native vector env's compiled step: an env diverged, so the step ended "
-    "in the numpy step's tail (`_finish_step`)",
+    "compiled-step-declined": "the compiled step (the native vector env's, or a single env's) "
+    "did not take this call (actions not a float32/float64 array of the batch's or the "
+    "action's shape, non-finite actions, no cached L(x) of the state, or no state to step); "
+    "the numpy step ran",
+    "numpy-tail": "the compiled step on the envelope 'compiled-step': an env diverged, so the "
+    "step ended in the numpy step's tail (the native vector env's `_finish_step`; a single "
+    "env's observation of the state it keeps)",
 }
 
-#: `StepPlan.envelope` values: the native vector env's compiled prologue and epilogue around
-#: the integrator's step; the same with the numpy tail (observation layout other than
-#: "absolute", or SAME_STEP autoresets); numpy calls only (every single env)
+#: `StepPlan.envelope` values: the compiled prologue and epilogue around the integrator's step
+#: (the native vector env's `CompiledVectorStep`, the single envs' `compiled_episode_step`);
+#: the same with the numpy tail (observation layout other than "absolute", SAME_STEP
+#: autoresets, the PettingZoo env's per-agent observations and rewards); numpy calls only
 ENVELOPES = ("compiled-step", "compiled-step+numpy-tail", "numpy")
 
 
@@ -85,7 +88,8 @@ class StepPlan:
         kernel_pass: the pass that gives P(x) and L(x) x: "compiled" (`native.kernel`),
             "numpy", "torch", "grid" or "chunked" (the matrix-free kernel sums; a swarm too
             wide for the grid takes the chunked sum in that step).
-        envelope: `ENVELOPES`: the native vector env's compiled step or numpy.
+        envelope: `ENVELOPES`: the compiled step (the native vector env's, or the single
+            envs' as a batch of one) or numpy.
         num_envs: B (1 for the single envs).
         blocks: how many blocks of envs a numpy pass over the batch goes through.
         envs_per_block: envs per block (the last may hold fewer).
@@ -113,7 +117,7 @@ class StepPlan:
 
     @property
     def compiled_step(self) -> bool:
-        """Whether steps take the native vector env's compiled prologue and epilogue."""
+        """Whether steps take the compiled prologue and epilogue (`ENVELOPES`)."""
         return self.envelope != "numpy"
 
     @property
@@ -257,13 +261,14 @@ def _envelope(
     numpy: bool,
     phi: str,
     blocks: int,
-    same_step_autoreset: bool,
+    numpy_tail: bool,
     one_at_a_time: bool,
 ) -> str:
     """The native vector env's envelope (`SwarmVectorEnv._step_compiled`): numpy, one block,
     every pass member by member, SERB or ERB on the fused step or Euler-Maruyama, the
     "agents" or "common" action basis ("modes" transforms its actions by numpy), and the path
-    "step" available (checked by `fast_step.same_as_numpy`)."""
+    "step" available (checked by `fast_step.same_as_numpy`); with the numpy tail for a layout
+    other than "absolute" or `numpy_tail` (SAME_STEP autoresets)."""
     if not numpy or blocks != 1 or config.action_basis not in ("agents", "common"):
         return "numpy"
     if not one_at_a_time:
@@ -273,7 +278,28 @@ def _envelope(
         return "numpy"
     if not native.available("step"):
         return "numpy"
-    if config.observation != "absolute" or same_step_autoreset:
+    if config.observation != "absolute" or numpy_tail:
+        return "compiled-step+numpy-tail"
+    return "compiled-step"
+
+
+def _single_envelope(config: EpisodeConfig, model: SwarmModel, env: str) -> str:
+    """A single env's envelope (`compiled_episode.compiled_episode_step`): the compiled
+    prologue and epilogue around the integrator's step (fused, or its own: any scheme) where
+    the kernel pass is the compiled one on the dense workspace (the model then keeps L(x) of
+    every state the step starts from), the action basis "agents" or "common" and the path
+    "step" available; with the numpy tail for a layout other than "absolute" and for the
+    PettingZoo env (its per-agent observations)."""
+    p, n, d = config.simulation.n_paths, config.params.n_agents, config.params.dim
+    like = _like(p, n, d)
+    if (
+        config.action_basis not in ("agents", "common")
+        or model.compiled_pass_parameters(like) is None
+        or not model._uses_workspace(like)
+        or not native.available("step")
+    ):
+        return "numpy"
+    if config.observation != "absolute" or env == "pettingzoo":
         return "compiled-step+numpy-tail"
     return "compiled-step"
 
@@ -294,7 +320,8 @@ def resolve_step_plan(
     the functions the hot code asks: `auto_phi_method`, the model's `matrix_free` and
     `compiled_pass_parameters`, `native.available`. For the native vector env (``env=
     "vector"``) also its blocks (`block_bytes` of kernel matrices at most, unless every pass
-    runs member by member or the backend is torch: one block) and its envelope."""
+    runs member by member or the backend is torch: one block); the envelope of every env
+    (a single env's as a batch of one: `compiled_episode.compiled_episode_step`)."""
     cls = INTEGRATORS[config.simulation.integrator]
     numpy = backend == "numpy"
     kind = config.simulation.jacobian if cls.needs_jacobian else "frozen"
@@ -314,6 +341,8 @@ def resolve_step_plan(
         per_block = -(-num_envs // wanted)  # balanced: blocks differ by <= 1 env
         blocks = -(-num_envs // per_block)
         envelope = _envelope(config, numpy, phi, blocks, same_step_autoreset, one_at_a_time)
+    else:
+        envelope = _single_envelope(config, model, env)
     return StepPlan(
         env=env,
         integrator=config.simulation.integrator,

@@ -15,10 +15,12 @@ from gymnasium import spaces
 
 from agent_envs import native
 from agent_envs.envs.attributes import EpisodeAttributes
-from agent_envs.envs.episode import StepOutcome, SwarmEpisode
+from agent_envs.envs.compiled_episode import CompiledOutcome, compiled_episode_step
+from agent_envs.envs.episode import SwarmEpisode
 from agent_envs.envs.episode_config import EpisodeConfig, reset_options
 from agent_envs.envs.interface import action_rows
 from agent_envs.envs.observation import (
+    global_observation,
     interaction_drift_bound,
     observation_space,
 )
@@ -233,6 +235,10 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
             if self.render_mode is None
             else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
         )
+        # the compiled step's constants (`compiled_episode_step`)
+        self._compiled_step = self.plan.compiled_step
+        self._observation_bounds = (self.observation_space.low, self.observation_space.high)
+        self._absolute = self.config.observation == "absolute"
 
     def __repr__(self) -> str:
         # (str(env) stays Gymnasium's "<SwarmEnv<id>>", which the wrappers print)
@@ -272,26 +278,45 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
         return self._observation(), info
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        control = self.episode.control_from_action(action)
-        outcome: StepOutcome = self.episode.step(self.np_random, control)
+        episode = self.episode
+        found = None
+        if self._compiled_step:  # the plan's compiled envelope (`compiled_episode_step`)
+            found = compiled_episode_step(
+                episode, self.np_random, action, self._observation_bounds, self._absolute
+            )
+            if found is None:
+                episode.fallbacks["compiled-step-declined"] += 1
+        if found is None:
+            outcome = episode.step(self.np_random, episode.control_from_action(action))
+            observation = None
+        else:
+            outcome, observation = found.outcome, self._compiled_observation(found)
         if self._renderer is not None and not outcome.diverged:
-            self._renderer.record(self.episode.time, self.episode.mean_positions)
+            self._renderer.record(episode.time, episode.mean_positions)
             if self.render_mode == "human":
                 self.render()
         info = {
-            "positions": self.episode.positions.copy(),
-            "control": control,
-            "time": self.episode.time,
+            "positions": episode.positions.copy(),
+            "control": outcome.control,
+            "time": episode.time,
             "running_cost": outcome.running_cost,
             "diverged": outcome.diverged,
         }
-        return (
-            self._observation(),
-            float(self.episode.reward(outcome)),
-            outcome.diverged,
-            outcome.truncated,
-            info,
-        )
+        if observation is None:
+            observation = self._observation()
+        reward = float(-episode.dt * outcome.running_cost)  # (`SwarmEpisode.reward`)
+        return observation, reward, outcome.diverged, outcome.truncated, info
+
+    def _compiled_observation(self, found: CompiledOutcome) -> np.ndarray | None:
+        """The observation after a compiled step: the epilogue's ("absolute"), the layout's
+        from its path means, or None (a diverged or general step: `_observation`)."""
+        if found.observation is not None or found.mean_positions is None:
+            return found.observation
+        ep = self.episode
+        return global_observation(
+            found.mean_positions, ep._mean_drift, ep._target, ep.time_fraction,
+            self.observation_space, self.config.observation,
+        )  # fmt: skip
 
     def render(self) -> np.ndarray | None:
         if self._renderer is None:

@@ -5,6 +5,7 @@ Exposed as the versioned module `agent_envs.swarm_v0` (`parallel_env`, `env`, `r
 
 from __future__ import annotations
 
+import operator
 from typing import Any, ClassVar
 
 import numpy as np
@@ -12,7 +13,10 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from agent_envs import native
 from agent_envs.envs.attributes import EpisodeAttributes
+from agent_envs.envs.compiled_agents import compiled_agent_costs, compiled_agent_rows
+from agent_envs.envs.compiled_episode import CompiledOutcome, compiled_episode_step
 from agent_envs.envs.episode import SwarmEpisode
 from agent_envs.envs.episode_config import EpisodeConfig, reset_options
 from agent_envs.envs.observation import (
@@ -23,6 +27,41 @@ from agent_envs.envs.observation import (
 )
 from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
 from agent_envs.validation import check_seed, real_array
+
+_DTYPE = operator.attrgetter("dtype")
+_NDIM = operator.attrgetter("ndim")
+_REAL_KINDS = frozenset("iuf")
+
+
+def _real_numpy_values(values: list[Any]) -> bool:
+    """Whether every value is a numpy array or scalar of a real dtype (signed or unsigned int,
+    float): the types and dtypes of the N actions collected by C-level maps into sets, then
+    checked once per distinct type and dtype."""
+    if not all(issubclass(t, (np.ndarray, np.generic)) for t in set(map(type, values))):
+        return False
+    return all(dtype.kind in _REAL_KINDS for dtype in set(map(_DTYPE, values)))
+
+
+def _joined_rows(values: list[Any], n: int, d: int) -> np.ndarray | None:
+    """The N actions as one new writable (N, d) array where each is a C-contiguous numpy array
+    of shape (d,) and all share one real dtype (the common case): their bytes joined in one
+    C-level call, the array ``np.asarray(values)`` gives, in a third of its time; None
+    otherwise (`_stacked_actions` then stacks and checks as before)."""
+    if set(map(type, values)) != {np.ndarray}:
+        return None
+    dtypes = set(map(_DTYPE, values))
+    if len(dtypes) != 1:
+        return None
+    (dtype,) = dtypes
+    if dtype.kind not in _REAL_KINDS or not dtype.isnative or set(map(_NDIM, values)) != {1}:
+        return None
+    if set(map(len, values)) != {d}:
+        return None
+    try:
+        joined = b"".join(values)
+    except (BufferError, TypeError, ValueError):  # (a row that is not C-contiguous)
+        return None
+    return np.frombuffer(bytearray(joined), dtype=dtype).reshape(n, d)
 
 
 class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarray]):
@@ -145,6 +184,10 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             if self.render_mode is None
             else SwarmRenderer(self.render_mode, params.horizon, self.metadata["render_fps"])
         )
+        # the compiled step's constants (`compiled_episode_step`)
+        self._compiled_step = self.plan.compiled_step
+        self._state_bounds = (self.state_space.low, self.state_space.high)
+        self._obs_bounds = (self._obs_space.low, self._obs_space.high)
 
     def __repr__(self) -> str:
         # (str(env) stays PettingZoo's, the metadata name)
@@ -165,12 +208,16 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         return self._np_random
 
     # ------------------------------------------------------------------ API
-    def _observations(self) -> dict[str, np.ndarray]:
+    def _observations(self, mean_positions: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Every agent's observation, rows (views) of one (N, size) array, from the current
+        state (its path means E x where given: a compiled step's)."""
         ep = self.episode
+        if mean_positions is None:
+            mean_positions = ep.mean_positions
         rows = agent_observations(
-            ep.mean_positions,
-            ep.mean_interaction_drift,
-            ep.target,
+            mean_positions,
+            ep._mean_drift,
+            ep._target,
             ep.time_fraction,
             self._obs_space,
             self.config.observation,
@@ -200,39 +247,46 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         }
         return self._observations(), infos
 
-    def _control(self, actions: dict[str, Any]) -> np.ndarray:
+    def _stacked_actions(self, actions: dict[str, Any]) -> Any:
+        """The live agents' actions stacked (N, d) (or (N,) for d = 1 scalars) in agent order,
+        after the checks of the dict: every live agent and no other, each a numpy array of a
+        real dtype (stacking would promote a bool or an int action among float ones silently,
+        so every value's own dtype is checked). Where a value is not, each agent's action is
+        checked alone, so that the error names the agent."""
         if not self.agents:
             raise RuntimeError("the episode is over (no live agents); call reset() first")
         if not isinstance(actions, dict):
             raise TypeError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        missing = [a for a in self.agents if a not in actions]
-        extra = [a for a in actions if a not in self._agent_index]
-        if missing or extra:
+        if type(actions) is dict and list(actions) == self.possible_agents:
+            values = list(actions.values())  # (the common case: keyed in the agents' order)
+        elif actions.keys() != self._agent_index.keys():  # (every agent is live while any is)
+            missing = [a for a in self.agents if a not in actions]
+            extra = [a for a in actions if a not in self._agent_index]
             raise ValueError(
                 f"actions must hold one action per live agent; missing {missing[:5]}"
                 f"{'...' if len(missing) > 5 else ''}, unknown {extra[:5]}"
             )
+        else:
+            values = list(map(actions.__getitem__, self.possible_agents))
         n, d = self.config.params.n_agents, self.config.params.dim
-        agent_shapes = ((d,), ()) if d == 1 else ((d,),)
-        values = [actions[a] for a in self.possible_agents]
-        # fast path: numpy arrays of a real dtype (stacking would promote a bool or an int
-        # action among float ones silently, so every value's own dtype is checked)
-        stacked = None
-        if all(isinstance(v, (np.ndarray, np.generic)) and v.dtype.kind in "iuf" for v in values):
+        stacked = _joined_rows(values, n, d)
+        if stacked is not None:
+            return stacked
+        if _real_numpy_values(values):
             try:
                 stacked = np.asarray(values)
             except ValueError:  # ragged: the slow path names the agent
                 stacked = None
-        fast = stacked is not None and stacked.shape in ((n, d), (n,) if d == 1 else (n, d))
-        if not fast:  # slow path: check every agent's action to name the offending one
-            rows = []
-            for agent in self.possible_agents:
-                arr = real_array(f"actions[{agent!r}]", actions[agent])  # names the agent
-                if arr.shape not in agent_shapes:
-                    raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {arr.shape}")
-                rows.append(arr.reshape(d))
-            stacked = np.stack(rows)
-        return self.episode.control_from_action(stacked, name="actions")
+            if stacked is not None and stacked.shape in ((n, d), (n,) if d == 1 else (n, d)):
+                return stacked
+        agent_shapes = ((d,), ()) if d == 1 else ((d,),)
+        rows = []
+        for agent in self.possible_agents:
+            arr = real_array(f"actions[{agent!r}]", actions[agent])  # names the agent
+            if arr.shape not in agent_shapes:
+                raise ValueError(f"actions[{agent!r}] must have shape ({d},), got {arr.shape}")
+            rows.append(arr.reshape(d))
+        return np.stack(rows)
 
     def step(
         self, actions: dict[str, Any]
@@ -243,28 +297,68 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         dict[str, bool],
         dict[str, dict[str, Any]],
     ]:
-        control = self._control(actions)
-        outcome = self.episode.step(self.np_random, control)
-        self.last_control = control
-        rewards_arr = self.episode.agent_rewards(outcome)
-        costs = self.episode.agent_costs(outcome)
+        episode = self.episode
+        stacked = self._stacked_actions(actions)
+        found = None
+        if self._compiled_step:  # the plan's compiled envelope (`compiled_episode_step`)
+            found = compiled_episode_step(
+                episode, self.np_random, stacked, self._state_bounds, False
+            )
+            if found is None:
+                episode.fallbacks["compiled-step-declined"] += 1
+        if found is None:
+            control = episode.control_from_action(stacked, name="actions")
+            outcome = episode.step(self.np_random, control)
+            costs, observations = episode.agent_costs(outcome), None
+        else:
+            outcome = found.outcome
+            costs, observations = self._compiled_agent_outputs(found)
+        self.last_control = outcome.control
+        if self.config.agent_reward == "team":
+            rewards_arr = np.full(self.config.params.n_agents, episode.reward(outcome))
+        else:  # (`SwarmEpisode.agent_rewards`, from the costs taken once)
+            rewards_arr = -(episode.dt / episode.n_agents) * costs
         agents = self.agents
-        rewards = {a: float(r) for a, r in zip(agents, rewards_arr, strict=True)}
+        rewards = dict(zip(agents, rewards_arr.tolist(), strict=True))
         terminations = dict.fromkeys(agents, outcome.diverged)
         truncations = dict.fromkeys(agents, outcome.truncated)
-        time = self.episode.time
+        time, diverged = episode.time, outcome.diverged
         infos = {
-            a: {"time": time, "running_cost": float(c), "diverged": outcome.diverged}
-            for a, c in zip(agents, costs, strict=True)
+            a: {"time": time, "running_cost": c, "diverged": diverged}
+            for a, c in zip(agents, costs.tolist(), strict=True)
         }
-        observations = self._observations()
+        if observations is None:
+            observations = self._observations()
         if self._renderer is not None and not outcome.diverged:
-            self._renderer.record(time, self.episode.mean_positions)
+            self._renderer.record(time, episode.mean_positions)
             if self.render_mode == "human":
                 self.render()
         if outcome.diverged or outcome.truncated:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
+
+    def _compiled_agent_outputs(
+        self, found: CompiledOutcome
+    ) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
+        """After a compiled step: the per-agent costs (N,) and, where the step moved the state,
+        the observations (`compiled_agents`: compiled for the "absolute" and "relative"
+        layouts, numpy's `agent_observations` for "swarm"; None after a diverged or general
+        step: `_observations` of the state)."""
+        ep, outcome = self.episode, found.outcome
+        module = native.loaded("step")
+        costs = compiled_agent_costs(
+            module, outcome.start_positions[None], outcome.control[None], ep.targets,
+            ep.params.gamma,
+        )[0]  # fmt: skip
+        if found.mean_positions is None:
+            return costs, None
+        if self.config.observation == "swarm":
+            return costs, self._observations(found.mean_positions)
+        rows = compiled_agent_rows(
+            module, found.mean_positions[None], ep._mean_drift[None], ep.targets,
+            np.array([ep.time_fraction]), self._obs_bounds, self.config.observation == "relative",
+        )  # fmt: skip
+        return costs, dict(zip(self.possible_agents, rows[0], strict=True))
 
     def render(self) -> np.ndarray | None:
         if self._renderer is None:

@@ -63,11 +63,23 @@ class RosenbrockEuler(Integrator):
         if self.fused is not False and du_dt is None and dt != 0.0:
             found = self.fused_step(model, lin.matrix, rhs, x, dt, noise)
             if found is GAVE_UP:  # the workspace's P was partly overwritten: L(x) again
-                rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
-            elif found is not None:
+                return self.general_step(model, x, u, t, dt, noise, du_dt)
+            if found is not None:
                 return found
-            elif self.fused and getattr(model, "fallbacks", None) is not None:
+            if self.fused and getattr(model, "fallbacks", None) is not None:
                 model.fallbacks["fused-declined"] += 1
+        return self._phi_step(model, rhs, lin, x, dt, noise, du_dt)
+
+    def general_step(self, model: DriftModel, x, u, t, dt, noise, du_dt=None) -> Any:
+        """`step` without the fused step, from noise = sigma dW: L(x) and F(x, u) evaluated
+        again and the phi-action (what `step` takes after a fused step gave up; the single
+        envs' compiled step takes it there too)."""
+        rhs, lin = model.drift_and_linearization(t, x, u, self.jacobian)
+        return self._phi_step(model, rhs, lin, x, dt, noise, du_dt)
+
+    def _phi_step(self, model: DriftModel, rhs, lin, x, dt, noise, du_dt) -> Any:
+        """x + dt phi_1(dt A) (F + sigma A dW) + noise (+ dt^2 phi_2(dt A) du/dt) from
+        rhs = F(x, u) (..., N, d) and its linearization `lin` (module docstring)."""
         scaled = dt * lin.matrix
         kw = {"method": self.phi_method, "symmetric": lin.symmetric}
         if lin.bounds is not None:

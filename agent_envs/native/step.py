@@ -311,3 +311,92 @@ def epilogue(
                 if not (v < high[i] or v != v):
                     v = high[i]
                 obs[i] = v
+
+
+@njit(cache=True, error_model="numpy")
+def agent_costs(
+    x: np.ndarray, controls: np.ndarray, targets: np.ndarray, gamma: float, out: np.ndarray
+) -> None:
+    """For every env b, agent k: |x_k - xbar|^2 + gamma |u_k|^2 mean over the paths into
+    `out` (B, N), from x (B, P, N, d), the controls (B, N, d) and targets (B, d): the
+    PettingZoo env's per-agent costs (`SwarmEpisode.agent_costs`: `costs.agent_running_cost`
+    then the mean over the paths), with numpy's sums (module docstring; the mean over the
+    paths as a division of the sum by P, one path included). Every array C-contiguous."""
+    b_count, p_count, n, d = x.shape
+    size = n * d
+    xs = x.reshape(b_count, p_count * size)
+    us = controls.reshape(b_count, size)
+    terms = np.empty(d)
+    stack = pairwise_stack()
+    for b in range(b_count):
+        xb = xs[b]
+        u = us[b]
+        target = targets[b]
+        row = out[b]
+        for k in range(n):
+            row[k] = 0.0
+        for j in range(p_count):
+            base = j * size
+            for k in range(n):
+                at = k * d
+                if d < 8:
+                    position = -0.0
+                    control = -0.0
+                    for c in range(d):
+                        diff = xb[base + at + c] - target[c]
+                        position += diff * diff
+                        control += u[at + c] * u[at + c]
+                    position = 0.0 + position
+                    control = 0.0 + control
+                else:
+                    for c in range(d):
+                        diff = xb[base + at + c] - target[c]
+                        terms[c] = diff * diff
+                    position = 0.0 + _pairwise_sum(terms, 0, d, stack)
+                    for c in range(d):
+                        terms[c] = u[at + c] * u[at + c]
+                    control = 0.0 + _pairwise_sum(terms, 0, d, stack)
+                row[k] += position + gamma * control
+        for k in range(n):
+            row[k] = row[k] / p_count
+
+
+@njit(cache=True, error_model="numpy")
+def agent_rows(
+    mean_positions: np.ndarray,
+    mean_drift: np.ndarray,
+    targets: np.ndarray,
+    time_fractions: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    relative: bool,
+    observations: np.ndarray,
+) -> None:
+    """For every env b, agent k: the PettingZoo observation row [E x_k (or E x_k - xbar with
+    `relative`) | E drift_k | xbar | t/T] (3 d + 1) float32 into `observations` (B, N, 3 d + 1)
+    from the path means (B, N, d), targets (B, d) and t/T (B,), as
+    `agent_envs.envs.observation.agent_observations` ("absolute" or "relative" layout): the
+    offsets in float64, each entry cast to float32, clipped to [low, high] (3 d + 1,) by
+    `epilogue`'s rule (np.clip's). Every array C-contiguous."""
+    b_count, n, d = mean_positions.shape
+    width = 3 * d + 1
+    for b in range(b_count):
+        target = targets[b]
+        fraction = np.float32(time_fractions[b])
+        for k in range(n):
+            obs = observations[b, k]
+            for c in range(d):
+                position = mean_positions[b, k, c]
+                if relative:
+                    position = position - target[c]
+                obs[c] = np.float32(position)
+                obs[d + c] = np.float32(mean_drift[b, k, c])
+                obs[2 * d + c] = np.float32(target[c])
+            obs[3 * d] = fraction
+            for i in range(width):
+                v = obs[i]
+                if not (v > low[i] or v != v):
+                    v = low[i]
+                if not (v < high[i] or v != v):
+                    v = high[i]
+                obs[i] = v
