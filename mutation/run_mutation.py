@@ -86,6 +86,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
             "tests/test_envs_gym.py",
             "tests/test_envs_pettingzoo.py",
             "tests/test_env_options.py",
+            "tests/test_compiled_episode.py",
             "tests/test_laws.py",
         ],
     ),
@@ -99,7 +100,12 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "step_plan": (
         "agent_envs/envs/step_plan.py",
-        ["tests/test_step_plan.py", "tests/test_native_switch.py"],
+        [
+            "tests/test_step_plan.py",
+            "tests/test_native_switch.py",
+            "tests/test_compiled_episode.py",
+            "tests/test_native_cache.py",
+        ],
     ),
     "swarm_env": (
         "agent_envs/envs/swarm_env.py",
@@ -115,7 +121,11 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "compiled_agents": (
         "agent_envs/envs/compiled_agents.py",
-        ["tests/test_compiled_episode.py", "tests/test_envs_pettingzoo.py"],
+        [
+            "tests/test_compiled_episode.py",
+            "tests/test_envs_pettingzoo.py",
+            "tests/test_native_cache.py",
+        ],
     ),
     "observation": (
         "agent_envs/envs/observation.py",
@@ -140,7 +150,12 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "vector_inputs": ("agent_envs/envs/vector_inputs.py", ["tests/test_vector_env.py"]),
     "fast_step": (
         "agent_envs/envs/fast_step.py",
-        ["tests/test_fast_step.py", "tests/test_vector_env.py"],
+        [
+            "tests/test_fast_step.py",
+            "tests/test_step_plan.py",
+            "tests/test_compiled_episode.py",
+            "tests/test_native_cache.py",
+        ],
     ),
     "draws": (
         "agent_envs/draws.py",

@@ -53,3 +53,15 @@ def test_the_stamp_follows_every_linked_file(tmp_path):
         assert _source_stamp(*files) != before
         path.write_text(text)
         assert _source_stamp(*files) == before
+
+
+def test_with_numba_every_compiled_path_serves():
+    """Each path's load check compares its module with the numpy code it replaces and switches
+    the path off where they differ; the tests that compare envs then compare numpy with numpy
+    and still pass. So: with numba installed (CI installs it) and nothing switched off, every
+    path must serve, or some check (or module) is wrong."""
+    import os
+
+    if os.environ.get("AGENT_ENVS_NUMBA", "1") == "0":
+        pytest.skip("compiled paths switched off by AGENT_ENVS_NUMBA=0")
+    assert native.status() == dict.fromkeys(native.PATHS, True)

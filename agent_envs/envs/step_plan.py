@@ -106,14 +106,14 @@ class StepPlan:
     phi: str
     linear_operator: str
     kernel_pass: str
-    envelope: str = "numpy"
-    num_envs: int = 1
-    blocks: int = 1
-    envs_per_block: int = 1
-    n_paths: int = 1
-    backend: str = "numpy"
-    device: str = "cpu"
-    threads: int = 1
+    envelope: str
+    num_envs: int
+    blocks: int
+    envs_per_block: int
+    n_paths: int
+    backend: str
+    device: str
+    threads: int
 
     @property
     def compiled_step(self) -> bool:
