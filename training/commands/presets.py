@@ -12,9 +12,13 @@ Presets:
 
 - ``smoke``: PPO x 2 training seeds, N = 5 agents, m = 5 steps, 256 timesteps, 5 test
   episodes; a CI check that the whole pipeline runs.
-- ``quick``: N = 10, m = 20, otherwise the paper's stiff setting; PPO, SAC and
-  parameter-shared PPO with the training layer's hyperparameters, and ``apg``; the main job
-  (`agent-envs compare --preset quick`, a few minutes on 2 cores).
+- ``quick``: the paper's study in miniature, the main job (`agent-envs compare --preset
+  quick`, about two minutes on 2 cores): N = 10, m = 20, otherwise the paper's stiff setting
+  with max_control = 25; the paper preset's learners with their interfaces and
+  hyperparameters at budgets chosen on the validation seeds (docs/presets.md), and
+  ``apg``; the references are the optimum (no MPC: it equals the optimum at sigma = 0.01), the
+  feedback controllers and ``proportional-common``, the summary/common learners' fair baseline
+  (`agent_envs.training.commands.interface_references`).
 - ``paper``: the paper's scale (N = 100, m = 50, eps = 0.05, SERB, 20 Brownian paths,
   max_control = 25): PPO, SAC and TD3 on the summary observation with one common control, PPO on
   the full state and control in the modes basis, parameter-shared PPO with the swarm
@@ -355,9 +359,9 @@ QUICK_BUDGETS = {"ppo": 16_384, "sac": 6_000, "ppo-shared": 76_800, "apg": 150}
 
 #: The parameter-shared learner's network of hyperparams/paper.yml with SB3's orthogonal
 #: initialization (gain 0.01 on the action head): its initial policy is then close to the zero
-#: control. With the entry's ortho_init = false, training seed 2 started at 6.6 on the
-#: validation seeds (9x the zero control) and was still at 3.5 after 76 800 agent-steps, the
-#: bad start the paper study met at N = 100 (docs/results.md).
+#: control. With the entry's ortho_init = false, training seed 2 was at 6.6 on the validation
+#: seeds at its first validation (9x the zero control) and still at 3.5 after 76 800
+#: agent-steps, the bad start the paper study met at N = 100 (docs/presets.md).
 _QUICK_SHARED_POLICY = {
     **read_hyperparams_file("paper")["ppo-shared"]["policy_kwargs"],
     "ortho_init": True,
