@@ -170,7 +170,7 @@ def test_seed_table_refuses_references_that_differ_between_files(tmp_path):
     pd.DataFrame(rows).to_csv(first, index=False)
     rows[1]["total_cost"] = 2.5
     pd.DataFrame(rows).to_csv(second, index=False)
-    assert "| **apg** | proportional | +50.00 / +50.00 (%)" in seed_table_markdown(
+    assert "| **apg** | proportional | 1.5 / 1.5 | +50.00% / +50.00% |" in seed_table_markdown(
         "quick", [first, first]
     )
     with pytest.raises(ValueError, match="differs between the training seeds"):

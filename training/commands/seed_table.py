@@ -9,6 +9,7 @@ evaluation's per-episode costs to ``OUT/evaluation/episodes.csv`` (columns polic
 total_cost, ...). Given one such file per training seed (in seed order), `seed_table_markdown`
 writes one row per policy:
 
+- mean cost over the test seeds, per training seed;
 - gap to optimal, per training seed: the mean over the test seeds s of (J(s) - V(s)) / V(s),
   with V(s) the optimal open-loop plan's cost on seed s (``optimal`` in the same file);
 - paired ratio to the proportional controller and to the learner's fair baseline
@@ -51,8 +52,8 @@ def _ratio(costs: pd.DataFrame, policy: str, reference: str) -> float:
     return float((costs[policy] / costs[reference]).mean())
 
 
-def _cells(values: Sequence[float], fmt: str) -> str:
-    return " / ".join(format(v, fmt) for v in values)
+def _cells(values: Sequence[float], fmt: str, suffix: str = "") -> str:
+    return " / ".join(format(v, fmt) + suffix for v in values)
 
 
 def seed_table_markdown(preset_name: str, files: Sequence[str | Path]) -> str:
@@ -64,18 +65,19 @@ def seed_table_markdown(preset_name: str, files: Sequence[str | Path]) -> str:
     runs = [_costs(f) for f in files]
     learners = [lr for lr in preset.learners if lr.name in runs[0]]
     lines = [
-        "| policy | fair baseline | gap to optimal | ratio to proportional | "
+        "| policy | fair baseline | mean cost | gap to optimal | ratio to proportional | "
         "ratio to fair baseline |",
-        "|---|---|---|---|---|",
+        "|---|---|---|---|---|---|",
     ]
     for learner in learners:
         fair = fair_baseline(learner.env_kwargs)
         gaps = [100 * _gap(c, learner.name) for c in runs]
         prop = [_ratio(c, learner.name, "proportional") for c in runs]
         fairs = [_ratio(c, learner.name, fair) for c in runs]
+        means = [float(c[learner.name].mean()) for c in runs]
         lines.append(
-            f"| **{learner.name}** | {fair} | {_cells(gaps, '+.2f')} (%) | "
-            f"{_cells(prop, '.3f')} | {_cells(fairs, '.3f')} |"
+            f"| **{learner.name}** | {fair} | {_cells(means, '.4g')} | "
+            f"{_cells(gaps, '+.2f', '%')} | {_cells(prop, '.3f')} | {_cells(fairs, '.3f')} |"
         )
     references = [p for p in runs[0].columns if p not in {lr.name for lr in learners}]
     for name in references:
@@ -84,7 +86,8 @@ def seed_table_markdown(preset_name: str, files: Sequence[str | Path]) -> str:
     for name in sorted(references, key=lambda p: runs[0][p].mean()):
         gap = 100 * _gap(runs[0], name)
         prop = _ratio(runs[0], name, "proportional")
-        lines.append(f"| {name} | | {gap:+.2f}% | {prop:.3f} | |")
+        mean = float(runs[0][name].mean())
+        lines.append(f"| {name} | | {mean:.4g} | {gap:+.2f}% | {prop:.3f} | |")
     return "\n".join(lines) + "\n"
 
 
