@@ -513,13 +513,16 @@ def test_compare_quick_preset_smoke(tmp_path):
         "2",
         "--eval-env-kwargs",
         '{"integrator": "em"}',
+        "--optimum",
+        "optimal,mpc",  # the preset's optimum, and MPC, which the quick preset leaves out
         "--no-progress-bar",
     ]
     assert main(argv) == 0
     report = (out / "report" / "report.md").read_text()
     names = ("turnpike", "proportional", "zero", "optimal", "mpc", "ppo", "sac", "ppo-shared")
-    for name in (*names, "apg"):
+    for name in (*names, "apg", "proportional-common"):
         assert f"| {name} |" in report
+    assert "Against each learner's fair baseline" in report
     assert "gap to optimal" in report
     assert "Learning curves" in report and "learning_curves.png" in report
     assert "Per-agent costs of ppo-shared" in report

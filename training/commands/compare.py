@@ -47,6 +47,7 @@ from agent_envs.training.commands.experiment import (
     check_envs,
     select,
 )
+from agent_envs.training.commands.interface_references import CENTRE_LAW, fair_baseline
 from agent_envs.training.commands.learner_runs import budget, evaluation_spec, train_from_dict
 from agent_envs.training.commands.presets import OPTIMUM_POLICIES, PRESETS, Learner, get_preset
 from agent_envs.training.config import command_line, json_field, option_field
@@ -361,6 +362,49 @@ def _proportional_section(results):
     )
 
 
+def fair_baseline_table(episodes, learners: dict[str, Learner]):
+    """One row per learner: its fair baseline (`interface_references.fair_baseline`, the best
+    simple law in its interface) next to it, and the proportional controller, on the same test
+    seeds. Ratios are paired: the mean over seeds of cost / the other's cost on that seed."""
+    import pandas as pd
+
+    costs = episodes.pivot(index="seed", columns="policy", values="total_cost")
+    rows = []
+    for name, learner in learners.items():
+        fair = fair_baseline(learner.env_kwargs)
+        row = {"learner": name, "interface": _interface_label(learner.env_kwargs)}
+        row.update({"fair baseline": fair, "learner cost": costs[name].mean()})
+        if fair in costs:
+            row["fair baseline cost"] = costs[fair].mean()
+            row["ratio to fair baseline"] = (costs[name] / costs[fair]).mean()
+        if "proportional" in costs:
+            row["ratio to proportional"] = (costs[name] / costs["proportional"]).mean()
+        rows.append(row)
+    return pd.DataFrame(rows).round(4)
+
+
+def _interface_label(env_kwargs: dict[str, Any]) -> str:
+    keys = ("observation", "action_basis", "agent_reward")
+    return ", ".join(f"{k}={env_kwargs[k]}" for k in keys if k in env_kwargs) or "default"
+
+
+def _fair_baseline_section(results, learners: dict[str, Learner]):
+    from agent_envs.training.results.report import ReportSection
+
+    return ReportSection(
+        "Against each learner's fair baseline",
+        text=(
+            "Each learner next to the best simple law its own interface can express: for one "
+            "common control from the summary observation, the proportional law on the centre "
+            f"({CENTRE_LAW}: u = 12 (xbar - c) for every agent, evaluated through that "
+            "interface); for a per-agent interface, the proportional controller. Same test "
+            "seeds; ratios are the mean over seeds of the paired cost ratio (below 1: the "
+            "learner is cheaper)."
+        ),
+        table=fair_baseline_table(results.episodes, learners),
+    )
+
+
 def _learning_curve_section(run_dirs: dict[str, Path], learners: dict[str, Learner], out: Path):
     from agent_envs.training.results.report import ReportSection
 
@@ -453,6 +497,7 @@ def compare(config: CompareConfig) -> dict[str, Any]:
         agent_tables = {name: per_agent_table(run_dirs[name], env_kwargs, seeds) for name in shared}
     sections = [
         _proportional_section(results),
+        _fair_baseline_section(results, learners),
         _learning_curve_section(run_dirs, learners, out),
         *(_per_agent_section(name, table) for name, (table, _) in agent_tables.items()),
     ]
@@ -510,4 +555,4 @@ def _finish(config, results, sections, run_dirs, setting, timing) -> dict[str, A
 # --------------------------------------------------------------------------------------- CLI
 
 
-__all__ = ["CompareConfig", "compare"]
+__all__ = ["CompareConfig", "compare", "fair_baseline_table"]

@@ -30,6 +30,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agent_envs.training.commands.interface_references import (
+    INTERFACE_REFERENCES,
+    interface_reference,
+)
 from agent_envs.training.commands.presets import EnvSetting, Learner, Preset
 from agent_envs.training.config import (
     VEC_ENV_CHOICES,
@@ -84,8 +88,12 @@ class Trial:
 
     def reference_spec(self) -> Any:
         """The policy spec `evaluate_policies` takes for this reference trial: its registered
-        name, or a factory building it with `policy_kwargs` (`make_baseline(name, env, **kw)`).
+        name, or a factory building it with `policy_kwargs` (`make_baseline(name, env, **kw)`);
+        a reference acting through another interface (`interface_references`) is a factory
+        ``env -> InterfacePolicy``.
         """
+        if self.policy in INTERFACE_REFERENCES:
+            return functools.partial(interface_reference, self.policy, **self.policy_kwargs)
         if not self.policy_kwargs:
             return self.policy
         from agent_envs.baselines import make_baseline
@@ -331,11 +339,12 @@ def available_references(
     preset: Preset, wanted: Sequence[str] | None = None
 ) -> tuple[list[str], list[str]]:
     """(references of `preset` (or `wanted`) this install has, those it lacks) per
-    `agent_envs.baselines.BASELINES`."""
+    `agent_envs.baselines.BASELINES` and the interface references (`INTERFACE_REFERENCES`)."""
     from agent_envs.baselines import BASELINES
 
     names = preset.references if wanted is None else tuple(wanted)
-    return [r for r in names if r in BASELINES], [r for r in names if r not in BASELINES]
+    known = set(BASELINES) | set(INTERFACE_REFERENCES)
+    return [r for r in names if r in known], [r for r in names if r not in known]
 
 
 def _learner_trials(
