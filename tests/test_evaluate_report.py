@@ -12,9 +12,9 @@ import pytest
 import agent_envs  # noqa: F401
 from agent_envs.baselines import TurnpikeController, ZeroController
 from agent_envs.training.commands.cli import main as cli_main
-from agent_envs.training.commands.cli import parse_policy_specs, parse_seeds
 from agent_envs.training.commands.evaluate import evaluate_policies
-from agent_envs.training.defaults import parse_env_kwargs
+from agent_envs.training.commands.evaluate_options import parse_policy_specs
+from agent_envs.training.defaults import parse_env_kwargs, parse_seeds
 from agent_envs.training.learners.policies import (
     ModelSpec,
     PerAgentPolicy,

@@ -36,6 +36,11 @@ import numpy as np
 
 from agent_envs.tasks import TASK_LIST, TaskScore, TaskSpec, get_task, load_references, score
 from agent_envs.tasks.scores import summarize
+from agent_envs.training.commands.interface_references import (
+    CENTRE_LAW,
+    INTERFACE_REFERENCES,
+    CentreLaw,
+)
 from agent_envs.training.commands.task_evaluation import SCORE_COLUMNS, csv_text, reference_scores
 from agent_envs.training.config import option_field
 from agent_envs.training.storage import write_text_atomic
@@ -49,10 +54,8 @@ TRAINING_SEEDS = (0, 1, 2)
 #: Tasks whose learners are not trained there but transferred from another task.
 TRANSFERS = {"agent_envs/LargeSwarm-v0": "agent_envs/StiffSwarm-v0"}
 #: The best simple law in SAC's interface (its fair baseline, docs/env-options.md): the
-#: proportional law on the swarm's centre, u = beta (xbar - c) for every agent, from the
-#: summary observation through the common action basis; scored live (nothing to train).
-CENTRE_LAW = "proportional-common"
-CENTRE_LAW_INTERFACE = {"observation": "summary", "action_basis": "common"}
+#: proportional law on the swarm's centre (`interface_references.CentreLaw`), scored live
+CENTRE_LAW_INTERFACE = INTERFACE_REFERENCES[CENTRE_LAW]
 #: Columns of a unit's file and of episodes.csv: scores.csv's with the training seed.
 EPISODE_COLUMNS = (*SCORE_COLUMNS[:3], "training_seed", *SCORE_COLUMNS[3:])
 
@@ -163,22 +166,11 @@ def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
     return path
 
 
-def centre_law(env: Any) -> Any:
-    """`CENTRE_LAW` for `env` (summary observation, common action): a factory ``env -> policy``.
-
-    The summary observation's first d entries are the centre's offset c - xbar; the action is
-    u / max_control with u = beta (xbar - c), beta = 12 (the paper's), clipped to [-1, 1].
-    """
-    from agent_envs.baselines import DEFAULT_BETA
-
+def centre_law(env: Any) -> CentreLaw:
+    """`CENTRE_LAW` for `env` (summary observation, common action): u = beta (xbar - c),
+    beta = 12, as an action u / max_control clipped to [-1, 1] (a factory ``env -> policy``)."""
     inner = env.unwrapped
-    d, bound = inner.params.dim, float(inner.max_control)
-
-    def act(obs: np.ndarray) -> np.ndarray:
-        offset = np.asarray(obs, dtype=np.float64)[:d]
-        return np.clip(-DEFAULT_BETA * offset / bound, -1.0, 1.0).astype(np.float32)
-
-    return act
+    return CentreLaw(inner.params.dim, float(inner.max_control))
 
 
 def centre_law_rows(task_id: str, out: Path) -> list[dict[str, Any]]:
