@@ -43,14 +43,20 @@ def dummy_vec_env(kwargs: dict[str, Any], n_envs: int) -> Any:
 
 def native_vec_env(kwargs: dict[str, Any], n_envs: int) -> Any:
     """The native vector env of `n_envs` envs behind SB3's VecEnv protocol."""
-    from agent_envs.training.learners.native_vec_env import NativeVecEnv
+    try:
+        from agent_envs.training.learners.native_vec_env import NativeVecEnv
+    except ImportError:  # (an A/B baseline from before the training rooms, issue 39)
+        from agent_envs.training.native_vec_env import NativeVecEnv  # type: ignore[no-redef]
 
     return NativeVecEnv(n_envs, kwargs)
 
 
 def supersuit_vec_env(kwargs: dict[str, Any], n_envs: int) -> Any:
     """One SB3 sub-env per agent of `n_envs` PettingZoo swarms, through SuperSuit."""
-    from agent_envs.training.learners.multiagent import make_shared_vec_env
+    try:
+        from agent_envs.training.learners.multiagent import make_shared_vec_env
+    except ImportError:  # (an A/B baseline from before the training rooms, issue 39)
+        from agent_envs.training.multiagent import make_shared_vec_env  # type: ignore[no-redef]
 
     return make_shared_vec_env(kwargs, n_copies=n_envs)
 

@@ -102,6 +102,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
         "agent_envs/envs/step_plan.py",
         [
             "tests/test_step_plan.py",
+            "tests/test_plan_choices.py",
             "tests/test_native_switch.py",
             "tests/test_compiled_episode.py",
             "tests/test_native_cache.py",
