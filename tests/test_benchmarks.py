@@ -107,3 +107,32 @@ def test_device_benchmark_measures_on_the_cpu_when_asked():
     )
     assert done.returncode == 0, done.stderr[-2000:] + done.stdout[-2000:]
     assert "device env-steps/s (warm)" in done.stdout and "failed" not in done.stdout
+
+
+def test_where_users_step_table_is_the_committed_run():
+    """docs/benchmarks.md's "Where users step" figures are the committed JSON of the run."""
+    root = BENCHMARKS.parent
+    data = json.loads((root / "docs/results/user-step/bench_user_step_ab.json").read_text())
+    page = (root / "docs/benchmarks.md").read_text()
+    section = page.split("### Where users step", 1)[1].split("Reading it:", 1)[0]
+    steps = {row["figure"]: row for row in data["steps"]}
+    rows = [
+        ("`gym.make` env step / native per-env step (B = 64), 1 path", "| How far is the env"),
+        ("bare `SwarmEnv` step (no wrapper) / native per-env step", "| | bare `SwarmEnv`"),
+        ("PettingZoo step, N = 100 / native per-env step", "| How far is the PettingZoo"),
+        ("PettingZoo step, N = 100 / its five dicts alone", "| | the same / its five dicts"),
+        ("PettingZoo step, N = 10 / native per-env step, N = 10", "| | parallel env step, N = 10"),
+        ("`gym.make` env step / native per-env step, 20 paths", "| And with 20 paths?"),
+    ]
+    for figure, start in rows:
+        line = next(ln for ln in section.splitlines() if ln.startswith(start))
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[2] == f"{steps[figure]['value']:.2f}", figure
+        if "dicts" not in figure:  # (the dicts' row shares the PettingZoo step's A/B)
+            assert cells[3] == f"{steps[figure]['old_over_new']:.2f}x faster", figure
+    for row in data["ppo"]:
+        line = next(ln for ln in section.splitlines() if f"| {row['learn']:,.0f} |" in ln)
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[2] == f"{100 * row['env_share']:.0f} %" and cells[3] == (
+            f"{row['new_over_old']:.2f}"
+        ), row["vec_env"]
