@@ -462,8 +462,8 @@ def test_large_batched_solve_converges_with_the_default_phi_method():
 def test_optimal_references_run_only_when_asked_for():
     """`evaluate` without -p and `compare --optimum ''` run the three feedback references only:
     the optimal-control ones solve an optimization per episode (or step) and must be named."""
-    from agent_envs.training.commands.evaluate_options import parse_policy_specs
     from agent_envs.training.commands.compare import CompareConfig
+    from agent_envs.training.commands.evaluate_options import parse_policy_specs
     from agent_envs.training.defaults import FEEDBACK_BASELINES
 
     assert tuple(parse_policy_specs(None)) == FEEDBACK_BASELINES
