@@ -134,7 +134,12 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_functions": (
         "agent_envs/integrators/phi_functions.py",
-        ["tests/test_phi_functions.py", "tests/test_integrators.py", "tests/test_large_swarms.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_integrators.py",
+            "tests/test_large_swarms.py",
+        ],
     ),
     "phi_dense": (
         "agent_envs/integrators/phi_dense.py",
@@ -142,11 +147,19 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_lanczos": (
         "agent_envs/integrators/phi_lanczos.py",
-        ["tests/test_phi_functions.py", "tests/test_compiled_lanczos.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_compiled_lanczos.py",
+        ],
     ),
     "lanczos_stopping": (
         "agent_envs/integrators/lanczos_stopping.py",
-        ["tests/test_phi_functions.py", "tests/test_compiled_lanczos.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_compiled_lanczos.py",
+        ],
     ),
     "lanczos_rule": (
         "agent_envs/native/lanczos_rule.py",

@@ -1,0 +1,272 @@
+"""Contracts of the phi-function modules that their value tests do not pin (each found by a
+mutant that survived the mutation run, docs/mutation.md): the "auto" strategy's documented
+decisions, the fused step's conditions, the large-n basis accumulation of the Lanczos
+iteration, its breakdown threshold's scale, the spectrum interval's bottom at 0 and the
+fallback warning pointing at the caller."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from agent_envs import SwarmModel, SwarmParams
+from agent_envs.integrators import phi_functions as pf
+from agent_envs.integrators import phi_lanczos
+from agent_envs.integrators.krylov_space import RowOperator
+from agent_envs.integrators.lanczos_stopping import spectrum_interval
+from agent_envs.integrators.phi_functions import (
+    auto_phi_method,
+    frozen_advance_applies,
+    phi_action,
+    phi_scalar,
+)
+from agent_envs.integrators.phi_lanczos import lanczos_action, lanczos_numpy
+
+
+def _symmetric(n: int, seed: int, scale: float = 1.0) -> np.ndarray:
+    """A random symmetric (n, n) matrix with a spectrum of width about 2 `scale`."""
+    b = np.random.default_rng(seed).standard_normal((n, n))
+    return scale * (b + b.T) / (2 * np.sqrt(n))
+
+
+# ------------------------------------------------------------------ "auto"'s decisions
+@pytest.mark.parametrize(
+    ("size", "n_matrices", "symmetric", "expected"),
+    [
+        # n <= 48: "expm" whatever the batch and symmetry
+        (48, 1, True, "expm"),
+        (48, 20, True, "expm"),
+        (48, 20, False, "expm"),
+        # symmetric: "expm" for a single matrix up to n = 80, else "krylov"
+        (60, 1, True, "expm"),
+        (80, 1, True, "expm"),
+        (81, 1, True, "krylov"),
+        (49, 2, True, "krylov"),
+        (60, 20, True, "krylov"),
+        # not symmetric: "expm" up to n = 80, and for a single matrix up to n = 128
+        (80, 20, False, "expm"),
+        (81, 2, False, "krylov"),
+        (100, 1, False, "expm"),
+        (128, 1, False, "expm"),
+        (129, 1, False, "krylov"),
+    ],
+)
+def test_auto_picks_the_documented_strategy(size, n_matrices, symmetric, expected):
+    """The crossovers of phi_functions' docstring (benchmarks/bench_integrators.py, table 1)."""
+    assert auto_phi_method(size, n_matrices, symmetric) == expected
+
+
+def test_auto_counts_the_matrices_of_the_broadcast_batch():
+    """Three matrices acting on one block of vectors are three problems: "auto" computes
+    what "krylov" computes (three symmetric matrices of n = 60), bit for bit, not the single
+    matrix's "expm" (whose value differs in the last digits)."""
+    a = np.stack([_symmetric(60, seed) for seed in range(3)]) - 2.0 * np.eye(60)
+    v = np.random.default_rng(3).standard_normal((60, 2))
+    auto = phi_action(a, v, 1, symmetric=True)
+    np.testing.assert_array_equal(auto, phi_action(a, v, 1, method="krylov", symmetric=True))
+    assert not np.array_equal(auto, phi_action(a, v, 1, method="expm", symmetric=True))
+
+
+def test_fallback_warning_points_at_the_caller():
+    """The RuntimeWarning of a Krylov space that did not converge names the line that called
+    `phi_action` (stacklevel), not a line inside the package."""
+    a = np.random.default_rng(0).standard_normal((60, 60))
+    v = np.random.default_rng(1).standard_normal((60, 1))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        got = phi_action(a, v, 1, method="krylov", max_krylov_dim=2)
+    (warning,) = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert "did not reach" in str(warning.message)
+    assert warning.filename == __file__
+    np.testing.assert_allclose(got, phi_action(a, v, 1, method="expm"), rtol=1e-12, atol=0)
+
+
+# ------------------------------------------------------------------ the fused step's conditions
+@pytest.fixture()
+def compiled():
+    """The compiled Lanczos on for the test (and restored after)."""
+    pytest.importorskip("numba")
+    assert pf.load_compiled(), "numba is installed but the compiled Lanczos did not load"
+    before = pf.use_compiled(True)
+    yield
+    pf.use_compiled(before)
+
+
+def _frozen_step(n=100, paths=2, kernel="symmetric"):
+    """(model, A = tau c L(x), rhs, x, noise) of one exponential Rosenbrock-Euler step."""
+    model = SwarmModel(SwarmParams(n_agents=n, dim=1, epsilon=0.05, kernel=kernel), "dense")
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1, 1, (paths, n, 1))
+    rhs, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+    return model, 0.02 * lin.matrix, rhs, x, rng.standard_normal(x.shape)
+
+
+class _Subclass(np.ndarray):
+    """An ndarray subclass: not the plain float64 array the compiled step reads."""
+
+
+def test_fused_step_applies_to_the_frozen_laplacian(compiled):
+    """A current symmetric frozen L(x), float64 arrays batched like P, "krylov", or "auto"
+    where it chooses "krylov" (n = 100 > 80; n = 60 batched)."""
+    _, a, rhs, x, noise = _frozen_step()
+    assert frozen_advance_applies(a, rhs, x, noise, "krylov")
+    assert frozen_advance_applies(a, rhs, x, noise, "auto")
+    _, a, rhs, x, noise = _frozen_step(n=60, paths=2)
+    assert frozen_advance_applies(a, rhs, x, noise, "auto")
+
+
+def test_fused_step_follows_auto_where_it_picks_the_dense_method(compiled):
+    """n = 60, one path: "auto" picks "expm" (a single symmetric matrix up to n = 80), so the
+    fused Krylov step does not apply, while an explicit "krylov" does."""
+    _, a, rhs, x, noise = _frozen_step(n=60, paths=1)
+    assert auto_phi_method(60, 1, True) == "expm"
+    assert not frozen_advance_applies(a, rhs, x, noise, "auto")
+    assert frozen_advance_applies(a, rhs, x, noise, "krylov")
+    _, a, rhs, x, noise = _frozen_step(n=40, paths=4)
+    assert not frozen_advance_applies(a, rhs, x, noise, "auto")
+
+
+@pytest.mark.parametrize(
+    "refusal",
+    [
+        "x subclass", "rhs subclass", "noise subclass", "x float32", "rhs float32",
+        "noise float32", "rhs shape", "noise shape", "batch", "method expm", "method eigh",
+        "dense matrix", "nonsymmetric", "no peak", "not current", "not compiled",
+    ],
+)  # fmt: skip
+def test_fused_step_refuses_each_condition(compiled, refusal):
+    """Each of `frozen_advance_applies`' conditions alone refuses the fused step."""
+    model, a, rhs, x, noise = _frozen_step()
+    method = "krylov"
+    if refusal.endswith("subclass"):
+        name = refusal.split()[0]
+        arrays = {"x": x, "rhs": rhs, "noise": noise}
+        arrays[name] = arrays[name].view(_Subclass)
+        x, rhs, noise = arrays["x"], arrays["rhs"], arrays["noise"]
+    elif refusal.endswith("float32"):
+        name = refusal.split()[0]
+        arrays = {"x": x, "rhs": rhs, "noise": noise}
+        arrays[name] = arrays[name].astype(np.float32)
+        x, rhs, noise = arrays["x"], arrays["rhs"], arrays["noise"]
+    elif refusal == "rhs shape":
+        rhs = rhs[..., :-1, :]
+    elif refusal == "noise shape":
+        noise = np.concatenate([noise, noise], axis=-1)
+    elif refusal == "batch":
+        x, rhs, noise = x[:1], rhs[:1], noise[:1]
+    elif refusal.startswith("method"):
+        method = refusal.split()[1]
+    elif refusal == "dense matrix":
+        a = a.dense()
+    elif refusal == "nonsymmetric":
+        _, a, rhs, x, noise = _frozen_step(kernel="nonsymmetric")
+    elif refusal == "no peak":
+        a = a.scaled(1.0)
+        a.peak = None
+    elif refusal == "not current":
+        model.drift_and_linearization(0.0, x + 0.1, None, "frozen")  # overwrites P
+        assert not a.current
+    elif refusal == "not compiled":
+        pf.use_compiled(False)
+    assert not frozen_advance_applies(a, rhs, x, noise, method)
+
+
+# ------------------------------------------------------------------ the Lanczos iteration
+class _Diagonal:
+    """A matrix-free operator diag(d): the exact phi_p(A) v is phi_p(d) v."""
+
+    def __init__(self, d: np.ndarray) -> None:
+        self.d = d
+        self.shape = (d.size, d.size)
+        self.norm_inf = float(np.max(np.abs(d)))
+
+    def matvec(self, v: np.ndarray) -> np.ndarray:
+        return self.d[:, None] * v
+
+    def scaled(self, c: float) -> _Diagonal:
+        return _Diagonal(c * self.d)
+
+
+def _count_stacked(monkeypatch) -> list[int]:
+    """Records each stacked-basis assembly (`gather_members`) of the Lanczos iteration."""
+    calls: list[int] = []
+    original = phi_lanczos.gather_members
+
+    def spy(*args):
+        calls.append(1)
+        return original(*args)
+
+    monkeypatch.setattr(phi_lanczos, "gather_members", spy)
+    return calls
+
+
+@pytest.mark.parametrize(("n", "stacked"), [(2**14 - 1, 1), (2**14, 0)])
+def test_lanczos_sums_its_basis_from_n_2_pow_14(monkeypatch, n, stacked):
+    """From n = 2^14 on (`ACCUMULATE_BASIS_MIN_N`) the iteration sums its basis vector by
+    vector (no stacked (k, m, n) copy); below, it stacks it. Both are phi_p(A) v."""
+    calls = _count_stacked(monkeypatch)
+    d = -np.linspace(0.0, 2.0, n)
+    v = np.random.default_rng(0).standard_normal((n, 2))
+    got = phi_action(_Diagonal(d), v, 1, symmetric=True)
+    assert len(calls) == stacked
+    np.testing.assert_allclose(got, phi_scalar(d, 1)[:, None] * v, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("lanczos", [lanczos_numpy, lanczos_action])
+@pytest.mark.parametrize("batch", [(), (3,)])
+def test_summed_basis_equals_the_stacked_product(monkeypatch, lanczos, batch):
+    """The vector-by-vector sum of the basis (taken for a small n with the threshold lowered)
+    equals the stacked product to round-off, for one member and a batch, two columns."""
+    a = _symmetric(40, seed=1, scale=3.0)
+    rng = np.random.default_rng(2)
+    v = np.broadcast_to(rng.standard_normal((40, 2)), (*batch, 40, 2))  # one stopping m
+    stacked, stacked_ok = lanczos(RowOperator(a), v, 1, 1e-10, 40)
+    calls = _count_stacked(monkeypatch)
+    monkeypatch.setattr(phi_lanczos, "ACCUMULATE_BASIS_MIN_N", 1)
+    summed, summed_ok = lanczos(RowOperator(a), v, 1, 1e-10, 40)
+    assert not calls  # the summed path was taken
+    assert summed.shape == stacked.shape == (*batch, 40, 2)
+    np.testing.assert_array_equal(summed_ok, stacked_ok)
+    np.testing.assert_allclose(summed, stacked, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("scale", [1e-9, 1.0, 1e6])
+def test_breakdown_threshold_scales_with_the_norm(scale):
+    """The happy-breakdown tolerance is relative to ||A||_inf: a matrix of tiny norm is not
+    taken for a breakdown at m = 1 (its Lanczos value is phi_p(A) v to round-off, not
+    phi_p(a_1) v), at every scale of A."""
+    a = _symmetric(60, seed=4, scale=scale) - 3.0 * scale * np.eye(60)
+    v = np.random.default_rng(5).standard_normal((60, 1))
+    got = phi_action(a, v, 1, method="krylov", symmetric=True, rtol=1e-13)
+    want = phi_action(a, v, 1, method="eigh", symmetric=True)
+    assert np.max(np.abs(got - want)) <= 1e-11 * np.max(np.abs(want))
+
+
+def test_a_column_that_breaks_down_stays_zero_while_its_member_continues():
+    """Column 0 lies in an invariant subspace of dimension 2 (b_2 ~ round-off: its breakdown),
+    column 1 does not, so the member goes on; the broken-down column's next basis vectors are
+    0 in both executors, which agree bit for bit."""
+    rng = np.random.default_rng(6)
+    q, _ = np.linalg.qr(rng.standard_normal((50, 50)))
+    a = (q * np.linspace(-4.0, 0.0, 50)) @ q.T
+    a = (a + a.T) / 2
+    v = np.stack([q[:, 3] + q[:, 40], rng.standard_normal(50)], axis=-1)
+    got, got_ok = lanczos_numpy(RowOperator(a), v, 1, 1e-10, 50)
+    want, want_ok = lanczos_action(RowOperator(a), v, 1, 1e-10, 50)
+    assert got_ok and want_ok
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_allclose(got, phi_action(a, v, 1, method="eigh", symmetric=True),
+                               rtol=1e-8, atol=1e-12)  # fmt: skip
+
+
+# ------------------------------------------------------------------ the spectrum's interval
+def test_spectrum_interval_at_a_bottom_of_zero():
+    """low = 0 (the zero operator: c p_max = 0) is an interval [0, 0] with the bound (tight);
+    a positive bottom is not (the frozen c L is negative semidefinite), nor an unknown width."""
+    norm, width = np.array([2.0, 2.0, 2.0]), np.array([0.0, 0.0, np.inf])
+    lo, hi, tight = spectrum_interval(norm, width, np.array([0.0, 1e-3, 0.0]))
+    np.testing.assert_array_equal(tight, [True, False, False])
+    np.testing.assert_array_equal(lo, [0.0, -2.0, -2.0])
+    np.testing.assert_array_equal(hi, [0.0, 2.0, 2.0])
