@@ -143,7 +143,11 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_dense": (
         "agent_envs/integrators/phi_dense.py",
-        ["tests/test_phi_functions.py", "tests/test_array_backends.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_array_backends.py",
+        ],
     ),
     "phi_lanczos": (
         "agent_envs/integrators/phi_lanczos.py",
@@ -167,7 +171,11 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_krylov": (
         "agent_envs/integrators/phi_krylov.py",
-        ["tests/test_compiled_lanczos.py", "tests/test_phi_functions.py"],
+        [
+            "tests/test_compiled_lanczos.py",
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+        ],
     ),
     "phi_arnoldi": (
         "agent_envs/integrators/phi_arnoldi.py",

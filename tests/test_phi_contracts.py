@@ -261,6 +261,34 @@ def test_a_column_that_breaks_down_stays_zero_while_its_member_continues():
                                rtol=1e-8, atol=1e-12)  # fmt: skip
 
 
+def test_an_operator_whose_space_does_not_converge_takes_substeps():
+    """A matrix-free operator (without `dense()`) whose Krylov space does not converge within
+    `max_krylov_dim` gets its action in substeps: phi_p(A) v to the tolerance, not the
+    unconverged Krylov value; one that converges gets the Krylov value itself."""
+    d = -np.linspace(0.0, 8.0, 300)
+    v = np.random.default_rng(7).standard_normal((300, 2))
+    want = phi_scalar(d, 1)[:, None] * v
+    substepped = phi_action(_Diagonal(d), v, 1, symmetric=True, max_krylov_dim=12)
+    np.testing.assert_allclose(substepped, want, rtol=1e-8, atol=1e-10)
+    direct, ok = lanczos_numpy(RowOperator(_Diagonal(d)), v, 1, 1e-10, 100)
+    assert ok
+    np.testing.assert_array_equal(phi_action(_Diagonal(d), v, 1, symmetric=True), direct)
+
+
+# ------------------------------------------------------------------ the dense methods
+@pytest.mark.parametrize("order", [1, 2, 3])
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_augmented_expm_on_torch_equals_numpy(order, k):
+    """Sidje's augmented matrix built for torch (its identity blocks placed by concatenation)
+    gives numpy's value, for every order and block width."""
+    torch = pytest.importorskip("torch")
+    a = _symmetric(12, seed=8) + 0.3 * np.random.default_rng(9).standard_normal((12, 12))
+    v = np.random.default_rng(10).standard_normal((2, 12, k))
+    want = phi_action(a, v, order, method="expm")
+    got = phi_action(torch.tensor(a), torch.tensor(v), order, method="expm")
+    np.testing.assert_allclose(got.numpy(), want, rtol=1e-12, atol=1e-14)
+
+
 # ------------------------------------------------------------------ the spectrum's interval
 def test_spectrum_interval_at_a_bottom_of_zero():
     """low = 0 (the zero operator: c p_max = 0) is an interval [0, 0] with the bound (tight);
