@@ -189,6 +189,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
         "agent_envs/integrators/phi_fused.py",
         [
             "tests/test_compiled_lanczos.py",
+            "tests/test_phi_contracts.py",
             "tests/test_native_switch.py",
             "tests/test_fast_step.py",
         ],

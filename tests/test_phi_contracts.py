@@ -95,10 +95,11 @@ def compiled():
 
 
 def _frozen_step(n=100, paths=2, kernel="symmetric"):
-    """(model, A = tau c L(x), rhs, x, noise) of one exponential Rosenbrock-Euler step."""
+    """(model, A = tau c L(x), rhs, x, noise) of one exponential Rosenbrock-Euler step, over
+    `paths` paths (None: unbatched)."""
     model = SwarmModel(SwarmParams(n_agents=n, dim=1, epsilon=0.05, kernel=kernel), "dense")
     rng = np.random.default_rng(0)
-    x = rng.uniform(-1, 1, (paths, n, 1))
+    x = rng.uniform(-1, 1, (n, 1) if paths is None else (paths, n, 1))
     rhs, lin = model.drift_and_linearization(0.0, x, None, "frozen")
     return model, 0.02 * lin.matrix, rhs, x, rng.standard_normal(x.shape)
 
@@ -171,6 +172,50 @@ def test_fused_step_refuses_each_condition(compiled, refusal):
     elif refusal == "not compiled":
         pf.use_compiled(False)
     assert not frozen_advance_applies(a, rhs, x, noise, method)
+
+
+@pytest.mark.parametrize("paths", [(), (1,), (3,)])
+def test_compiled_lanczos_takes_any_float_block_like_a_fresh_float64_one(compiled, paths):
+    """The compiled phi-action of the frozen L(x) on a read-only block (a single env's state
+    is passed as it is), on an unbatched one and with a float32 W in `add_product` gives what
+    it gives on a fresh writable float64 copy, bit for bit."""
+    _, a, rhs, _, noise = _frozen_step(paths=paths[0] if paths else None)
+    kw = {"method": "krylov", "symmetric": True}
+    want = phi_action(a, rhs.copy(), 1, **kw)
+    read_only = rhs.copy()
+    read_only.flags.writeable = False
+    np.testing.assert_array_equal(phi_action(a, read_only, 1, **kw), want)
+    w32 = noise.astype(np.float32)
+    np.testing.assert_array_equal(
+        phi_action(a, rhs, 1, add_product=(w32, 50.0), **kw),
+        phi_action(a, rhs, 1, add_product=(w32.astype(np.float64), 50.0), **kw),
+    )
+
+
+def test_fused_advance_runs_on_the_calling_thread_by_default(compiled, monkeypatch):
+    """`frozen_advance` without `threads` is one pass on the calling thread (the threaded
+    driver needs `load_compiled_threads` first), and its x_next is the step's formula
+    x + dt phi_1(dt A) rhs + noise."""
+    from agent_envs import native
+    from agent_envs.dynamics.linearization_cache import LinearizationCache
+
+    model = LinearizationCache(SwarmParams(n_agents=100, epsilon=0.05))
+    x = np.random.default_rng(0).uniform(-1, 1, (3, 100, 1))
+    x.flags.writeable = False
+    rhs, lin = model.drift_and_linearization(0.0, x, None, "frozen")
+    noise = 0.01 * np.random.default_rng(1).standard_normal(x.shape)
+    want = x + 0.02 * phi_action(0.02 * lin.matrix, rhs, 1, method="krylov", symmetric=True)
+    want = want + noise
+
+    def threaded(*args):
+        raise AssertionError("the threaded driver ran without threads > 1")
+
+    monkeypatch.setattr(native.loaded("lanczos"), "frozen_advance_threads", threaded)
+    found = pf.frozen_advance(
+        lin.matrix, rhs, x, 0.02, noise, None, *model.fused_relinearization(x)
+    )
+    assert found is not None
+    np.testing.assert_allclose(found[0], want, rtol=1e-12, atol=1e-14)
 
 
 # ------------------------------------------------------------------ the Lanczos iteration
