@@ -192,6 +192,32 @@ def test_compiled_lanczos_takes_any_float_block_like_a_fresh_float64_one(compile
     )
 
 
+def test_compiled_lanczos_broadcasts_a_block_over_the_members(compiled):
+    """One block V (n, k) for a batch of three frozen L(x): each member acts on V, bit for bit
+    as on V repeated per member, and so does W of `add_product`."""
+    _, a, rhs, _, noise = _frozen_step(paths=3)
+    kw = {"method": "krylov", "symmetric": True}
+    v, w = rhs[1], noise[2]
+    full = np.broadcast_to(v, rhs.shape).copy()
+    np.testing.assert_array_equal(phi_action(a, v, 1, **kw), phi_action(a, full, 1, **kw))
+    np.testing.assert_array_equal(
+        phi_action(a, rhs, 1, add_product=(w, 50.0), **kw),
+        phi_action(a, rhs, 1, add_product=(np.broadcast_to(w, rhs.shape).copy(), 50.0), **kw),
+    )
+
+
+def test_compiled_lanczos_without_the_kernels_peak(compiled):
+    """A symmetric frozen L(x) whose kernel has no peak (`peak` None: no interval for the error
+    bound) still takes the compiled Lanczos, stopped by Saad's estimate: phi_p(A) V to the
+    tolerance."""
+    _, a, rhs, _, _ = _frozen_step(paths=2)
+    a = a.scaled(1.0)
+    a.peak = None
+    got = phi_action(a, rhs, 1, method="krylov", symmetric=True)
+    want = phi_action(a.dense(), rhs, 1, method="eigh", symmetric=True)
+    assert np.max(np.abs(got - want)) <= 1e-8 * np.max(np.abs(want))
+
+
 def test_fused_advance_runs_on_the_calling_thread_by_default(compiled, monkeypatch):
     """`frozen_advance` without `threads` is one pass on the calling thread (the threaded
     driver needs `load_compiled_threads` first), and its x_next is the step's formula
