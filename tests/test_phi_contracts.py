@@ -206,6 +206,34 @@ def test_compiled_lanczos_broadcasts_a_block_over_the_members(compiled):
     )
 
 
+def test_a_block_batched_beyond_the_operator_takes_the_general_lanczos(compiled):
+    """V (2, B, n, k) on B frozen L(x): the compiled Lanczos, member by member over P's batch,
+    declines, and the general Lanczos broadcasts: each slice as on its own (to round-off)."""
+    _, a, rhs, _, _ = _frozen_step(paths=3)
+    kw = {"method": "krylov", "symmetric": True}
+    got = phi_action(a, np.stack([rhs, -2.0 * rhs]), 1, **kw)
+    for i, v in enumerate([rhs, -2.0 * rhs]):
+        want = phi_action(a, v, 1, **kw)
+        np.testing.assert_allclose(got[i], want, rtol=1e-9, atol=1e-12 * np.max(np.abs(want)))
+
+
+@pytest.mark.parametrize("layout", ["fortran", "strided"])
+def test_compiled_lanczos_on_a_non_contiguous_block(compiled, layout):
+    """A block that is not C-contiguous (Fortran order, a strided view) gives what its
+    C-contiguous copy gives, bit for bit."""
+    _, a, rhs, _, noise = _frozen_step(paths=2)
+    block = np.concatenate([rhs, noise], axis=-1)  # (2, n, 2)
+    if layout == "fortran":
+        v = np.asfortranarray(block)
+    else:
+        v = np.repeat(block, 2, axis=-1)[..., ::2]
+    assert not v.flags.c_contiguous
+    kw = {"method": "krylov", "symmetric": True}
+    np.testing.assert_array_equal(
+        phi_action(a, v, 1, **kw), phi_action(a, np.ascontiguousarray(v), 1, **kw)
+    )
+
+
 def test_compiled_lanczos_without_the_kernels_peak(compiled):
     """A symmetric frozen L(x) whose kernel has no peak (`peak` None: no interval for the error
     bound) still takes the compiled Lanczos, stopped by Saad's estimate: phi_p(A) V to the
