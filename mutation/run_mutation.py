@@ -183,7 +183,11 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "krylov_space": (
         "agent_envs/integrators/krylov_space.py",
-        ["tests/test_phi_functions.py", "tests/test_compiled_lanczos.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_compiled_lanczos.py",
+        ],
     ),
     "phi_fused": (
         "agent_envs/integrators/phi_fused.py",

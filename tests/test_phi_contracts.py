@@ -374,6 +374,19 @@ def test_an_operator_whose_space_does_not_converge_takes_substeps():
     np.testing.assert_array_equal(phi_action(_Diagonal(d), v, 1, symmetric=True), direct)
 
 
+def test_row_operator_bounds_a_matrix_by_its_row_sums():
+    """Without bounds given, a matrix's ||A||_inf is its largest absolute row sum (not the
+    column sum: a matrix that is not symmetric tells them apart), per batch member, with an
+    unknown width (inf) and bottom (nan)."""
+    a = np.random.default_rng(11).uniform(0.0, 1.0, (2, 5, 5))
+    a[0, 0, :] = 10.0  # row 0 of member 0 sums to 50, no column to more than 10.8
+    norm, width, low = RowOperator(a).member_bounds((2,))
+    np.testing.assert_array_equal(norm, np.max(np.sum(np.abs(a), axis=-1), axis=-1))
+    assert norm[0] == 50.0
+    np.testing.assert_array_equal(width, [np.inf, np.inf])
+    assert np.all(np.isnan(low))
+
+
 # ------------------------------------------------------------------ the dense methods
 @pytest.mark.parametrize("order", [1, 2, 3])
 @pytest.mark.parametrize("k", [1, 2, 3])
