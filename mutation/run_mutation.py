@@ -179,7 +179,11 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_arnoldi": (
         "agent_envs/integrators/phi_arnoldi.py",
-        ["tests/test_phi_functions.py", "tests/test_array_backends.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_array_backends.py",
+        ],
     ),
     "krylov_space": (
         "agent_envs/integrators/krylov_space.py",

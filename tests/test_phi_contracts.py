@@ -387,6 +387,64 @@ def test_row_operator_bounds_a_matrix_by_its_row_sums():
     assert np.all(np.isnan(low))
 
 
+# ------------------------------------------------------------------ the Arnoldi iteration
+def _invariant_pair(n: int = 40, seed: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """A non-symmetric A with span{e_0, e_1} invariant, and V whose column 0 lies there (its
+    Arnoldi breaks down at m = 2) and column 1 does not."""
+    rng = np.random.default_rng(seed)
+    a = np.diag(np.linspace(-3.0, 0.0, n))
+    a[2:, 2:] += np.triu(rng.uniform(0.0, 0.3, (n - 2, n - 2)), 1)
+    a[0, 1], a[1, 0] = 0.7, -0.2
+    v = np.zeros((n, 2))
+    v[:2, 0] = 1.0, 0.5
+    v[:, 1] = rng.standard_normal(n)
+    return a, v
+
+
+def test_arnoldi_column_that_breaks_down_equals_it_alone():
+    """Column 0 breaks down at m = 2 while column 1 goes on: its next basis vectors are 0, so
+    its value is the one it gets alone, bit for bit, and both are phi_p(A) v."""
+    a, v = _invariant_pair()
+    both = phi_action(a, v, 1, method="krylov")
+    np.testing.assert_array_equal(both[:, 0], phi_action(a, v[:, :1], 1, method="krylov")[:, 0])
+    np.testing.assert_allclose(both, phi_action(a, v, 1, method="expm"), rtol=1e-10, atol=1e-13)
+
+
+def test_arnoldi_zero_column_gives_zero():
+    """A zero column (|v| = 0) gives phi_p(A) 0 = 0, and the other column its own value."""
+    a, v = _invariant_pair()
+    v[:, 0] = 0.0
+    got = phi_action(a, v, 2, method="krylov")
+    np.testing.assert_array_equal(got[:, 0], 0.0)
+    np.testing.assert_allclose(got, phi_action(a, v, 2, method="expm"), rtol=1e-10, atol=1e-13)
+
+
+class _Counting:
+    """A matrix as a matrix-free operator that counts its products."""
+
+    def __init__(self, a: np.ndarray) -> None:
+        self.a, self.shape, self.products = a, a.shape, 0
+        self.norm_inf = float(np.max(np.sum(np.abs(a), axis=-1)))
+
+    def matvec(self, v: np.ndarray) -> np.ndarray:
+        self.products += 1
+        return self.a @ v
+
+    def scaled(self, c: float) -> _Counting:
+        return _Counting(c * self.a)
+
+
+def test_arnoldi_checks_every_fourth_dimension():
+    """Arnoldi compares its coefficients every 4 dimensions (the default `check_every`): it
+    stops at a multiple of 4, here after 20 products (5 checks) of a 300 x 300 A."""
+    a = np.diag(-np.linspace(0.0, 4.0, 300)) + np.diag(np.full(299, 0.4), 1)
+    op = _Counting(a)
+    v = np.random.default_rng(13).standard_normal((300, 1))
+    got = phi_action(op, v, 1)
+    assert op.products == 20
+    np.testing.assert_allclose(got, phi_action(a, v, 1, method="expm"), rtol=1e-9, atol=1e-12)
+
+
 # ------------------------------------------------------------------ the dense methods
 @pytest.mark.parametrize("order", [1, 2, 3])
 @pytest.mark.parametrize("k", [1, 2, 3])
