@@ -204,7 +204,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_matrix_free": (
         "agent_envs/integrators/phi_matrix_free.py",
-        ["tests/test_large_swarms.py"],
+        ["tests/test_large_swarms.py", "tests/test_phi_contracts.py"],
     ),
     "operators": (
         "agent_envs/dynamics/operators.py",

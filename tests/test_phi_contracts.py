@@ -387,6 +387,31 @@ def test_row_operator_bounds_a_matrix_by_its_row_sums():
     assert np.all(np.isnan(low))
 
 
+def test_substeps_double_when_the_order_2_tail_does_not_converge(monkeypatch):
+    """phi_2 in substeps: where the tail phi_2(hA) v does not converge (here: made to fail
+    once, at s = 4 substeps), the number of substeps doubles rather than stepping without it:
+    the result is still phi_2(A) v."""
+    from agent_envs.integrators import phi_matrix_free
+
+    original = phi_matrix_free.krylov_or_none
+    tails = []
+
+    def tail_fails_once(op, v, order, *args):
+        # fails the tail once at s = 4 (||hA|| = 2), where the phi_1 substeps converge
+        if order == 2 and op.norm_inf <= 2.0:
+            tails.append(1)
+            if len(tails) == 1:
+                return None
+        return original(op, v, order, *args)
+
+    monkeypatch.setattr(phi_matrix_free, "krylov_or_none", tail_fails_once)
+    d = -np.linspace(0.0, 8.0, 300)
+    v = np.random.default_rng(14).standard_normal((300, 1))
+    got = phi_action(_Diagonal(d), v, 2, symmetric=True, max_krylov_dim=12)
+    assert len(tails) >= 2
+    np.testing.assert_allclose(got, phi_scalar(d, 2)[:, None] * v, rtol=1e-8, atol=1e-10)
+
+
 # ------------------------------------------------------------------ the Arnoldi iteration
 def _invariant_pair(n: int = 40, seed: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """A non-symmetric A with span{e_0, e_1} invariant, and V whose column 0 lies there (its
