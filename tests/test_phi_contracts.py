@@ -412,6 +412,15 @@ def test_substeps_double_when_the_order_2_tail_does_not_converge(monkeypatch):
     np.testing.assert_allclose(got, phi_scalar(d, 2)[:, None] * v, rtol=1e-8, atol=1e-10)
 
 
+def test_substeps_refuse_order_3():
+    """An operator's substeps are implemented for p = 1, 2 only: p = 3 where the Krylov space
+    does not converge is refused as not implemented (not taken for a non-convergence)."""
+    d = -np.linspace(0.0, 8.0, 300)
+    v = np.random.default_rng(15).standard_normal((300, 1))
+    with pytest.raises(ValueError, match="order 3 > 2 is not implemented"):
+        phi_action(_Diagonal(d), v, 3, symmetric=True, max_krylov_dim=12)
+
+
 # ------------------------------------------------------------------ the Arnoldi iteration
 def _invariant_pair(n: int = 40, seed: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """A non-symmetric A with span{e_0, e_1} invariant, and V whose column 0 lies there (its
