@@ -164,19 +164,36 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_functions": (
         "agent_envs/integrators/phi_functions.py",
-        ["tests/test_phi_functions.py", "tests/test_integrators.py", "tests/test_large_swarms.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_integrators.py",
+            "tests/test_large_swarms.py",
+        ],
     ),
     "phi_dense": (
         "agent_envs/integrators/phi_dense.py",
-        ["tests/test_phi_functions.py", "tests/test_array_backends.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_array_backends.py",
+        ],
     ),
     "phi_lanczos": (
         "agent_envs/integrators/phi_lanczos.py",
-        ["tests/test_phi_functions.py", "tests/test_compiled_lanczos.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_compiled_lanczos.py",
+        ],
     ),
     "lanczos_stopping": (
         "agent_envs/integrators/lanczos_stopping.py",
-        ["tests/test_phi_functions.py", "tests/test_compiled_lanczos.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_compiled_lanczos.py",
+        ],
     ),
     "lanczos_rule": (
         "agent_envs/native/lanczos_rule.py",
@@ -184,27 +201,40 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "phi_krylov": (
         "agent_envs/integrators/phi_krylov.py",
-        ["tests/test_compiled_lanczos.py", "tests/test_phi_functions.py"],
+        [
+            "tests/test_compiled_lanczos.py",
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+        ],
     ),
     "phi_arnoldi": (
         "agent_envs/integrators/phi_arnoldi.py",
-        ["tests/test_phi_functions.py", "tests/test_array_backends.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_array_backends.py",
+        ],
     ),
     "krylov_space": (
         "agent_envs/integrators/krylov_space.py",
-        ["tests/test_phi_functions.py", "tests/test_compiled_lanczos.py"],
+        [
+            "tests/test_phi_functions.py",
+            "tests/test_phi_contracts.py",
+            "tests/test_compiled_lanczos.py",
+        ],
     ),
     "phi_fused": (
         "agent_envs/integrators/phi_fused.py",
         [
             "tests/test_compiled_lanczos.py",
+            "tests/test_phi_contracts.py",
             "tests/test_native_switch.py",
             "tests/test_fast_step.py",
         ],
     ),
     "phi_matrix_free": (
         "agent_envs/integrators/phi_matrix_free.py",
-        ["tests/test_large_swarms.py"],
+        ["tests/test_large_swarms.py", "tests/test_phi_contracts.py"],
     ),
     "operators": (
         "agent_envs/dynamics/operators.py",
