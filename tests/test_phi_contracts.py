@@ -502,3 +502,21 @@ def test_spectrum_interval_at_a_bottom_of_zero():
     np.testing.assert_array_equal(tight, [True, False, False])
     np.testing.assert_array_equal(lo, [0.0, -2.0, -2.0])
     np.testing.assert_array_equal(hi, [0.0, 2.0, 2.0])
+
+
+def test_phi_1s_torch_gradient_near_zero_is_its_series():
+    """d phi_1 / dz = 1/2 + z/3 + ... : at z = 0 (the constant branch) and at tiny z (where
+    autograd of expm1(z) / z cancels) the gradient is the series', the values unchanged."""
+    torch = pytest.importorskip("torch")
+    from agent_envs.integrators.phi_dense import phi_scalar
+
+    z = torch.tensor([0.0, -0.0, 1e-30, -1e-12, 5e-8, 1e-3, -0.5], dtype=torch.float64)
+    z.requires_grad_(True)
+    value = phi_scalar(z, 1)
+    value.sum().backward()
+    plain = phi_scalar(z.detach(), 1)
+    assert torch.equal(value.detach(), plain)  # the same bits as without autograd
+    want = 0.5 + z.detach() / 3.0
+    assert torch.allclose(z.grad[:5], want[:5], rtol=1e-12, atol=0.0)
+    exact = (z.detach() * torch.exp(z.detach()) - torch.expm1(z.detach())) / z.detach() ** 2
+    assert torch.allclose(z.grad[5:], exact[5:], rtol=1e-9, atol=0.0)

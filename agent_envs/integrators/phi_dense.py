@@ -30,6 +30,9 @@ import numpy as np
 from agent_envs import arrays
 from agent_envs.native.lanczos_rule import TAYLOR_TERMS
 
+#: below this |z| the torch gradient of phi_1 comes from its series (`phi_scalar`)
+_TINY_PHI1 = 1e-7
+
 
 def phi_scalar(z: Any, order: int) -> Any:
     """phi_order(z) elementwise for real z (numpy or torch), accurate near z = 0.
@@ -48,7 +51,15 @@ def phi_scalar(z: Any, order: int) -> Any:
     z_safe = xp.where(nonzero, z, 1.0)
     if order == 1:
         with np.errstate(over="ignore"):
-            return xp.where(nonzero, xp.expm1(z_safe) / z_safe, 1.0)
+            value = xp.where(nonzero, xp.expm1(z_safe) / z_safe, 1.0)
+        if arrays.is_torch(z) and z.requires_grad:
+            # the same values, with the derivative 1/2 + z/3 of the series near 0: autograd of
+            # expm1(z) / z cancels catastrophically below |z| ~ 1e-7 and the constant branch
+            # at z = 0 has none
+            tiny = xp.abs(z) < _TINY_PHI1
+            series = 1.0 + z * (0.5 + z / 6.0)
+            value = xp.where(tiny, value.detach() + (series - series.detach()), value)
+        return value
     small = xp.abs(z) < 0.1
     zs = xp.where(small, z, 0.0)
     acc = xp.zeros_like(zs) + 1.0 / math.factorial(TAYLOR_TERMS - 1 + order)

@@ -29,8 +29,9 @@ by job:
 
 All three are written once for numpy and torch (`agent_envs.arrays`).
 
-``"auto"`` picks "expm" for n <= 48, and for larger n "krylov" except for a single matrix with
-n <= 80 (n <= 128 if it is not symmetric), where "expm" is still cheaper: the crossovers
+``"auto"`` picks "expm" for n <= 48; above that "krylov" for symmetric matrices except a single
+one with n <= 80, and for non-symmetric ones "expm" up to n = 80 (up to 128 for a single
+matrix), where it is still cheaper than Arnoldi, else "krylov": the crossovers
 measured on numpy by benchmarks/bench_integrators.py (table 1) with one BLAS thread.
 For a gradient on torch (forward and backward, N = 100 batched over 20 paths),
 benchmarks/bench_gradient.py measures "krylov" cheapest, then "eigh", with "expm" far behind
