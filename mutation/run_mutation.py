@@ -92,7 +92,11 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "episode_config": (
         "agent_envs/envs/episode_config.py",
-        ["tests/test_validation.py", "tests/test_envs_gym.py"],
+        [
+            "tests/test_episode_config_contracts.py",
+            "tests/test_validation.py",
+            "tests/test_envs_gym.py",
+        ],
     ),
     "attributes": (
         "agent_envs/envs/attributes.py",
