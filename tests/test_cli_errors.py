@@ -188,6 +188,8 @@ BATTERY: list[tuple[list[str], str]] = [
     (["evaluate", "--out", "{out}", "--env-id", "agent_envs.swarm_v0"], "PettingZoo"),
     (["evaluate", "--out", "{out}", "--env-kwargs", '{"bogus": 1}'], "bogus"),
     (["evaluate", "--out", "{out}", "--env-kwargs", '{"n_agents": -1}'], "n_agents"),
+    (["evaluate", "--out", "{out}", "--env-kwargs", '{"neighbours": 0}'], "neighbours"),
+    (["evaluate", "--out", "{out}", "--env-kwargs", '{"neighbours": 3}'], "observation='local'"),
     (["evaluate", "--out", "{out}", "--env-kwargs", "[1]"], "--env-kwargs"),
     (["evaluate", "--out", "{out}", "--env-kwargs", "{oops"], "--env-kwargs"),
     (["evaluate", "--out", "{out}", "--seeds", "x"], "--seeds"),

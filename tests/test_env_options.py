@@ -240,7 +240,7 @@ def test_references_act_alike_under_every_action_basis():
         (
             swarm_v0.parallel_env,
             {"observation": "velocity"},
-            r"observation='velocity' .* 'absolute', 'relative', 'swarm'$",
+            r"observation='velocity' .* 'absolute', 'relative', 'swarm', 'local'$",
         ),
         (lambda **k: gym.make(ENV, **k), {"action_basis": 3}, "action_basis must be a str"),
         (lambda **k: gym.make(ENV, **k), {"observation": "swarm"}, "observation='swarm'"),

@@ -18,7 +18,13 @@ import numpy as np
 
 from agent_envs.draws import uniform_positions
 from agent_envs.dynamics.operators import check_linear_operator
-from agent_envs.envs.interface import ENV_KIND_VALUES, check_env_options, check_option
+from agent_envs.envs.interface import (
+    DEFAULT_NEIGHBOURS,
+    ENV_KIND_VALUES,
+    MAX_NEIGHBOURS,
+    check_env_options,
+    check_option,
+)
 from agent_envs.params import SwarmParams
 from agent_envs.simulator import (
     DEFAULT_DIVERGENCE_THRESHOLD,
@@ -26,7 +32,7 @@ from agent_envs.simulator import (
     as_positions,
     diverged_paths,
 )
-from agent_envs.validation import DIVERGENCE_THRESHOLD_RANGE, check_positive
+from agent_envs.validation import DIVERGENCE_THRESHOLD_RANGE, check_int, check_positive
 
 #: Keys of `reset(options=...)` the swarm envs understand.
 RESET_OPTION_NAMES = ("initial_positions", "target")
@@ -70,6 +76,7 @@ ENV_OPTION_NAMES = (
     "observation",
     "action_basis",
     "agent_reward",
+    "neighbours",
 )
 
 
@@ -112,8 +119,10 @@ class EpisodeConfig:
     linear_operator in "auto" | "dense" | "matrix_free" (see `SwarmModel`); observation,
     action_basis and agent_reward are the learner's interface (`agent_envs.envs.interface`:
     each env takes its own values of them; none changes the dynamics, the cost or the random
-    draws). The simulation's fields read as the config's own too (``config.n_steps`` is
-    ``config.simulation.n_steps``), as the env kwargs name them.
+    draws). neighbours: K of ``observation="local"`` (PettingZoo), an int in [1, 1024], default
+    6 (None before it is resolved); given with another layout it raises `ValueError`, since it
+    would change nothing. The simulation's fields read as the config's own too
+    (``config.n_steps`` is ``config.simulation.n_steps``), as the env kwargs name them.
     """
 
     params: SwarmParams
@@ -123,6 +132,7 @@ class EpisodeConfig:
     observation: str = "absolute"
     action_basis: str = "agents"
     agent_reward: str = "own"
+    neighbours: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, SwarmParams):
@@ -140,6 +150,22 @@ class EpisodeConfig:
         check_linear_operator(self.linear_operator)
         for name in ("observation", "action_basis", "agent_reward"):
             check_option(name, getattr(self, name))
+        self._check_neighbours()
+
+    def _check_neighbours(self) -> None:
+        """``neighbours``: an int in [1, MAX_NEIGHBOURS] with ``observation="local"`` (None
+        there becomes `DEFAULT_NEIGHBOURS`), None with any other layout."""
+        if self.neighbours is None:
+            if self.observation == "local":
+                object.__setattr__(self, "neighbours", DEFAULT_NEIGHBOURS)
+            return
+        value = check_int("neighbours", self.neighbours, 1, MAX_NEIGHBOURS)
+        if self.observation != "local":
+            raise ValueError(
+                "neighbours is an option of the PettingZoo env's observation='local' only; "
+                f"got neighbours={value} with observation={self.observation!r}"
+            )
+        object.__setattr__(self, "neighbours", value)
 
     @classmethod
     def from_kwargs(
@@ -188,6 +214,8 @@ class EpisodeConfig:
         params = {k: v for k, v in changes.items() if k in param_names}
         spec = {k: v for k, v in changes.items() if k in SIMULATION_OPTION_NAMES}
         options = {k: v for k, v in changes.items() if k not in params and k not in spec}
+        if options.get("observation", "local") != "local":  # (K belongs to the local layout)
+            options.setdefault("neighbours", None)
         return dataclasses.replace(
             self,
             params=dataclasses.replace(self.params, **params) if params else self.params,

@@ -50,6 +50,12 @@ PettingZoo agent; `agent_envs.envs.observation` builds them). Time t / T is alwa
   stiff regime; docs/env-options.md measures it).
 - ``"swarm"`` (PettingZoo, 5 d + 1 entries): the ``"relative"`` row of agent k with the swarm's
   centre offset c - xbar and spread inserted before t / T.
+- ``"local"`` (PettingZoo, (K + 1)(d + 1) entries, K the kwarg ``neighbours``, default
+  `DEFAULT_NEIGHBOURS`, in [1, `MAX_NEIGHBOURS`]; only with this layout): agent k's own offset
+  E x_k - xbar, its K nearest neighbours' offsets E x_l - E x_k and a mask (zeros and mask 0
+  where N - 1 < K), t / T; no global statistic (`agent_envs.envs.local_observation`: the
+  ranking, ties, the communication graph and its cost). The Gymnasium env has no per-agent
+  rows, so it does not take it.
 
 **Agent reward** (`AGENT_REWARDS`, PettingZoo env): ``"own"`` (default) gives agent k
 -tau/N (|x_k - xbar|^2 + gamma |u_k|^2) (they add up to the swarm's reward); ``"team"`` gives
@@ -69,7 +75,10 @@ from agent_envs import arrays
 #: Observation layouts of `agent_envs/Swarm-v0` (and its native vector env).
 OBSERVATIONS = ("absolute", "relative", "modes", "summary")
 #: Observation layouts of one agent of `agent_envs.swarm_v0`.
-AGENT_OBSERVATIONS = ("absolute", "relative", "swarm")
+AGENT_OBSERVATIONS = ("absolute", "relative", "swarm", "local")
+#: K of the ``"local"`` layout when the kwarg ``neighbours`` is not given, and its largest value.
+DEFAULT_NEIGHBOURS = 6
+MAX_NEIGHBOURS = 1024
 #: Action bases of `agent_envs/Swarm-v0` (the PettingZoo env acts per agent: "agents" only).
 ACTION_BASES = ("agents", "modes", "common")
 #: Reward of each agent of `agent_envs.swarm_v0` (the Gymnasium env has one reward).
@@ -249,7 +258,9 @@ __all__ = [
     "ACTION_BASES",
     "AGENT_OBSERVATIONS",
     "AGENT_REWARDS",
+    "DEFAULT_NEIGHBOURS",
     "ENV_KIND_VALUES",
+    "MAX_NEIGHBOURS",
     "OBSERVATIONS",
     "OPTION_VALUES",
     "action_rows",

@@ -17,7 +17,9 @@ observation (of each agent's own observation in the PettingZoo env).
 
 These are the default layouts (``observation="absolute"``). The env kwarg ``observation``
 selects another (`agent_envs.envs.interface`: "relative", "modes", "summary" for the Gymnasium
-env; "relative", "swarm" for a PettingZoo agent); every function here takes it as `layout`.
+env; "relative", "swarm", "local" for a PettingZoo agent); every function here takes it as
+`layout`. The ``"local"`` row (own offset, K nearest neighbours, mask, t / T) is built by
+`agent_envs.envs.local_observation`; the per-agent functions here take its K as `neighbours`.
 
 Bounds (finite, as the checkers want them): positions and target lie in
 ``[-divergence_threshold, divergence_threshold]`` (a state beyond it ends the episode and is
@@ -38,11 +40,18 @@ from gymnasium import spaces
 from agent_envs.dynamics.kernels import CuckerSmaleKernel
 from agent_envs.envs.interface import (
     AGENT_OBSERVATIONS,
+    DEFAULT_NEIGHBOURS,
     OBSERVATIONS,
     from_modes,
     modes_bound,
     swarm_summary,
     to_modes,
+)
+from agent_envs.envs.local_observation import (
+    local_observation_size,
+    local_observation_space,
+    local_observations,
+    split_local_observation,
 )
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -65,9 +74,14 @@ def observation_size(n_agents: int, dim: int, layout: str = "absolute") -> int:
     return 2 * n_agents * dim + dim + 1
 
 
-def agent_observation_size(dim: int, layout: str = "absolute") -> int:
-    """Length of one PettingZoo agent's observation: 3 d + 1 (``"swarm"``: 5 d + 1)."""
+def agent_observation_size(
+    dim: int, layout: str = "absolute", neighbours: int = DEFAULT_NEIGHBOURS
+) -> int:
+    """Length of one PettingZoo agent's observation: 3 d + 1 (``"swarm"``: 5 d + 1;
+    ``"local"``: (K + 1)(d + 1), K = `neighbours`)."""
     check_layout(layout, agent=True)
+    if layout == "local":
+        return local_observation_size(dim, neighbours)
     return 5 * dim + 1 if layout == "swarm" else 3 * dim + 1
 
 
@@ -125,9 +139,17 @@ def observation_space(
 
 
 def agent_observation_space(
-    dim: int, position_bound: float, drift_bound: float, layout: str = "absolute"
+    dim: int,
+    position_bound: float,
+    drift_bound: float,
+    layout: str = "absolute",
+    neighbours: int = DEFAULT_NEIGHBOURS,
 ) -> spaces.Box:
-    """One PettingZoo agent's observation space Box((3 d + 1,), float32) (``"swarm"``: 5 d + 1)."""
+    """One PettingZoo agent's observation space Box((3 d + 1,), float32) (``"swarm"``: 5 d + 1;
+    ``"local"``: `local_observation.local_observation_space`, (K + 1)(d + 1) with K =
+    `neighbours`)."""
+    if layout == "local":
+        return local_observation_space(dim, position_bound, neighbours)
     return _box(_bounds(1, dim, position_bound, drift_bound, layout), dim)
 
 
@@ -202,11 +224,15 @@ def agent_observations(
     time_fraction: float,
     space: spaces.Box,
     layout: str = "absolute",
+    neighbours: int = DEFAULT_NEIGHBOURS,
 ) -> np.ndarray:
     """All agents' PettingZoo observations: one new (N, size) float32 array, row k = agent k.
 
-    `layout` "absolute" | "relative" | "swarm" (`agent_envs.envs.interface`).
+    `layout` "absolute" | "relative" | "swarm" | "local" (`agent_envs.envs.interface`; "local"
+    reads neither `mean_drift` nor anything global, and takes K = `neighbours`).
     """
+    if layout == "local":
+        return local_observations(mean_positions, target, time_fraction, space, neighbours)
     n, d = mean_positions.shape
     obs = np.empty((n, agent_observation_size(d, layout)), dtype=np.float32)
     target = np.asarray(target)
@@ -266,13 +292,20 @@ def split_observation(
     }
 
 
-def split_agent_observation(obs: Any, dim: int, layout: str = "absolute") -> dict[str, np.ndarray]:
+def split_agent_observation(
+    obs: Any, dim: int, layout: str = "absolute", neighbours: int = DEFAULT_NEIGHBOURS
+) -> dict[str, np.ndarray]:
     """Inverse of the PettingZoo per-agent layout, batched over leading axes.
 
     Returns a dict with ``position`` (..., d) (absolute: offsets are mapped back),
     ``interaction_drift`` (..., d), ``target`` (..., d) and ``time_fraction`` (...), as float64
-    arrays; the ``"swarm"`` layout adds ``centre_offset`` and ``spread`` (..., d).
+    arrays; the ``"swarm"`` layout adds ``centre_offset`` and ``spread`` (..., d). The
+    ``"local"`` row holds no position, drift or target: its dict is
+    `local_observation.split_local_observation`'s (``offset``, ``neighbour_offsets``,
+    ``neighbour_mask``, ``time_fraction``).
     """
+    if check_layout(layout, agent=True) == "local":
+        return split_local_observation(obs, dim, neighbours)
     arr = np.asarray(obs, dtype=np.float64)
     size = agent_observation_size(dim, layout)
     if arr.ndim < 1 or arr.shape[-1] != size:
@@ -299,14 +332,20 @@ def agent_observations_from_global(
     Args:
         obs: (..., 2 N d + d + 1) Gymnasium observations in the default ("absolute") layout.
         n_agents, dim: N and d of the env.
-        layout: the per-agent layout to build ("absolute" | "relative" | "swarm").
+        layout: the per-agent layout to build ("absolute" | "relative" | "swarm"; not
+            "local", whose neighbour search `local_observation.local_observations` makes from
+            the path means: ValueError).
 
     Returns:
         (..., N, size) float32: row k is the row `agent_observations` builds from the same path
         means in `layout` (without its clipping, which the Gymnasium observation has already
         had; the swarm's centre and spread are taken from the float32 positions).
     """
-    check_layout(layout, agent=True)
+    if check_layout(layout, agent=True) == "local":
+        raise ValueError(
+            "observation='local' rows are built from the path means by "
+            "agent_envs.envs.local_observation.local_observations, not from the global state"
+        )
     parts = split_observation(obs, n_agents, dim)
     lead = parts["positions"].shape[:-2]
     shape = (*lead, n_agents, dim)

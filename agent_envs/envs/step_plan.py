@@ -289,7 +289,8 @@ def _single_envelope(config: EpisodeConfig, model: SwarmModel, env: str) -> str:
     the kernel pass is the compiled one on the dense workspace (the model then keeps L(x) of
     every state the step starts from), the action basis "agents" or "common" and the path
     "step" available; with the numpy tail for a layout other than "absolute" and for the
-    PettingZoo env (its per-agent observations)."""
+    PettingZoo env (its per-agent observations: compiled rows for "absolute" and "relative",
+    numpy's for "swarm" and for "local", whose neighbour search stays in numpy/scipy)."""
     p, n, d = config.simulation.n_paths, config.params.n_agents, config.params.dim
     like = _like(p, n, d)
     if (

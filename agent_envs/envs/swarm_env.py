@@ -156,6 +156,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     | observation | "absolute" | layout (Env options) | "absolute", "relative", "modes", "summary" |
     | action_basis | "agents" | action -> u (Env options) | "agents", "modes", "common" |
     | agent_reward | "own" | PettingZoo's per-agent reward | "own" here (PettingZoo: also "team") |
+    | neighbours | None | K of PettingZoo's "local" layout | none here (PettingZoo: [1, 1024]) |
     | render_mode | None | see Rendering | None, "rgb_array", "human" |
     | num_threads | 1 | threads of the compiled passes over the paths | int in [1, numba's] |
 

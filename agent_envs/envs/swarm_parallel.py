@@ -19,13 +19,14 @@ from agent_envs.envs.compiled_agents import compiled_agent_costs, compiled_agent
 from agent_envs.envs.compiled_episode import CompiledOutcome, compiled_episode_step
 from agent_envs.envs.episode import SwarmEpisode
 from agent_envs.envs.episode_config import EpisodeConfig, reset_options
+from agent_envs.envs.interface import DEFAULT_NEIGHBOURS
 from agent_envs.envs.observation import (
     agent_observation_space,
     agent_observations,
     interaction_drift_bound,
     observation_space,
 )
-from agent_envs.envs.rendering import SwarmRenderer, check_render_mode
+from agent_envs.envs.rendering import RENDER_MODES, SwarmRenderer, check_render_mode
 from agent_envs.validation import check_seed, real_array
 
 _DTYPE = operator.attrgetter("dtype")
@@ -95,6 +96,20 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     u_k = beta (xbar - E x_k) - E drift_k. `state()` returns the global state, equal to the
     Gymnasium observation vector (`state_space` is its Box).
 
+    With ``observation="local"`` each agent sees no global statistic (not even the drift, a
+    mean over the swarm): `Box(((K + 1)(d + 1),))`, K = ``neighbours`` (default 6),
+
+    | slice                  | content                                                  |
+    |------------------------|----------------------------------------------------------|
+    | [0, d)                 | E x_k - xbar, its own offset to the target               |
+    | [d, d + K d)           | E x_l - E x_k for its K nearest agents l, nearest first  |
+    | [(K+1) d, (K+1) d + K) | mask: 1 for a neighbour, 0 for an empty slot (N - 1 < K) |
+    | (K + 1)(d + 1) - 1     | t / T                                                    |
+
+    (nearest by Euclidean distance between path means, ties to the lower agent index; the
+    K-nearest-neighbour communication graph this implies and its cost per step:
+    `agent_envs.envs.local_observation`.)
+
     ## Rewards
 
     r_k^n = -tau/N (|x_k^n - xbar|^2 + gamma |u_k^n|^2), mean over the paths, at the state at
@@ -102,6 +117,14 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     states and controls (up to round-off). With ``agent_reward="team"`` every agent receives the
     swarm's reward -tau c(x^n, u^n) instead (no agent moves the centre, the cost's main term,
     by more than O(1/N) alone; docs page "Env options").
+
+    Units: with c(x, u) = (1/N) sum_k (|x_k - xbar|^2 + gamma |u_k|^2) the swarm's running cost
+    and tau = T / m, the swarm's return is -sum_n tau c(x^n, u^n). With ``agent_reward="own"``
+    the agents' rewards add up to it, so a mean over agents (BenchMARL's
+    ``episode_reward_mean``) is -1/N of it: swarm cost = -N x that mean. With "team" every agent
+    has the swarm's reward: swarm cost = -1 x the mean. The info ``running_cost`` is the
+    agent's term |x_k - xbar|^2 + gamma |u_k|^2 itself, with no tau / N factor: its reward
+    under "own" is -tau / N x it.
 
     ## Starting State
 
@@ -120,11 +143,12 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
 
     The keyword arguments of `SwarmEnv`, with the same defaults and accepted ranges (its
     table), `render_mode` included, except the env options: ``observation`` is "absolute",
-    "relative" (E x_k - xbar in the first slice) or "swarm" (the "relative" row with the
+    "relative" (E x_k - xbar in the first slice), "swarm" (the "relative" row with the
     swarm's centre offset c - xbar and spread sqrt(mean_l (x_l - c)^2) inserted before t / T:
-    `Box((5 d + 1,))`); ``action_basis`` is "agents" only (each agent acts for itself);
-    ``agent_reward`` is "own" or "team" (Rewards). `state()` keeps the default layout.
-    Bad values raise `ValueError`/`TypeError` naming the
+    `Box((5 d + 1,))`) or "local" (Observation Space; ``neighbours`` K, an int in [1, 1024],
+    default 6, is its kwarg and refused with any other layout); ``action_basis`` is "agents"
+    only (each agent acts for itself); ``agent_reward`` is "own" or "team" (Rewards).
+    `state()` keeps the default layout. Bad values raise `ValueError`/`TypeError` naming the
     argument; an unknown keyword raises
     `TypeError("SwarmParallelEnv.__init__() got an unexpected keyword argument 'x'")`.
     `agent_envs.swarm_v0.env()`/`raw_env()` give the AEC env through PettingZoo's
@@ -133,17 +157,19 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     ## Info (per agent)
 
     `time` (after the step), `running_cost` (the agent's term |x_k - xbar|^2 + gamma |u_k|^2,
-    mean over the paths), `diverged` (bool). `reset` returns the same keys, with `time` and
-    `running_cost` 0.0 and `diverged` False. Global quantities (positions of all paths, the
-    control) are on the env: `positions`, `last_control`. Which code a step runs is `plan`
-    (`agent_envs.envs.step_plan.StepPlan`, resolved when the env is made; `repr(env)` shows
-    it), its mid-step fallbacks so far `plan_fallbacks` (a `Counter`).
+    mean over the paths, unscaled: no tau / N factor; Units), `diverged` (bool). `reset`
+    returns the same keys, with `time` and `running_cost` 0.0 and `diverged` False. Global
+    quantities (positions of all paths, the control) are on the env: `positions`,
+    `last_control`. Which code a step runs is `plan` (`agent_envs.envs.step_plan.StepPlan`,
+    resolved when the env is made; `repr(env)` shows it), its mid-step fallbacks so far
+    `plan_fallbacks` (a `Counter`).
 
     ## Version History
 
     - v0 (`agent_envs.swarm_v0`): the only version; its changes within v0 are the Gymnasium
       env's (`SwarmEnv`, Version History), which shares the episode core, and the env options
-      ``observation`` and ``agent_reward`` (defaults unchanged).
+      ``observation`` (its value "local" with the kwarg ``neighbours``) and ``agent_reward``
+      (defaults unchanged); `render(mode=...)`.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -159,6 +185,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         )
         self.episode = SwarmEpisode(self.config, "pettingzoo")
         self.render_mode = check_render_mode(render_mode)
+        # K of observation="local" (unused, and the layouts' default, otherwise)
+        self._neighbours = self.config.neighbours or DEFAULT_NEIGHBOURS
         params = self.config.params
         n, d = params.n_agents, params.dim
         self.possible_agents: list[str] = [f"agent_{k}" for k in range(n)]
@@ -167,7 +195,9 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         bound = self.config.divergence_threshold
         drift_bound = interaction_drift_bound(self.episode.model.kernel)
         self.observation_spaces = {
-            agent: agent_observation_space(d, bound, drift_bound, self.config.observation)
+            agent: agent_observation_space(
+                d, bound, drift_bound, self.config.observation, self._neighbours
+            )
             for agent in self.possible_agents
         }
         self.action_spaces = {
@@ -221,6 +251,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             ep.time_fraction,
             self._obs_space,
             self.config.observation,
+            self._neighbours,
         )
         return dict(zip(self.possible_agents, rows, strict=True))
 
@@ -342,8 +373,8 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
     ) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
         """After a compiled step: the per-agent costs (N,) and, where the step moved the state,
         the observations (`compiled_agents`: compiled for the "absolute" and "relative"
-        layouts, numpy's `agent_observations` for "swarm"; None after a diverged or general
-        step: `_observations` of the state)."""
+        layouts, numpy's `agent_observations` for "swarm" and "local"; None after a diverged or
+        general step: `_observations` of the state)."""
         ep, outcome = self.episode, found.outcome
         module = native.loaded("step")
         costs = compiled_agent_costs(
@@ -352,7 +383,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         )[0]  # fmt: skip
         if found.mean_positions is None:
             return costs, None
-        if self.config.observation == "swarm":
+        if self.config.observation in ("swarm", "local"):
             return costs, self._observations(found.mean_positions)
         rows = compiled_agent_rows(
             module, found.mean_positions[None], ep._mean_drift[None], ep.targets,
@@ -360,10 +391,28 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         )  # fmt: skip
         return costs, dict(zip(self.possible_agents, rows[0], strict=True))
 
-    def render(self) -> np.ndarray | None:
-        if self._renderer is None:
-            return None
-        return self._renderer.render()
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """A frame in `render_mode` (None without one); `mode` ("human" | "rgb_array", as
+        BenchMARL's ``env.render(mode="rgb_array")`` passes it) renders in that mode instead:
+        the env's own renderer where it is that mode, else a renderer made for this call with
+        the env's recorded history (just the current state where it records none; the
+        "call reset() first" frame before a reset). A mode that is not one raises `ValueError`.
+        """
+        if mode is None or (self._renderer is not None and mode == self.render_mode):
+            return None if self._renderer is None else self._renderer.render()
+        if mode not in RENDER_MODES:
+            raise ValueError(f"mode must be None or one of {RENDER_MODES}, got {mode!r}")
+        params = self.config.params
+        renderer = SwarmRenderer(mode, params.horizon, self.metadata["render_fps"])
+        if self._renderer is not None:
+            renderer.__setstate__(self._renderer.__getstate__())
+            renderer.render_mode = mode
+        elif self.episode.positions is not None:
+            renderer.reset(self.episode.time, self.episode.mean_positions, self.episode.target)
+        try:
+            return renderer.render()
+        finally:
+            renderer.close()
 
     def close(self) -> None:
         if self._renderer is not None:
