@@ -108,6 +108,11 @@ class FeedbackController:
                 f"{type(self).__name__} needs the agents' positions; the env's "
                 "observation='summary' holds only the swarm's centre and spread"
             )
+        if self.observation_layout == "local":
+            raise ValueError(
+                f"{type(self).__name__} needs the agents' positions and the interaction drift; "
+                "the env's observation='local' holds each agent's neighbourhood only"
+            )
         if not self.max_control > 0:
             raise ValueError(f"max_control must be > 0, got {self.max_control}")
         self.n_agents = self.params.n_agents

@@ -260,6 +260,14 @@ def test_a_controller_that_needs_positions_refuses_the_summary_layout():
         ProportionalController(env)
 
 
+def test_a_controller_that_needs_positions_refuses_the_local_layout():
+    from agent_envs import swarm_v0
+
+    env = swarm_v0.parallel_env(**SMALL, observation="local", neighbours=2)
+    with pytest.raises(ValueError, match="observation='local'"):
+        ProportionalController(env)
+
+
 @pytest.mark.parametrize(("observation", "basis"), [("summary", "common"), ("modes", "modes")])
 def test_torch_vector_env_follows_the_numpy_one_with_options(observation, basis):
     pytest.importorskip("torch")

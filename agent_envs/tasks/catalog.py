@@ -8,9 +8,9 @@ version; the old one stays loadable. `agent_envs/Swarm-v0` stays the free-kwargs
 exploration.
 
 What a user may still choose is the *interface* (`INTERFACE_KWARGS`: observation layout, action
-basis, PettingZoo agent reward, render mode, compiled threads): it changes what a policy sees
-and moves, never the dynamics, the cost or the random draws (`agent_envs.envs.interface`), so a
-score stays comparable whatever interface a learner used.
+basis, PettingZoo agent reward and neighbours, render mode, compiled threads): it changes what
+a policy sees and moves, never the dynamics, the cost or the random draws
+(`agent_envs.envs.interface`), so a score stays comparable whatever interface a learner used.
 
     import gymnasium as gym, agent_envs
     env = gym.make("agent_envs/StiffSwarm-v0")                           # the task's defaults
@@ -44,7 +44,14 @@ from types import MappingProxyType
 from typing import Any
 
 #: Env kwargs a task leaves to the user: the interface, never the dynamics, cost or draws.
-INTERFACE_KWARGS = ("observation", "action_basis", "agent_reward", "render_mode", "num_threads")
+INTERFACE_KWARGS = (
+    "observation",
+    "action_basis",
+    "agent_reward",
+    "neighbours",
+    "render_mode",
+    "num_threads",
+)
 #: The task id's shape: ``agent_envs/Name-vN`` (Farama's namespace/name-version convention).
 TASK_ID_PATTERN = re.compile(r"^(?:agent_envs/)?(?P<name>[A-Za-z][A-Za-z0-9]*)-v(?P<version>\d+)$")
 #: What a yardstick may be (module docstring).

@@ -56,8 +56,9 @@ def make_task_vector_env(task_id: str, num_envs: int = 1, **interface: Any) -> S
 def parallel_env(task_id: str, **interface: Any) -> SwarmParallelEnv:
     """The task's PettingZoo twin (`agent_envs.swarm_v0.parallel_env` with the task's kwargs).
 
-    `interface` may set observation ("absolute", "relative", "swarm"), agent_reward ("own",
-    "team"), render_mode and num_threads; the dynamics, cost and seeds are the task's.
+    `interface` may set observation ("absolute", "relative", "swarm", "local" with its
+    `neighbours`), agent_reward ("own", "team"), render_mode and num_threads; the dynamics,
+    cost and seeds are the task's.
     """
     task = get_task(task_id)
     kwargs = task.make_kwargs(interface)
