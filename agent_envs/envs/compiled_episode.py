@@ -37,7 +37,7 @@ from agent_envs.integrators.exponential import GAVE_UP
 if TYPE_CHECKING:
     from agent_envs.envs.episode import SwarmEpisode
 
-_FLOATS = (np.float32, np.float64)
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))  # (dtypes: `in` compares no types)
 
 
 class CompiledOutcome(NamedTuple):
