@@ -15,7 +15,7 @@ from pettingzoo import ParallelEnv
 
 from agent_envs import native
 from agent_envs.envs.attributes import EpisodeAttributes
-from agent_envs.envs.compiled_agents import compiled_agent_costs, compiled_agent_rows
+from agent_envs.envs.compiled_agents import AgentOutputs, compiled_agent_costs
 from agent_envs.envs.compiled_episode import CompiledOutcome, compiled_episode_step
 from agent_envs.envs.episode import SwarmEpisode
 from agent_envs.envs.episode_config import EpisodeConfig, reset_options
@@ -188,6 +188,9 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         self._compiled_step = self.plan.compiled_step
         self._state_bounds = (self.state_space.low, self.state_space.high)
         self._obs_bounds = (self._obs_space.low, self._obs_space.high)
+        swarm = self.config.observation == "swarm"  # (its rows: numpy's, from the means)
+        relative = self.config.observation == "relative"
+        self._agent_outputs = AgentOutputs(None if swarm else self._obs_bounds, relative)
         # the step's kept dicts (`_agent_dict`, `_agent_flags`): their agents, and every agent
         # -> None / False / True
         self._kept_agents = self.possible_agents[:]
@@ -306,7 +309,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         found = None
         if self._compiled_step:  # the plan's compiled envelope (`compiled_episode_step`)
             found = compiled_episode_step(
-                episode, self.np_random, stacked, self._state_bounds, False
+                episode, self.np_random, stacked, self._state_bounds, False, self._agent_outputs
             )
             if found is None:
                 episode.fallbacks["compiled-step-declined"] += 1
@@ -363,24 +366,21 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         self, found: CompiledOutcome
     ) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
         """After a compiled step: the per-agent costs (N,) and, where the step moved the state,
-        the observations (`compiled_agents`: compiled for the "absolute" and "relative"
-        layouts, numpy's `agent_observations` for "swarm"; None after a diverged or general
-        step: `_observations` of the state)."""
-        ep, outcome = self.episode, found.outcome
-        module = native.loaded("step")
-        costs = compiled_agent_costs(
-            module, outcome.start_positions[None], outcome.control[None], ep.targets,
-            ep.params.gamma,
-        )[0]  # fmt: skip
+        the observations (the step's compiled calls gave both, `AgentOutputs`, for the
+        "absolute" and "relative" layouts; numpy's `agent_observations` for "swarm"; None after
+        a diverged or general step: `_observations` of the state)."""
+        costs = found.agent_costs
+        if costs is None:  # (not expected: the step was asked for them)
+            ep, outcome = self.episode, found.outcome
+            costs = compiled_agent_costs(
+                native.loaded("step"), outcome.start_positions[None], outcome.control[None],
+                ep.targets, ep.params.gamma,
+            )[0]  # fmt: skip
         if found.mean_positions is None:
             return costs, None
-        if self.config.observation == "swarm":
+        if found.agent_rows is None:
             return costs, self._observations(found.mean_positions)
-        rows = compiled_agent_rows(
-            module, found.mean_positions[None], ep._mean_drift[None], ep.targets,
-            np.array([ep.time_fraction]), self._obs_bounds, self.config.observation == "relative",
-        )  # fmt: skip
-        return costs, self._agent_dict(self.possible_agents, rows[0])
+        return costs, self._agent_dict(self.possible_agents, found.agent_rows)
 
     def render(self) -> np.ndarray | None:
         if self._renderer is None:
