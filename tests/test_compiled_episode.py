@@ -19,7 +19,7 @@ import pytest
 
 from agent_envs import swarm_v0
 from agent_envs.envs import fast_step
-from agent_envs.envs.compiled_agents import agents_same_as_numpy
+from agent_envs.envs.compiled_agents import agents_same_as_numpy, combined_same_as_separate
 from agent_envs.envs.swarm_env import ENV_ID
 from agent_envs.native import loader
 
@@ -356,3 +356,35 @@ class _OffByOneUlp:
 @pytest.mark.parametrize("what", ["costs", "rows"])
 def test_the_per_agent_check_sees_one_ulp(what):
     assert not agents_same_as_numpy(_OffByOneUlp(what))
+
+
+def test_the_combined_calls_equal_the_separate_ones():
+    """`compiled_agents.combined_same_as_separate` (part of the path's load check): the
+    PettingZoo step's `prologue_agents` and `epilogue_agents` give the separate calls' bits."""
+    assert combined_same_as_separate(loader.loaded("step"))
+
+
+class _CombinedOffByOneUlp:
+    """The compiled module with the combined calls' per-agent costs or rows nudged by one ulp."""
+
+    def __init__(self, what: str) -> None:
+        self.module, self.what = loader.loaded("step"), what
+
+    def __getattr__(self, name):
+        return getattr(self.module, name)
+
+    def prologue_agents(self, *args):
+        found = self.module.prologue_agents(*args)
+        if self.what == "costs":
+            args[-1].flat[-1] = np.nextafter(args[-1].flat[-1], np.inf)
+        return found
+
+    def epilogue_agents(self, *args):
+        self.module.epilogue_agents(*args)
+        if self.what == "rows":
+            args[-1].flat[0] = np.nextafter(args[-1].flat[0], np.float32(np.inf))
+
+
+@pytest.mark.parametrize("what", ["costs", "rows"])
+def test_the_combined_check_sees_one_ulp(what):
+    assert not combined_same_as_separate(_CombinedOffByOneUlp(what))

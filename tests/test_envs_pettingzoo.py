@@ -176,6 +176,29 @@ def test_divergence_terminates_every_agent():
     assert np.all(np.isfinite(par_env.state()))
 
 
+def test_step_dicts_are_fresh_each_step_in_agent_order():
+    """The step copies kept dicts of the agents (`_agent_dict`, `_agent_flags`): each step's
+    five dicts and the N infos are new objects keyed in agent order, so a caller that edits
+    one step's dicts changes neither the next step's nor the env's agents."""
+    par_env = swarm_v0.parallel_env(**SMALL)
+    par_env.reset(seed=0)
+    zeros = all_actions(par_env, np.zeros((5, 1)))
+    first = par_env.step(zeros)
+    for found in first:
+        assert list(found) == par_env.possible_agents
+        found["agent_0"] = "edited"
+        found["extra"] = None
+    infos = par_env.step(zeros)[-1]
+    assert len({id(info) for info in infos.values()}) == len(infos)
+    second = par_env.step(zeros)
+    for found in second:
+        assert list(found) == par_env.possible_agents
+        assert not isinstance(found["agent_0"], str) and "extra" not in found
+    assert type(second[2]["agent_1"]) is bool and type(second[3]["agent_1"]) is bool
+    assert list(second[4]["agent_1"]) == ["time", "running_cost", "diverged"]
+    assert par_env.agents == par_env.possible_agents
+
+
 # ---------------------------------------------------------------- bad input
 def test_bad_actions_and_kwargs():
     with pytest.raises(ValueError, match="integrator"):

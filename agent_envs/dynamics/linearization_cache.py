@@ -142,10 +142,10 @@ class LinearizationCache(SwarmModel):
         are made read-only)."""
         ws = self._workspace
         ws.generation += 1
-        p = ws.buffers(tuple(x_next.shape))[0]
-        *batch, n, _ = x_next.shape
-        operator = self._workspace_operator(p, row_sums.reshape(*batch, n), UpperTriangle(p))
-        drift = drift.reshape(x_next.shape)
+        shape = x_next.shape  # (a tuple: the workspace's key as is)
+        p = ws.buffers(shape)[0]
+        operator = self._workspace_operator(p, row_sums.reshape(shape[:-1]), UpperTriangle(p))
+        drift = drift.reshape(shape)
         x_next.flags.writeable = False
         drift.flags.writeable = False
         self._cached_state, self._cached_matrix = x_next, (operator, drift)

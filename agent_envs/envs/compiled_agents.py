@@ -10,11 +10,15 @@ instead of about fifteen numpy calls; `agents_same_as_numpy`, part of the path's
 (`fast_step.same_as_numpy`), checks both against those numpy calls (`costs.
 agent_running_cost` and the mean over the paths; `observation.agent_observations`) bit for
 bit on fixed random data, so where a value differs the whole path "step" stays off.
+
+The PettingZoo env's compiled step takes both in its prologue's and epilogue's calls
+(`module.prologue_agents`, `module.epilogue_agents`: `AgentOutputs` asks for them);
+`combined_same_as_separate`, part of the same check, checks those against the separate calls.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -25,6 +29,16 @@ from agent_envs.envs.observation import agent_observation_space, agent_observati
 #: blocks, d = 1, 2 and 9 (a pairwise sum over the coordinates)
 AGENT_CHECK_SHAPES = ((1, 1, 100, 1), (1, 20, 100, 1), (2, 3, 5, 2), (1, 2, 130, 3),
                       (1, 1, 300, 2), (1, 9, 17, 9), (1, 1, 2, 1))  # fmt: skip
+
+
+class AgentOutputs(NamedTuple):
+    """What the PettingZoo env asks of the compiled episode step besides the single env's:
+    the per-agent costs (always) and the observation rows where `bounds`, the agent space's
+    (low, high) (3 d + 1,) float32, are given (the "absolute" or `relative` layout; None for
+    "swarm", whose rows numpy builds)."""
+
+    bounds: tuple[np.ndarray, np.ndarray] | None
+    relative: bool
 
 
 def compiled_agent_costs(
@@ -95,4 +109,43 @@ def agents_same_as_numpy(
             want = agent_running_cost(x[e], controls[e], targets[e], 0.37).mean(axis=0)
             if not _same_bits(costs[e], want):
                 return False
+    return True
+
+
+def combined_same_as_separate(module: Any) -> bool:
+    """Whether `module.prologue_agents` and `module.epilogue_agents` give what
+    `module.prologue` + `module.agent_costs` and `module.epilogue` + `module.agent_rows` give
+    (each checked against numpy), bit for bit, on fixed random data of `AGENT_CHECK_SHAPES`
+    (float32 and float64 actions; states, drifts and means beyond the bounds)."""
+    rng = np.random.default_rng(20261129)
+    for b, p, n, d in AGENT_CHECK_SHAPES:
+        x = rng.standard_normal((b, p, n, d)) * 10.0 ** rng.uniform(-3, 6, (b, p, n, d))
+        drift = rng.standard_normal((b, p, n, d)) * 10.0 ** rng.uniform(-3, 6, (b, p, n, d))
+        x.flags.writeable = drift.flags.writeable = False  # (read-only, as the env's)
+        targets = rng.standard_normal((b, d))
+        fractions = rng.uniform(0.0, 1.0, b)
+        for dtype, relative in ((np.float32, False), (np.float64, True)):
+            actions = rng.uniform(-2.0, 2.0, (b, n, d)).astype(dtype)
+            outs = [(np.empty((b, n, d)), np.empty(b), np.empty(x.shape), np.empty((b, n)))
+                    for _ in range(2)]  # fmt: skip
+            module.prologue(actions, 25.0, x, drift, targets, 0.37, *outs[0][:3])
+            module.agent_costs(x, outs[0][0], targets, 0.37, outs[0][3])
+            module.prologue_agents(actions, 25.0, x, drift, targets, 0.37, *outs[1])
+            space = agent_observation_space(d, 1e6, 1e5, "relative" if relative else "absolute")
+            low, high = (
+                np.full(2 * n * d + d + 1, -1e6, np.float32),
+                np.full(2 * n * d + d + 1, 1e6, np.float32),
+            )
+            ends = [(np.empty((b, n, d)), np.empty((b, n, d)),
+                     np.empty((b, low.shape[0]), np.float32), np.empty(b, np.bool_),
+                     np.empty((b, n, 3 * d + 1), np.float32)) for _ in range(2)]  # fmt: skip
+            common = (x, drift, 1e6, targets, fractions, low, high, True)
+            module.epilogue(*common, *ends[0][:4])
+            module.agent_rows(ends[0][0], ends[0][1], targets, fractions, space.low,
+                              space.high, relative, ends[0][4])  # fmt: skip
+            module.epilogue_agents(*common, *ends[1][:4], space.low, space.high, relative,
+                                   ends[1][4])  # fmt: skip
+            for one, two in zip((*outs[0], *ends[0]), (*outs[1], *ends[1]), strict=True):
+                if not _same_bits(one, two):
+                    return False
     return True

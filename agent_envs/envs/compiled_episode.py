@@ -13,6 +13,9 @@ vector env's compiled prologue and epilogue (`agent_envs.envs.fast_step`, the co
     E x^{n+1}, E L(x^{n+1}) x^{n+1}, diverged,    compiled_epilogue
     the "absolute" observation
 
+The PettingZoo env asks for its per-agent costs and observation rows in the prologue's and
+the epilogue's calls (`compiled_agents.AgentOutputs`: `prologue_agents`, `epilogue_agents`).
+
 These are the numpy step's values bit for bit (`fast_step.same_as_numpy` checks the two
 compiled calls when the path loads; tests/test_compiled_episode.py checks whole episodes). The
 call returns None, before any draw, wherever it does not apply (an action that is not a
@@ -30,6 +33,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from agent_envs import arrays, native
+from agent_envs.envs.compiled_agents import AgentOutputs
 from agent_envs.envs.episode import StepOutcome, advance_paths, checked_advance
 from agent_envs.envs.fast_step import compiled_epilogue, compiled_prologue
 from agent_envs.integrators.exponential import GAVE_UP
@@ -37,17 +41,21 @@ from agent_envs.integrators.exponential import GAVE_UP
 if TYPE_CHECKING:
     from agent_envs.envs.episode import SwarmEpisode
 
-_FLOATS = (np.float32, np.float64)
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))  # (dtypes: `in` compares no types)
 
 
 class CompiledOutcome(NamedTuple):
     """What one compiled episode step did: the `StepOutcome`, and (where the step did not
     diverge) the path means E x^{n+1} (N, d) and, for the "absolute" layout, the observation
-    (2 N d + d + 1,) float32 (None otherwise: the adapter builds its layout from the means)."""
+    (2 N d + d + 1,) float32 (None otherwise: the adapter builds its layout from the means).
+    Where `AgentOutputs` were asked: the per-agent costs (N,) of x^n and u^n, and (with their
+    bounds, where the means are given) the agent observation rows (N, 3 d + 1) float32."""
 
     outcome: StepOutcome
     mean_positions: np.ndarray | None
     observation: np.ndarray | None
+    agent_costs: np.ndarray | None = None
+    agent_rows: np.ndarray | None = None
 
 
 def compiled_episode_step(
@@ -56,12 +64,14 @@ def compiled_episode_step(
     action: Any,
     bounds: tuple[np.ndarray, np.ndarray],
     absolute: bool,
+    agents: AgentOutputs | None = None,
 ) -> CompiledOutcome | None:
     """One step of `episode` from the raw `action` (rows d entries, (rows d,) or (rows, d);
     rows = N, or 1 for the "common" basis) on the compiled envelope (module docstring), or
     None before any draw where it does not apply. `bounds` are the Gymnasium observation
     space's (low, high) (2 N d + d + 1,) float32 (the global state's, for the PettingZoo env);
-    `absolute` asks for that observation."""
+    `absolute` asks for that observation, `agents` for the PettingZoo env's per-agent outputs
+    in the same compiled calls (`CompiledOutcome`)."""
     if type(action) is not np.ndarray or action.dtype not in _FLOATS:
         return None
     shapes, rows, d = episode.action_shapes
@@ -78,6 +88,7 @@ def compiled_episode_step(
     targets = episode.targets
     if not action.flags.c_contiguous:
         action = np.ascontiguousarray(action)
+    per_agent = None if agents is None else np.empty((1, x.shape[-2]))
     found = compiled_prologue(
         module,
         action.reshape(1, rows, d),
@@ -86,6 +97,7 @@ def compiled_episode_step(
         drift[None],
         targets,
         params.gamma,
+        per_agent,
     )
     if found is None:
         return None  # (a non-finite action: the numpy step raises)
@@ -96,11 +108,21 @@ def compiled_episode_step(
     rhs = rhs.reshape(x.shape)
     rhs.flags.writeable = False  # (read-only: the fused step's compiled call takes it as is)
     x_next = _advance(episode, operator, rhs, x, control, dw)
+    agent_costs = None if per_agent is None else per_agent[0]
     if x_next is None or x_next is GAVE_UP:
-        return _general_advance(episode, x, control, costs, dw, x_next is GAVE_UP)
+        found = _general_advance(episode, x, control, costs, dw, x_next is GAVE_UP)
+        return found._replace(agent_costs=agent_costs)
     cached_next = model.cached_linearization(x_next)
     if cached_next is None or not (x_next.flags.c_contiguous and cached_next[1].flags.c_contiguous):
-        return _numpy_tail(episode, x, x_next, control, costs)  # (not expected: no such step)
+        found = _numpy_tail(episode, x, x_next, control, costs)  # (not expected: no such step)
+        return found._replace(agent_costs=agent_costs)
+    agent_rows = None
+    if agents is not None and agents.bounds is not None:
+        agent_rows = (
+            agents.bounds,
+            agents.relative,
+            np.empty((1, x.shape[-2], 3 * d + 1), np.float32),
+        )
     means, mean_drift, observations, diverged = compiled_epilogue(
         module,
         x_next[None],
@@ -110,18 +132,22 @@ def compiled_episode_step(
         np.array([(episode.step_index + 1) / spec.n_steps]),
         bounds,
         absolute,
+        agent_rows,
     )
     cost = float(costs[0])
     if diverged[0]:
         episode.diverged = True
         if episode.plan.envelope == "compiled-step":  # (the numpy observation of x^n follows)
             episode.fallbacks["numpy-tail"] += 1
-        return CompiledOutcome(StepOutcome(x, control, cost, True, False), None, None)
+        outcome = StepOutcome(x, control, cost, True, False)
+        return CompiledOutcome(outcome, None, None, agent_costs)
     episode.positions, episode._mean_drift = x_next, mean_drift[0]
     episode.step_index += 1
     truncated = episode.step_index >= spec.n_steps
     outcome = StepOutcome(x, control, cost, False, truncated)
-    return CompiledOutcome(outcome, means[0], observations[0] if absolute else None)
+    rows_found = None if agent_rows is None else agent_rows[2][0]
+    observation = observations[0] if absolute else None
+    return CompiledOutcome(outcome, means[0], observation, agent_costs, rows_found)
 
 
 def _advance(episode: SwarmEpisode, operator: Any, rhs: Any, x: Any, control: Any, dw: Any) -> Any:

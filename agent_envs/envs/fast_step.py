@@ -8,18 +8,18 @@ path means, observations and divergence flags in another. `CompiledVectorStep`, 
 integrator's fused step, epilogue), taken where its plan's envelope is the compiled step
 (`StepPlan.envelope`).
 
-`same_as_numpy` (with `compiled_agents.agents_same_as_numpy`: `step_path_check`) is registered
-with the loader (`agent_envs.native.register_check`) when this module is imported; the loader
-runs it when the path first loads, when an env that can use it is made. It checks the module
-against the numpy calls it replaces, on fixed random data of several shapes: the controls
-("agents" and "common" bases), running costs and right-hand sides of `prologue` against
-`controls_from_actions`, `mean_running_cost` and F = L(x) x + u; the path means, observations
-and divergence flags of `epilogue` against `arrays.mean_axis`, `global_observation` and
-`advance_paths`'s checks, every value bit for bit (signed zeros included, values the clip
-cuts), on read-only states as the env passes them. Where numba is missing or switched off
-(``AGENT_ENVS_NUMBA=0``) the path is off; where a value differs (a numpy that sums in another
-order), or the module does not compile, off with a warning; the env then steps with its numpy
-calls.
+`same_as_numpy` (with `compiled_agents.agents_same_as_numpy` and `combined_same_as_separate`:
+`step_path_check`) is registered with the loader (`agent_envs.native.register_check`) when this
+module is imported; the loader runs it when the path first loads, when an env that can use it
+is made. It checks the module against the numpy calls it replaces, on fixed random data of
+several shapes: the controls ("agents" and "common" bases), running costs and right-hand sides
+of `prologue` against `controls_from_actions`, `mean_running_cost` and F = L(x) x + u; the path
+means, observations and divergence flags of `epilogue` against `arrays.mean_axis`,
+`global_observation` and `advance_paths`'s checks, every value bit for bit (signed zeros
+included, values the clip cuts), on read-only states as the env passes them. Where numba is
+missing or switched off (``AGENT_ENVS_NUMBA=0``) the path is off; where a value differs (a
+numpy that sums in another order), or the module does not compile, off with a warning; the env
+then steps with its numpy calls.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import numpy as np
 
 from agent_envs import arrays, native
 from agent_envs.draws import GeneratorHandles, fill_brownian_increments
-from agent_envs.envs.compiled_agents import agents_same_as_numpy
+from agent_envs.envs.compiled_agents import agents_same_as_numpy, combined_same_as_separate
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.interface import action_rows, controls_from_actions
 from agent_envs.envs.observation import global_observation, observation_space
@@ -70,16 +70,21 @@ def compiled_prologue(
     drift: np.ndarray,
     targets: np.ndarray,
     gamma: float,
+    per_agent: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """`module.prologue` (the compiled module): for actions (B, R, d) (C-contiguous), the
     state x (B, P, N, d) and its drift L(x) x, targets (B, d): (controls u (B, N, d), running
     costs (B,), rhs F = L(x) x + u (B, P, N, d)), the numpy step's bits
     (`controls_from_actions`, `mean_running_cost`); None for a non-finite action (the numpy
-    step then raises)."""
+    step then raises). Given `per_agent` (B, N), the per-agent costs too, in the same call
+    (`module.prologue_agents`: `compiled_agents.compiled_agent_costs`'s values)."""
     b, _, d = actions.shape
     n = x.shape[-2]
     controls, costs, rhs = np.empty((b, n, d)), np.empty(b), np.empty(x.shape)
-    if not module.prologue(actions, max_control, x, drift, targets, gamma, controls, costs, rhs):
+    args = (actions, max_control, x, drift, targets, gamma, controls, costs, rhs)
+    if not (
+        module.prologue(*args) if per_agent is None else module.prologue_agents(*args, per_agent)
+    ):
         return None
     return controls, costs, rhs
 
@@ -93,22 +98,28 @@ def compiled_epilogue(
     fractions: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray],
     absolute: bool,
+    agent_rows: tuple[tuple[np.ndarray, np.ndarray], bool, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """`module.epilogue`: for the new state x_next (B, P, N, d) and its drift (C-contiguous),
     the divergence threshold, targets (B, d), time fractions (n + 1) / m (B,) and the
     observation space's (low, high) (float32): (E x (B, N, d), E drift (B, N, d), the
     "absolute" observations (B, obs) float32 (meaningless unless `absolute`), diverged (B,)),
     the numpy step's bits (`arrays.mean_axis`, `global_observation`, `advance_paths`'s
-    checks)."""
+    checks). Given `agent_rows` ((low, high) of the agent space, relative, out (B, N, 3 d + 1)
+    float32), the PettingZoo rows of the path means into out too, in the same call
+    (`module.epilogue_agents`: `compiled_agents.compiled_agent_rows`'s values)."""
     b, _, n, d = x_next.shape
     low, high = bounds
     mean_positions, mean_drift = np.empty((b, n, d)), np.empty((b, n, d))
     observations = np.empty((b, low.shape[0]), dtype=np.float32)
     diverged = np.empty(b, dtype=np.bool_)
-    module.epilogue(
-        x_next, drift_next, threshold, targets, fractions, low, high, absolute, mean_positions,
-        mean_drift, observations, diverged,
-    )  # fmt: skip
+    args = (x_next, drift_next, threshold, targets, fractions, low, high, absolute,
+            mean_positions, mean_drift, observations, diverged)  # fmt: skip
+    if agent_rows is None:
+        module.epilogue(*args)
+    else:
+        (agent_low, agent_high), relative, rows = agent_rows
+        module.epilogue_agents(*args, agent_low, agent_high, relative, rows)
     return mean_positions, mean_drift, observations, diverged
 
 
@@ -306,9 +317,12 @@ def same_as_numpy(
 
 
 def step_path_check(module: Any) -> bool:
-    """The load check of the path "step": `same_as_numpy` (the prologue and epilogue) and
-    `compiled_agents.agents_same_as_numpy` (the PettingZoo env's per-agent costs and rows)."""
-    return same_as_numpy(module) and agents_same_as_numpy(module)
+    """The load check of the path "step": `same_as_numpy` (the prologue and epilogue),
+    `compiled_agents.agents_same_as_numpy` (the PettingZoo env's per-agent costs and rows) and
+    `compiled_agents.combined_same_as_separate` (the two in one call each)."""
+    return (
+        same_as_numpy(module) and agents_same_as_numpy(module) and combined_same_as_separate(module)
+    )
 
 
 native.register_check("step", step_path_check, "the envs step with numpy calls")

@@ -15,7 +15,7 @@ from pettingzoo import ParallelEnv
 
 from agent_envs import native
 from agent_envs.envs.attributes import EpisodeAttributes
-from agent_envs.envs.compiled_agents import compiled_agent_costs, compiled_agent_rows
+from agent_envs.envs.compiled_agents import AgentOutputs, compiled_agent_costs
 from agent_envs.envs.compiled_episode import CompiledOutcome, compiled_episode_step
 from agent_envs.envs.episode import SwarmEpisode
 from agent_envs.envs.episode_config import EpisodeConfig, reset_options
@@ -218,6 +218,14 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         self._compiled_step = self.plan.compiled_step
         self._state_bounds = (self.state_space.low, self.state_space.high)
         self._obs_bounds = (self._obs_space.low, self._obs_space.high)
+        # "swarm" and "local": their rows are numpy's, from the means (no compiled rows)
+        numpy_rows = self.config.observation in ("swarm", "local")
+        relative = self.config.observation == "relative"
+        self._agent_outputs = AgentOutputs(None if numpy_rows else self._obs_bounds, relative)
+        # the step's kept dicts (`_agent_dict`, `_agent_flags`): their agents, and every agent
+        # -> None / False / True
+        self._kept_agents = self.possible_agents[:]
+        self._kept_dicts = {v: dict.fromkeys(self._kept_agents, v) for v in (None, False, True)}
 
     def __repr__(self) -> str:
         # (str(env) stays PettingZoo's, the metadata name)
@@ -333,7 +341,7 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         found = None
         if self._compiled_step:  # the plan's compiled envelope (`compiled_episode_step`)
             found = compiled_episode_step(
-                episode, self.np_random, stacked, self._state_bounds, False
+                episode, self.np_random, stacked, self._state_bounds, False, self._agent_outputs
             )
             if found is None:
                 episode.fallbacks["compiled-step-declined"] += 1
@@ -350,14 +358,14 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
         else:  # (`SwarmEpisode.agent_rewards`, from the costs taken once)
             rewards_arr = -(episode.dt / episode.n_agents) * costs
         agents = self.agents
-        rewards = dict(zip(agents, rewards_arr.tolist(), strict=True))
-        terminations = dict.fromkeys(agents, outcome.diverged)
-        truncations = dict.fromkeys(agents, outcome.truncated)
+        rewards = self._agent_dict(agents, rewards_arr.tolist())
+        terminations = self._agent_flags(agents, outcome.diverged)
+        truncations = self._agent_flags(agents, outcome.truncated)
         time, diverged = episode.time, outcome.diverged
-        infos = {
-            a: {"time": time, "running_cost": c, "diverged": diverged}
-            for a, c in zip(agents, costs.tolist(), strict=True)
-        }
+        infos = self._agent_dict(
+            agents,
+            [{"time": time, "running_cost": c, "diverged": diverged} for c in costs.tolist()],
+        )
         if observations is None:
             observations = self._observations()
         if self._renderer is not None and not outcome.diverged:
@@ -368,28 +376,43 @@ class SwarmParallelEnv(EpisodeAttributes, ParallelEnv[str, np.ndarray, np.ndarra
             self.agents = []
         return observations, rewards, terminations, truncations, infos
 
+    def _agent_flags(self, agents: list[str], value: Any) -> dict[str, Any]:
+        """``dict.fromkeys(agents, value)``: a copy of the kept dict where `value` is a bool
+        and `agents` are the agents it was made for (a step's case: copying takes a tenth of
+        the time of building it)."""
+        if (value is False or value is True) and agents == self._kept_agents:
+            return self._kept_dicts[value].copy()
+        return dict.fromkeys(agents, value)
+
+    def _agent_dict(self, agents: list[str], values: Any) -> dict[str, Any]:
+        """``dict(zip(agents, values, strict=True))`` for `values` of len(agents) (N): where
+        `agents` are the kept agents, their kept dict copied and its values replaced (the same
+        keys in the same order, without the N insertions growing it)."""
+        if agents == self._kept_agents:
+            found = self._kept_dicts[None].copy()
+            found.update(zip(agents, values, strict=True))
+            return found
+        return dict(zip(agents, values, strict=True))
+
     def _compiled_agent_outputs(
         self, found: CompiledOutcome
     ) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
         """After a compiled step: the per-agent costs (N,) and, where the step moved the state,
-        the observations (`compiled_agents`: compiled for the "absolute" and "relative"
-        layouts, numpy's `agent_observations` for "swarm" and "local"; None after a diverged or
-        general step: `_observations` of the state)."""
-        ep, outcome = self.episode, found.outcome
-        module = native.loaded("step")
-        costs = compiled_agent_costs(
-            module, outcome.start_positions[None], outcome.control[None], ep.targets,
-            ep.params.gamma,
-        )[0]  # fmt: skip
+        the observations (the step's compiled calls gave both, `AgentOutputs`, for the
+        "absolute" and "relative" layouts; numpy's `agent_observations` for "swarm" and
+        "local"; None after a diverged or general step: `_observations` of the state)."""
+        costs = found.agent_costs
+        if costs is None:  # (not expected: the step was asked for them)
+            ep, outcome = self.episode, found.outcome
+            costs = compiled_agent_costs(
+                native.loaded("step"), outcome.start_positions[None], outcome.control[None],
+                ep.targets, ep.params.gamma,
+            )[0]  # fmt: skip
         if found.mean_positions is None:
             return costs, None
-        if self.config.observation in ("swarm", "local"):
+        if found.agent_rows is None:
             return costs, self._observations(found.mean_positions)
-        rows = compiled_agent_rows(
-            module, found.mean_positions[None], ep._mean_drift[None], ep.targets,
-            np.array([ep.time_fraction]), self._obs_bounds, self.config.observation == "relative",
-        )  # fmt: skip
-        return costs, dict(zip(self.possible_agents, rows[0], strict=True))
+        return costs, self._agent_dict(self.possible_agents, found.agent_rows)
 
     def render(self, mode: str | None = None) -> np.ndarray | None:
         """A frame in `render_mode` (None without one); `mode` ("human" | "rgb_array", as

@@ -26,6 +26,7 @@ from agent_envs.native.lanczos_rule import MAX_CHECK_STEP
 
 _NO_BOUNDS = readonly_view(np.empty(0))
 _NO_EXTRA = readonly_view(np.empty((0, 0, 0)))
+_FLOAT64 = np.dtype(np.float64)
 
 
 def load_compiled() -> bool:
@@ -105,8 +106,9 @@ def _as_members(arr: np.ndarray, full: tuple[int, ...]) -> np.ndarray:
     (members, n, k) array for the compiled calls: arr itself when it already is one (a single
     env's read-only state), a read-only view of it reshaped when it is C-contiguous float64 of
     that shape (the integrators' other arrays), a copy otherwise."""
-    if type(arr) is np.ndarray and arr.shape == full and arr.dtype == np.float64:
-        if len(full) == 3 and not arr.flags.writeable and arr.flags.c_contiguous:
+    if type(arr) is np.ndarray and arr.shape == full and arr.dtype == _FLOAT64:
+        flags = arr.flags
+        if len(full) == 3 and not flags.writeable and flags.c_contiguous:
             return arr
     else:
         arr = np.broadcast_to(np.asarray(arr, dtype=np.float64), full)

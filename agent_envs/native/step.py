@@ -21,6 +21,11 @@ the single env (which keeps its numpy calls):
 - a mean over the paths (axis -3, not contiguous) is numpy's order for an outer axis: 0.0 +
   x_0 + x_1 + ... in sequence, divided by P; over one path x + 0.0 (`arrays.mean_axis`).
 
+The PettingZoo env's per-agent costs and observation rows (`agent_costs`, `agent_rows`) come
+in the same calls where it asks (`prologue_agents`, `epilogue_agents`: the same functions
+called inside, checked against the separate calls by `compiled_agents.
+combined_same_as_separate`).
+
 `agent_envs.envs.fast_step.same_as_numpy` checks all of this against numpy's own calls when
 the loader loads the module (another numpy could sum in another order) and leaves the compiled
 step off, with a warning, where a value differs; tests/test_fast_step.py checks it on many
@@ -400,3 +405,57 @@ def agent_rows(
                 if not (v < high[i] or v != v):
                     v = high[i]
                 obs[i] = v
+
+
+@njit(cache=True, error_model="numpy")
+def prologue_agents(
+    actions: np.ndarray,
+    max_control: float,
+    x: np.ndarray,
+    drift: np.ndarray,
+    targets: np.ndarray,
+    gamma: float,
+    controls: np.ndarray,
+    costs: np.ndarray,
+    rhs: np.ndarray,
+    per_agent: np.ndarray,
+) -> bool:
+    """`prologue` and then, where it wrote, `agent_costs` of x and its controls into
+    `per_agent` (B, N): the PettingZoo env's compiled step in one call instead of two (the
+    same two functions, so the same bits)."""
+    if not prologue(actions, max_control, x, drift, targets, gamma, controls, costs, rhs):
+        return False
+    agent_costs(x, controls, targets, gamma, per_agent)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def epilogue_agents(
+    x_next: np.ndarray,
+    drift_next: np.ndarray,
+    threshold: float,
+    targets: np.ndarray,
+    time_fractions: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    absolute: bool,
+    mean_positions: np.ndarray,
+    mean_drift: np.ndarray,
+    observations: np.ndarray,
+    diverged: np.ndarray,
+    agent_low: np.ndarray,
+    agent_high: np.ndarray,
+    relative: bool,
+    rows: np.ndarray,
+) -> None:
+    """`epilogue` and then `agent_rows` of its path means at the same t/T into `rows`
+    (B, N, 3 d + 1) float32, clipped to [agent_low, agent_high]: the PettingZoo env's compiled
+    step in one call instead of two (the same two functions, so the same bits; the rows of a
+    diverged env are not used)."""
+    epilogue(
+        x_next, drift_next, threshold, targets, time_fractions, low, high, absolute,
+        mean_positions, mean_drift, observations, diverged,
+    )  # fmt: skip
+    agent_rows(
+        mean_positions, mean_drift, targets, time_fractions, agent_low, agent_high, relative, rows
+    )
