@@ -83,6 +83,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "episode": (
         "agent_envs/envs/episode.py",
         [
+            "tests/test_env_contracts.py",
             "tests/test_envs_gym.py",
             "tests/test_envs_pettingzoo.py",
             "tests/test_env_options.py",
@@ -110,11 +111,15 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "swarm_env": (
         "agent_envs/envs/swarm_env.py",
-        ["tests/test_envs_gym.py", "tests/test_compiled_episode.py"],
+        ["tests/test_env_contracts.py", "tests/test_envs_gym.py", "tests/test_compiled_episode.py"],
     ),
     "swarm_parallel": (
         "agent_envs/envs/swarm_parallel.py",
-        ["tests/test_envs_pettingzoo.py", "tests/test_compiled_episode.py"],
+        [
+            "tests/test_env_contracts.py",
+            "tests/test_envs_pettingzoo.py",
+            "tests/test_compiled_episode.py",
+        ],
     ),
     "compiled_episode": (
         "agent_envs/envs/compiled_episode.py",
@@ -152,6 +157,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "fast_step": (
         "agent_envs/envs/fast_step.py",
         [
+            "tests/test_env_contracts.py",
             "tests/test_fast_step.py",
             "tests/test_step_plan.py",
             "tests/test_compiled_episode.py",
