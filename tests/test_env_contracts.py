@@ -59,6 +59,14 @@ def test_scalar_actions_of_a_one_dimensional_swarm_mix_with_rows():
     _assert_same_step(1, {a: np.array(v).reshape(()) for a, v in mixed.items()})
 
 
+def test_strided_rows_step_as_their_contiguous_copies():
+    """Rows that are views with a stride (columns of a (d, N) array) are read as values."""
+    env = swarm_v0.parallel_env(dim=2, **SMALL)
+    columns = np.linspace(-0.8, 0.8, 10).reshape(2, 5)
+    assert not columns[:, 0].flags.c_contiguous
+    _assert_same_step(2, {a: columns[:, k] for k, a in enumerate(env.possible_agents)})
+
+
 @pytest.mark.parametrize(
     ("dim", "value", "shape"),
     [(1, np.zeros((1, 1)), "(1, 1)"), (2, np.float64(0.0), "()"), (2, np.zeros(()), "()")],
@@ -150,6 +158,14 @@ def test_a_diverged_step_ends_the_episode():
     np.testing.assert_array_equal(episode.positions, before)
     with pytest.raises(RuntimeError, match="over"):
         episode.step(rng, push)
+
+
+@pytest.mark.parametrize("make", [SwarmEnv, swarm_v0.parallel_env])
+def test_a_new_env_has_taken_no_steps(make):
+    """Before the first reset the episode counts no steps (n = 0, t_0 = 0)."""
+    env = make(**SMALL)
+    assert env.episode.step_index == 0 and env.episode.time_fraction == 0.0
+    assert not env.episode.done
 
 
 @pytest.mark.parametrize("mode", ["own", "team"])
