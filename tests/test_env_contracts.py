@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agent_envs import swarm_v0
+from agent_envs import native, swarm_v0
 from agent_envs.envs import SwarmEnv, SwarmParallelEnv, fast_step
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.interface import controls_from_actions
@@ -138,6 +138,19 @@ def test_the_two_adapters_render_the_same_frames():
     np.testing.assert_array_equal(gym_env.render(), par_env.render())
     gym_env.close()
     par_env.close()
+
+
+def test_threads_load_in_the_first_reset(monkeypatch):
+    """The threaded passes' one-time load (numba's threads start there) falls in reset, not in
+    the constructor (a fork after it loses its children) nor in a step."""
+    try:
+        env = SwarmEnv(num_threads=2, **SMALL)
+    except ValueError:  # (no numba, or it allows one thread here)
+        pytest.skip("no two threads of the compiled passes here")
+    loads: list[int] = []
+    monkeypatch.setattr(native, "load_compiled_threads", loads.append)
+    env.reset(seed=0)
+    assert loads == [2]
 
 
 # -------------------------------------------------------------------- episode
