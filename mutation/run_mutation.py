@@ -93,7 +93,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "episode_config": (
         "agent_envs/envs/episode_config.py",
-        ["tests/test_validation.py", "tests/test_envs_gym.py"],
+        ["tests/test_env_contracts.py", "tests/test_validation.py", "tests/test_envs_gym.py"],
     ),
     "attributes": (
         "agent_envs/envs/attributes.py",
@@ -128,6 +128,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "compiled_agents": (
         "agent_envs/envs/compiled_agents.py",
         [
+            "tests/test_env_contracts.py",
             "tests/test_compiled_episode.py",
             "tests/test_envs_pettingzoo.py",
             "tests/test_native_cache.py",
@@ -147,7 +148,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "vector_env": (
         "agent_envs/envs/vector_env.py",
-        ["tests/test_vector_env.py", "tests/test_native_vec_env.py"],
+        ["tests/test_env_contracts.py", "tests/test_vector_env.py", "tests/test_native_vec_env.py"],
     ),
     "vector_blocks": (
         "agent_envs/envs/vector_blocks.py",

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from agent_envs import native, swarm_v0
-from agent_envs.envs import SwarmEnv, SwarmParallelEnv, fast_step
+from agent_envs.envs import SwarmEnv, SwarmParallelEnv, compiled_agents, fast_step
 from agent_envs.envs.episode import mean_running_cost
 from agent_envs.envs.interface import controls_from_actions
 
@@ -250,3 +250,85 @@ def test_the_load_check_feeds_the_corners_it_promises():
     x_next, threshold = module.epilogues[0]
     beyond = np.any(np.abs(x_next) > threshold, axis=(1, 2, 3))
     assert beyond.tolist() == [False, True]
+
+
+class _RecordingAgentModule:
+    """A stand-in for the compiled per-agent module: records its inputs, writes nothing (the
+    check then fails at the first comparison)."""
+
+    def __init__(self) -> None:
+        self.costs: list[tuple[np.ndarray, np.ndarray]] = []
+        self.rows: list[tuple[np.ndarray, ...]] = []
+
+    def agent_costs(self, x, controls, targets, gamma, out):
+        self.costs.append((x, controls.copy()))
+        out[...] = np.nan
+
+    def agent_rows(self, means, drifts, targets, fractions, low, high, relative, out):
+        self.rows.append((means.copy(), drifts.copy(), low, high))
+        out[...] = np.nan
+
+
+def test_the_agent_check_feeds_the_corners_it_promises():
+    """`agents_same_as_numpy`'s data: a read-only state of both signs over six orders of
+    magnitude, controls with signed zeros, path means and drifts beyond the observation's
+    bounds (the clip cuts) and inside them."""
+    module = _RecordingAgentModule()
+    assert not compiled_agents.agents_same_as_numpy(module)
+    x, controls = module.costs[0]
+    assert not x.flags.writeable
+    assert np.any(x < -10) and np.any(x > 10) and np.any(np.abs(x) < 1e-2)
+    assert controls.flat[0] == 0 and np.signbit(controls.flat[0])
+    assert controls.flat[1] == 0 and not np.signbit(controls.flat[1])
+    means, drifts = module.rows[0][:2]
+    for values, bound in ((means, 1e6), (drifts, 1e5)):
+        assert np.any(np.abs(values) > bound) and np.any(np.abs(values) < bound)
+
+
+# ---------------------------------------------------------------- episode config
+def test_config_replace_changes_what_it_names():
+    """`EpisodeConfig.replace`: a swarm parameter, a simulation option and an env option, each
+    by its env keyword, the rest kept; the properties read the parts."""
+    config = SwarmEnv(**SMALL).config
+    assert config.replace(n_agents=7).params.n_agents == 7
+    assert config.replace(n_agents=7).simulation == config.simulation
+    assert config.replace(n_steps=5).simulation.n_steps == 5
+    assert config.replace(n_steps=5).params == config.params
+    assert config.replace(observation="relative").observation == "relative"
+    assert config.replace(n_steps=5).n_steps == 5
+    assert config.dt == config.params.horizon / config.simulation.n_steps
+    assert config.integrator == config.simulation.integrator
+    assert config.jacobian == config.simulation.jacobian
+    assert isinstance(config.integrator, str) and isinstance(config.jacobian, str)
+
+
+def test_an_option_value_of_the_other_env_is_refused_naming_this_env():
+    with pytest.raises(ValueError, match=r"not an option of agent_envs/Swarm-v0; it takes 'own'"):
+        SwarmEnv(agent_reward="team", **SMALL)
+    with pytest.raises(ValueError, match=r"not an option of agent_envs\.swarm_v0"):
+        swarm_v0.parallel_env(action_basis="modes", **SMALL)
+
+
+# ------------------------------------------------------------------ vector env
+def test_vector_plan_follows_the_autoreset_mode():
+    """A SAME_STEP autoreset needs the numpy tail after the compiled step (the reset envs'
+    observations); NEXT_STEP does not. The repr names every env and the plan."""
+    import gymnasium as gym
+    from gymnasium.vector import AutoresetMode
+
+    from agent_envs.envs import ENV_ID
+
+    envelopes = {}
+    for mode in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        venv = gym.make_vec(
+            ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", n_agents=20,
+            integrator="em", autoreset_mode=mode,
+        )  # fmt: skip
+        envelopes[mode] = venv.unwrapped.plan.envelope
+        assert f"num_envs=2, plan: {venv.unwrapped.plan.describe()})" in repr(venv)
+    if envelopes[AutoresetMode.NEXT_STEP] == "numpy":
+        pytest.skip("no compiled step here")
+    assert envelopes == {
+        AutoresetMode.NEXT_STEP: "compiled-step",
+        AutoresetMode.SAME_STEP: "compiled-step+numpy-tail",
+    }
