@@ -299,7 +299,9 @@ def test_config_replace_changes_what_it_names():
     assert config.dt == config.params.horizon / config.simulation.n_steps
     assert config.integrator == config.simulation.integrator
     assert config.jacobian == config.simulation.jacobian
-    assert isinstance(config.integrator, str) and isinstance(config.jacobian, str)
+    assert config.phi_method == config.simulation.phi_method
+    assert config.n_paths == config.simulation.n_paths
+    assert isinstance(config.phi_method, str) and isinstance(config.n_paths, int)
 
 
 def test_an_option_value_of_the_other_env_is_refused_naming_this_env():
