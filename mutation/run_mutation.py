@@ -83,6 +83,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "episode": (
         "agent_envs/envs/episode.py",
         [
+            "tests/test_env_contracts.py",
             "tests/test_envs_gym.py",
             "tests/test_envs_pettingzoo.py",
             "tests/test_env_options.py",
@@ -93,6 +94,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "episode_config": (
         "agent_envs/envs/episode_config.py",
         [
+            "tests/test_env_contracts.py",
             "tests/test_episode_config_contracts.py",
             "tests/test_validation.py",
             "tests/test_envs_gym.py",
@@ -114,11 +116,15 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "swarm_env": (
         "agent_envs/envs/swarm_env.py",
-        ["tests/test_envs_gym.py", "tests/test_compiled_episode.py"],
+        ["tests/test_env_contracts.py", "tests/test_envs_gym.py", "tests/test_compiled_episode.py"],
     ),
     "swarm_parallel": (
         "agent_envs/envs/swarm_parallel.py",
-        ["tests/test_envs_pettingzoo.py", "tests/test_compiled_episode.py"],
+        [
+            "tests/test_env_contracts.py",
+            "tests/test_envs_pettingzoo.py",
+            "tests/test_compiled_episode.py",
+        ],
     ),
     "compiled_episode": (
         "agent_envs/envs/compiled_episode.py",
@@ -127,6 +133,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "compiled_agents": (
         "agent_envs/envs/compiled_agents.py",
         [
+            "tests/test_env_contracts.py",
             "tests/test_compiled_episode.py",
             "tests/test_envs_pettingzoo.py",
             "tests/test_native_cache.py",
@@ -146,7 +153,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     ),
     "vector_env": (
         "agent_envs/envs/vector_env.py",
-        ["tests/test_vector_env.py", "tests/test_native_vec_env.py"],
+        ["tests/test_env_contracts.py", "tests/test_vector_env.py", "tests/test_native_vec_env.py"],
     ),
     "vector_blocks": (
         "agent_envs/envs/vector_blocks.py",
@@ -156,6 +163,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "fast_step": (
         "agent_envs/envs/fast_step.py",
         [
+            "tests/test_env_contracts.py",
             "tests/test_fast_step.py",
             "tests/test_step_plan.py",
             "tests/test_compiled_episode.py",
