@@ -143,6 +143,28 @@ def sum_like_numpy(a: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def _agent_cost(xb, at_x, u, at_u, target, d, gamma, terms, stack) -> float:
+    """|x_k - xbar|^2 + gamma |u_k|^2 of one agent (x_k at xb[at_x:], u_k at u[at_u:]), each
+    squared norm with numpy's sum over the d coordinates: fewer than 8 terms one running sum
+    (numpy's unrolled loop, written out), else the pairwise sum (`_pairwise_sum`)."""
+    if d < 8:
+        position = -0.0
+        control = -0.0
+        for c in range(d):
+            diff = xb[at_x + c] - target[c]
+            position += diff * diff
+            control += u[at_u + c] * u[at_u + c]
+        return (0.0 + position) + gamma * (0.0 + control)
+    for c in range(d):
+        diff = xb[at_x + c] - target[c]
+        terms[c] = diff * diff
+    position = 0.0 + _pairwise_sum(terms, 0, d, stack)
+    for c in range(d):
+        terms[c] = u[at_u + c] * u[at_u + c]
+    return position + gamma * (0.0 + _pairwise_sum(terms, 0, d, stack))
+
+
+@njit(cache=True, error_model="numpy")
 def prologue(
     actions: np.ndarray,
     max_control: float,
@@ -202,25 +224,9 @@ def prologue(
         for j in range(p_count):
             base = j * size
             for k in range(n):
-                at = k * d
-                if d < 8:  # numpy's sum of fewer than 8 terms, written out: one running sum
-                    position = -0.0
-                    control = -0.0
-                    for c in range(d):
-                        diff = xb[base + at + c] - target[c]
-                        position += diff * diff
-                        control += u[at + c] * u[at + c]
-                    position = 0.0 + position
-                    control = 0.0 + control
-                else:
-                    for c in range(d):
-                        diff = xb[base + at + c] - target[c]
-                        terms[c] = diff * diff
-                    position = 0.0 + _pairwise_sum(terms, 0, d, stack)
-                    for c in range(d):
-                        terms[c] = u[at + c] * u[at + c]
-                    control = 0.0 + _pairwise_sum(terms, 0, d, stack)
-                per_agent[k] = position + gamma * control
+                per_agent[k] = _agent_cost(
+                    xb, base + k * d, u, k * d, target, d, gamma, terms, stack
+                )
             per_path[j] = (0.0 + _pairwise_sum(per_agent, 0, n, stack)) / n
         if p_count == 1:
             costs[b] = per_path[0] + 0.0
@@ -343,25 +349,7 @@ def agent_costs(
         for j in range(p_count):
             base = j * size
             for k in range(n):
-                at = k * d
-                if d < 8:
-                    position = -0.0
-                    control = -0.0
-                    for c in range(d):
-                        diff = xb[base + at + c] - target[c]
-                        position += diff * diff
-                        control += u[at + c] * u[at + c]
-                    position = 0.0 + position
-                    control = 0.0 + control
-                else:
-                    for c in range(d):
-                        diff = xb[base + at + c] - target[c]
-                        terms[c] = diff * diff
-                    position = 0.0 + _pairwise_sum(terms, 0, d, stack)
-                    for c in range(d):
-                        terms[c] = u[at + c] * u[at + c]
-                    control = 0.0 + _pairwise_sum(terms, 0, d, stack)
-                row[k] += position + gamma * control
+                row[k] += _agent_cost(xb, base + k * d, u, k * d, target, d, gamma, terms, stack)
         for k in range(n):
             row[k] = row[k] / p_count
 
