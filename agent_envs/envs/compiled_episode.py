@@ -209,15 +209,7 @@ def _finish(
     drift: np.ndarray,
     flag: Any,
 ) -> CompiledOutcome:
-    """`SwarmEpisode.step`'s state update and outcome from x^{n+1}, its mean drift and the
-    divergence flag (the adapter then builds the observation by numpy)."""
-    spec = episode.config.simulation
-    diverged = bool(flag)
-    if diverged:
-        episode.diverged = True
-    else:
-        episode.positions, episode._mean_drift = x_next, drift
-        episode.step_index += 1
-    truncated = not diverged and episode.step_index >= spec.n_steps
-    outcome = StepOutcome(x, control, float(costs[0]), diverged, truncated)
+    """`SwarmEpisode.commit_step` from x^{n+1}, its mean drift and the divergence flag (the
+    adapter then builds the observation by numpy)."""
+    outcome = episode.commit_step(x, control, float(costs[0]), x_next, drift, flag)
     return CompiledOutcome(outcome, None, None)

@@ -291,6 +291,21 @@ class SwarmEpisode:
                 dw,
                 self.config.divergence_threshold,
             )
+        return self.commit_step(x, control, cost, x_next, drift, diverged_flag)
+
+    def commit_step(
+        self,
+        x: np.ndarray,
+        control: np.ndarray,
+        cost: float,
+        x_next: np.ndarray,
+        drift: np.ndarray,
+        diverged_flag: Any,
+    ) -> StepOutcome:
+        """The episode after a step from x under `control` (running cost `cost`) to x_next
+        with mean drift `drift`: the new state, or, where the step diverged, the old state kept
+        and the episode ended; its `StepOutcome`. (The numpy step and the compiled envelope,
+        `compiled_episode`, both end here.)"""
         diverged = bool(diverged_flag)
         if diverged:
             self.diverged = True
