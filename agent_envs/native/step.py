@@ -142,7 +142,7 @@ def sum_like_numpy(a: np.ndarray) -> float:
     return 0.0 + _pairwise_sum(a, 0, a.shape[0], pairwise_stack())
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _agent_cost(xb, at_x, u, at_u, target, d, gamma, terms, stack) -> float:
     """|x_k - xbar|^2 + gamma |u_k|^2 of one agent (x_k at xb[at_x:], u_k at u[at_u:]), each
     squared norm with numpy's sum over the d coordinates: fewer than 8 terms one running sum
