@@ -520,3 +520,16 @@ def test_phi_1s_torch_gradient_near_zero_is_its_series():
     assert torch.allclose(z.grad[:5], want[:5], rtol=1e-12, atol=0.0)
     exact = (z.detach() * torch.exp(z.detach()) - torch.expm1(z.detach())) / z.detach() ** 2
     assert torch.allclose(z.grad[5:], exact[5:], rtol=1e-9, atol=0.0)
+
+
+def test_a_numpy_matrix_with_a_torch_vector_is_a_named_type_error():
+    torch = pytest.importorskip("torch")
+    from agent_envs.integrators.phi_functions import phi_action
+
+    a = -np.eye(3)
+    v = np.ones((3, 1))
+    for method in ("auto", "expm", "eigh", "krylov"):
+        with pytest.raises(TypeError, match="must both be numpy arrays or both torch tensors"):
+            phi_action(a, torch.as_tensor(v), 1, method=method, symmetric=True)
+        with pytest.raises(TypeError, match="must both be numpy arrays or both torch tensors"):
+            phi_action(torch.as_tensor(a), v, 1, method=method, symmetric=True)

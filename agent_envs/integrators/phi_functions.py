@@ -167,6 +167,11 @@ def phi_action(
     elif not (arrays.is_torch(a) or arrays.is_torch(v)):
         a = np.asarray(a, dtype=float)
         v = np.asarray(v, dtype=float)
+    elif arrays.is_torch(a) != arrays.is_torch(v):  # (no method mixes the two libraries)
+        raise TypeError(
+            "a and v must both be numpy arrays or both torch tensors, got "
+            f"{type(a).__name__} and {type(v).__name__}"
+        )
     if a.shape[-1] != a.shape[-2] or v.shape[-2] != a.shape[-1]:
         raise ValueError(f"shapes do not fit: A {tuple(a.shape)}, V {tuple(v.shape)}")
     if method == "auto":
