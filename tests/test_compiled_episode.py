@@ -10,12 +10,10 @@ with every compiled path off.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-
 import gymnasium as gym
 import numpy as np
 import pytest
+from test_step_plan import switched_off
 
 from agent_envs import swarm_v0
 from agent_envs.envs import fast_step
@@ -29,18 +27,6 @@ pytestmark = pytest.mark.skipif(
 
 DIVERGING = {"n_steps": 10, "max_control": 10.0, "divergence_threshold": 2.5}
 SMALL = {"n_agents": 100, "n_steps": 6}  # (one path: the fused Lanczos from N = 65)
-
-
-@contextmanager
-def switched_off(*names: str) -> Iterator[None]:
-    """The compiled paths `names` off inside; every path as it was after."""
-    saved = dict(loader._loaded)
-    for name in names:
-        loader.use(name, False)
-    try:
-        yield
-    finally:
-        loader._loaded.update(saved)
 
 
 def _same(a, b) -> bool:
