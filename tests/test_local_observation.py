@@ -188,3 +188,38 @@ def test_render_mode_argument():
     made.reset(seed=0)
     made.step({a: np.zeros(1, np.float32) for a in made.agents})
     np.testing.assert_array_equal(made.render(mode="rgb_array"), made.render())
+
+
+@pytest.mark.parametrize("dim", [1, 2])
+def test_rows_from_the_gymnasium_observation_match_the_pettingzoo_env(dim):
+    """A local-observation policy is scored on the Gymnasium env (`PerAgentPolicy`): its rows,
+    built from the Gymnasium observation's float32 positions, are the PettingZoo env's (float32
+    round-off apart), at reset and after steps, batched or not."""
+    from agent_envs.envs.observation import agent_observations_from_global
+    from agent_envs.training.learners.policies import PerAgentPolicy
+
+    kwargs = {"n_agents": 9, "n_steps": 4, "dim": dim}
+    pz = swarm_v0.parallel_env(**kwargs, observation="local", neighbours=3)
+    env = gym.make("agent_envs/Swarm-v0", **kwargs)
+    obs, _ = pz.reset(seed=5)
+    g, _ = env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        rows = agent_observations_from_global(g, 9, dim, "local", 3)
+        expected = np.stack([obs[a] for a in pz.agents])
+        assert rows.shape == expected.shape == (9, local.local_observation_size(dim, 3))
+        np.testing.assert_allclose(rows, expected, atol=1e-6)
+        batched = agent_observations_from_global(np.stack([g, g]), 9, dim, "local", 3)
+        np.testing.assert_array_equal(batched, np.stack([rows, rows]))
+        action = rng.uniform(-0.1, 0.1, size=(9, dim)).astype(np.float32)
+        obs, *_ = pz.step({a: action[i] for i, a in enumerate(pz.agents)})
+        g, *_ = env.step(action.reshape(-1))
+
+    class Echo:  # returns the first entry of each row: the agent's own offset
+        def predict(self, rows, state, start, deterministic):
+            return rows[:, :dim], None
+
+    policy = PerAgentPolicy(Echo(), 9, dim, "local", 3)
+    action, _ = policy.predict(g)
+    own = agent_observations_from_global(g, 9, dim, "local", 3)[:, :dim]
+    np.testing.assert_array_equal(action, own.reshape(-1))

@@ -325,27 +325,29 @@ def split_agent_observation(
 
 
 def agent_observations_from_global(
-    obs: Any, n_agents: int, dim: int, layout: str = "absolute"
+    obs: Any,
+    n_agents: int,
+    dim: int,
+    layout: str = "absolute",
+    neighbours: int = DEFAULT_NEIGHBOURS,
 ) -> np.ndarray:
     """The N per-agent (PettingZoo) observations held in Gymnasium observations, batched.
 
     Args:
         obs: (..., 2 N d + d + 1) Gymnasium observations in the default ("absolute") layout.
         n_agents, dim: N and d of the env.
-        layout: the per-agent layout to build ("absolute" | "relative" | "swarm"; not
-            "local", whose neighbour search `local_observation.local_observations` makes from
-            the path means: ValueError).
+        layout: the per-agent layout to build ("absolute" | "relative" | "swarm" | "local").
+        neighbours: K of the "local" layout (ignored by the others).
 
     Returns:
         (..., N, size) float32: row k is the row `agent_observations` builds from the same path
         means in `layout` (without its clipping, which the Gymnasium observation has already
-        had; the swarm's centre and spread are taken from the float32 positions).
+        had; the swarm's centre and spread, and the local layout's nearest neighbours and their
+        offsets, are taken from the float32 positions, so a tie or a rounding may rank two
+        neighbours otherwise than the PettingZoo env's float64 search).
     """
     if check_layout(layout, agent=True) == "local":
-        raise ValueError(
-            "observation='local' rows are built from the path means by "
-            "agent_envs.envs.local_observation.local_observations, not from the global state"
-        )
+        return _local_rows_from_global(obs, n_agents, dim, neighbours)
     parts = split_observation(obs, n_agents, dim)
     lead = parts["positions"].shape[:-2]
     shape = (*lead, n_agents, dim)
@@ -363,3 +365,21 @@ def agent_observations_from_global(
         ]
     blocks.append(np.broadcast_to(parts["time_fraction"][..., None, None], (*lead, n_agents, 1)))
     return np.concatenate(blocks, axis=-1).astype(np.float32)
+
+
+def _local_rows_from_global(obs: Any, n_agents: int, dim: int, neighbours: int) -> np.ndarray:
+    """`agent_observations_from_global` for the "local" layout: (..., N, (K + 1)(d + 1))."""
+    parts = split_observation(obs, n_agents, dim)
+    positions = np.asarray(parts["positions"], dtype=np.float64)
+    lead = positions.shape[:-2]
+    unbounded = local_observation_space(dim, np.inf, neighbours)
+    flat = positions.reshape(-1, n_agents, dim)
+    targets = np.asarray(parts["target"], dtype=np.float64).reshape(-1, dim)
+    times = np.asarray(parts["time_fraction"], dtype=np.float64).reshape(-1)
+    rows = [
+        local_observations(flat[b], targets[b], float(times[b]), unbounded, neighbours)
+        for b in range(flat.shape[0])
+    ]
+    size = local_observation_size(dim, neighbours)
+    out = np.stack(rows) if rows else np.zeros((0, n_agents, size), np.float32)
+    return out.reshape(*lead, n_agents, size)

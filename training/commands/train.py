@@ -327,7 +327,12 @@ def _callbacks(config, run_dir: Path, sb3_envs: int, description: dict[str, Any]
     }
     eval_callback = SwarmEvalCallback(
         eval_vec,
-        lambda m: live_policy(m, shape, interface_of(config.env_kwargs)["observation"]),
+        lambda m: live_policy(
+            m,
+            shape,
+            interface_of(config.env_kwargs)["observation"],
+            config.env_kwargs.get("neighbours"),
+        ),
         references,
         reference_env=reference_vec,
         eval_seed=config.eval_seed,

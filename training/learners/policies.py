@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from agent_envs.envs.interface import action_rows, controls_from_actions
+from agent_envs.envs.interface import DEFAULT_NEIGHBOURS, action_rows, controls_from_actions
 from agent_envs.envs.observation import (
     agent_observation_size,
     agent_observations_from_global,
@@ -260,17 +260,28 @@ class PerAgentPolicy:
     are thus scored on the single-controller env, same seeds, same cost units.
     """
 
-    def __init__(self, policy: Any, n_agents: int, dim: int, layout: str = "absolute") -> None:
+    def __init__(
+        self,
+        policy: Any,
+        n_agents: int,
+        dim: int,
+        layout: str = "absolute",
+        neighbours: int | None = None,
+    ) -> None:
         self.policy = policy
         self.n_agents = n_agents
         self.dim = dim
         self.layout = layout
+        #: K of the "local" layout (None: the env's default, `DEFAULT_NEIGHBOURS`)
+        self.neighbours = DEFAULT_NEIGHBOURS if neighbours is None else int(neighbours)
 
     def agent_rows(self, observation: np.ndarray) -> np.ndarray:
         """The (B N, size) per-agent rows of one (2Nd+d+1,) or a batch of Gym observations."""
         obs = np.asarray(observation, dtype=np.float32)
         batch = obs[None] if obs.ndim == 1 else obs
-        rows = agent_observations_from_global(batch, self.n_agents, self.dim, self.layout)
+        rows = agent_observations_from_global(
+            batch, self.n_agents, self.dim, self.layout, self.neighbours
+        )
         return rows.reshape(-1, rows.shape[-1])
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
@@ -343,8 +354,13 @@ def trained_interface(model_path: Path) -> dict[str, Any]:
             # Gymnasium twin's id into env.json for the parameter-shared learner)
             trained_id = _read_json_keys(folder / "config.json", "env_id")[0]
             kwargs = kwargs if isinstance(kwargs, dict) else {}
-            return {"env_id": trained_id or env_id, **interface_of(kwargs)}
-    return {"env_id": None, **interface_of({})}
+            neighbours = kwargs.get("neighbours")
+            return {
+                "env_id": trained_id or env_id,
+                **interface_of(kwargs),
+                "neighbours": neighbours,
+            }
+    return {"env_id": None, **interface_of({}), "neighbours": None}
 
 
 def _read_json_keys(path: Path, *keys: str) -> list[Any]:
@@ -379,7 +395,7 @@ def _adapt_to_env(policy: Any, model: Any, env: Any, path: Path, info: dict[str,
                 "observation and action basis"
             )
         info["per_agent"] = True
-        return PerAgentPolicy(policy, n, d, trained["observation"])
+        return PerAgentPolicy(policy, n, d, trained["observation"], trained["neighbours"])
     wanted = (trained["observation"], trained["action_basis"])
     if wanted != here:
         if here != ("absolute", "agents"):
@@ -504,16 +520,19 @@ def resolve_policy(
 
 
 def live_policy(
-    model: Any, agent_shape: tuple[int, int] | None = None, layout: str = "absolute"
+    model: Any,
+    agent_shape: tuple[int, int] | None = None,
+    layout: str = "absolute",
+    neighbours: int | None = None,
 ) -> Any:
     """`model` as a PolicyPredictor on the raw Gymnasium env, following its live VecNormalize.
 
     `agent_shape` = (N, d) for a parameter-shared per-agent model (PettingZoo training), which
     then acts on the default-interface Gymnasium env through `PerAgentPolicy` with its
-    per-agent `layout`.
+    per-agent `layout` (and K = `neighbours` for the "local" layout).
     """
     stats = model.get_vec_normalize_env()
     policy = model if stats is None else NormalizedObservationPolicy(model, stats)
     if agent_shape is not None:
-        policy = PerAgentPolicy(policy, *agent_shape, layout)
+        policy = PerAgentPolicy(policy, *agent_shape, layout, neighbours)
     return policy
