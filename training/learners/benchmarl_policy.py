@@ -1,0 +1,51 @@
+"""A BenchMARL (TorchRL) group policy as a per-agent `predict`, to score it on `swarm_v0`.
+
+    from agent_envs.training.learners.benchmarl_policy import GroupPolicy
+    from agent_envs.training.learners.multiagent import evaluate_per_agent
+
+    policy = GroupPolicy(experiment.policy)            # a trained BenchMARL Experiment's
+    costs = evaluate_per_agent(policy, env_kwargs, seeds=range(1000, 1010))  # (seeds, N)
+    swarm_cost = costs.sum(axis=1)                    # J per seed
+
+`predict` maps the live agents' observations (M, obs_dim) to actions (M, d) in [-1, 1] the way
+`evaluate_per_agent` calls an SB3 model, so a BenchMARL policy is scored by the same code, on
+the same seeds, as the parameter-shared SB3 learner. Needs torch and tensordict (the `marl`
+extra); imported by nobody else in agent_envs.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+#: the group the BenchMARL task puts the N agents in (benchmarl_task.GROUP)
+DEFAULT_GROUP = "agents"
+
+
+class GroupPolicy:
+    """`predict(obs, state, episode_start, deterministic)` -> (actions, None) over a TorchRL
+    module that reads (group, "observation"), shape (M, obs_dim), and writes (group, "action"),
+    shape (M, d). deterministic=True runs it in TorchRL's DETERMINISTIC exploration mode (the
+    distribution's mode; BenchMARL's evaluation default), False samples."""
+
+    def __init__(self, module: Any, group: str = DEFAULT_GROUP) -> None:
+        self.module = module
+        self.group = group
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, None]:
+        obs = torch.as_tensor(np.asarray(observation, dtype=np.float32))
+        td = TensorDict({(self.group, "observation"): obs}, batch_size=[])
+        mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+        with torch.no_grad(), set_exploration_type(mode):
+            out = self.module(td)
+        return out.get((self.group, "action")).numpy().astype(np.float64), None
