@@ -29,12 +29,15 @@ DEFAULT_GROUP = "agents"
 class GroupPolicy:
     """`predict(obs, state, episode_start, deterministic)` -> (actions, None) over a TorchRL
     module that reads (group, "observation"), shape (M, obs_dim), and writes (group, "action"),
-    shape (M, d). deterministic=True runs it in TorchRL's DETERMINISTIC exploration mode (the
-    distribution's mode; BenchMARL's evaluation default), False samples."""
+    shape (M, d). deterministic=True runs it in TorchRL's DETERMINISTIC exploration mode
+    (BenchMARL's evaluation default; for its TanhNormal policies tanh(loc), not the mean action),
+    False samples (from torch's global generator: seed it for repeatable costs). ``sample=True``
+    samples whatever `predict` is asked (`evaluate_per_agent` asks for deterministic actions)."""
 
-    def __init__(self, module: Any, group: str = DEFAULT_GROUP) -> None:
+    def __init__(self, module: Any, group: str = DEFAULT_GROUP, sample: bool = False) -> None:
         self.module = module
         self.group = group
+        self.sample = sample
 
     def predict(
         self,
@@ -45,7 +48,8 @@ class GroupPolicy:
     ) -> tuple[np.ndarray, None]:
         obs = torch.as_tensor(np.asarray(observation, dtype=np.float32))
         td = TensorDict({(self.group, "observation"): obs}, batch_size=[])
-        mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+        random = self.sample or not deterministic
+        mode = ExplorationType.RANDOM if random else ExplorationType.DETERMINISTIC
         with torch.no_grad(), set_exploration_type(mode):
             out = self.module(td)
         return out.get((self.group, "action")).numpy().astype(np.float64), None

@@ -65,7 +65,9 @@ class SwarmTaskConfig:
     observation: str = "relative"
     neighbours: int | None = None
     agent_reward: str = "own"
-    max_control: float = 150.0
+    #: 5, not the env's 150: a fresh policy's controls then cost less than the zero control
+    #: (docs/learners/marl-libraries.md, "The action scale"; chosen on validation seeds)
+    max_control: float = 5.0
 
 
 def env_kwargs(config: dict[str, Any]) -> dict[str, Any]:
