@@ -8,7 +8,8 @@
 
     task = SwarmTask.SWARM.get_task()              # the shipped default (benchmarl_swarm.yaml)
     task.config.update(n_agents=10, n_steps=20)    # any keyword of swarm_v0.parallel_env
-    Experiment(task, MappoConfig.get_from_yaml(), MlpConfig.get_from_yaml(),
+    Experiment(task=task, algorithm_config=MappoConfig.get_from_yaml(),
+               model_config=MlpConfig.get_from_yaml(),
                critic_model_config=MlpConfig.get_from_yaml(), seed=0,
                config=ExperimentConfig.get_from_yaml()).run()
 
@@ -26,9 +27,9 @@ steps (`max_steps`).
 
 Units: BenchMARL logs per-agent returns averaged over agents. With agent_reward "own" the swarm
 cost of an episode is J = -N x ``episode_reward_mean``, with "team" J = -1 x it. `log_info`
-logs J itself as ``collection/info/swarm_cost``...  no conversion is needed when
-reading BenchMARL's logs. The `running_cost` info c_k^n has no tau / N factor:
-J = sum_n tau/N sum_k c_k^n, tau = T / m.
+logs J itself as ``collection/swarm_cost`` (the sampled episodes of each collected batch), so
+no conversion is needed when reading BenchMARL's logs. The `running_cost` info c_k^n has no
+tau / N factor: J = sum_n tau/N sum_k c_k^n, tau = T / m.
 """
 
 from __future__ import annotations
