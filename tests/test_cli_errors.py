@@ -356,6 +356,7 @@ BATTERY: list[tuple[list[str], str]] = [
     (["leaderboard", "--out", "{out}", "--tasks", "Nope-v0"], "the tasks are"),
     (["leaderboard", "--out", "{out}", "--seeds", "x"], "--seeds"),
     (["leaderboard", "--out", "{out}", "--workers", "0"], "--workers"),
+    (["leaderboard", "--out", "{out}", "--learners", "ppo-magic"], "--learners"),
     (["leaderboard", "--out", "{out}", "--timesteps-scale", "0"], "--timesteps-scale"),
     (["leaderboard", "--out", "{out}", "--table", "{file}/t.md"], "--table"),
 ]
