@@ -16,6 +16,7 @@ from agent_envs.training.commands.tune import (
     agents_per_copy,
     search_space,
     trial_train_config,
+    trials_table,
 )
 
 
@@ -115,16 +116,51 @@ def test_seeds_report_end_to_end_on_one_time_axis():
         "cost_seed_4": 0.5,
     }
     assert reports.evaluation({"cost_mean": 0.6, "timesteps": 100})["validation_cost"] == 0.5
+    # a run past its budget (PPO's last rollout) stays on its own seed's part of the axis
+    assert reports.evaluation({"cost_mean": 0.7, "timesteps": 128})["timesteps"] == 100
     reports.next_seed()
     second = reports.evaluation({"cost_mean": 0.9, "timesteps": 50})
     assert (second["timesteps"], second["seed"], second["validation_cost"]) == (150, 7, 0.9)
-    last = reports.evaluation({"cost_mean": 0.2, "timesteps": 100})
-    assert last["timesteps"] == 200 and last["validation_cost"] == 0.5
+    last = reports.evaluation({"cost_mean": 0.2, "timesteps": 128})  # past the budget
+    assert last["timesteps"] == 228 and last["validation_cost"] == 0.5
     assert (last["cost_seed_4"], last["cost_seed_7"], last["last_cost"]) == (0.5, 0.2, 0.2)
     mean = SeedReports((4, 7), 100, "mean", costs={4: 0.5}, running=1)
     assert mean.evaluation({"cost_mean": 0.2, "timesteps": 100})[
         "validation_cost"
     ] == pytest.approx(0.35, rel=1e-15)
+
+
+def test_trials_that_reached_every_seed_rank_first():
+    """A trial stopped after seed 0 with a low partial objective ranks after the trials that
+    ran both seeds; a seed a trial never reached is NaN."""
+    from types import SimpleNamespace
+
+    def result(trial, costs):
+        metrics = {"trial_id": trial, "timesteps": 100 * len(costs)}
+        metrics |= {f"cost_seed_{s}": c for s, c in costs.items()}
+        if costs:
+            metrics["validation_cost"] = max(costs.values())
+        config = {"base": {}, "sampled": {}, "seeds": [0, 1], "objective": "worst", "lr": 0.1}
+        return SimpleNamespace(config=config, metrics=metrics, error=None)
+
+    grid = [
+        result("stopped", {0: 0.1}),
+        result("worse", {0: 0.3, 1: 0.5}),
+        result("none", {}),
+        result("better", {0: 0.4, 1: 0.2}),
+    ]
+    table = trials_table(grid, (0, 1))
+    assert list(table["trial"]) == ["better", "worse", "stopped", "none"]
+    assert list(table.columns) == [
+        "trial",
+        "validation_cost",
+        "cost_seed_0",
+        "cost_seed_1",
+        "timesteps",
+        "error",
+        "lr",
+    ]
+    assert math.isnan(table["cost_seed_1"][2]) and table["validation_cost"][0] == 0.4
 
 
 def test_several_seeds_set_the_base_and_the_command():

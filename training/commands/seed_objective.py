@@ -14,7 +14,9 @@ its evaluation at t_i is reported at T = (i - 1) B + t_i with the partial object
 
 the finished seeds' final costs and the running seed's best so far. Every trial follows the same
 seeds in the same order, so trials compared at one T are at the same point of the same
-protocol; the last report, at T = n B, is J itself. With one seed, J(T) is the run's best
+protocol; the last report, at T = n B, is J itself. A run may end past its budget (PPO's last
+rollout rounds up): t_i is cut at B on every seed but the last, so that no seed reaches the next
+one's part of the axis (or the scheduler's end n B). With one seed, J(T) is the run's best
 validation cost so far at its own timesteps: the single-seed search as it always was.
 """
 
@@ -76,10 +78,13 @@ class SeedReports:
         seed = self.seeds[self.running]
         cost = float(row["cost_mean"])
         self.costs[seed] = min(self.costs.get(seed, math.inf), cost)
+        steps = int(row["timesteps"])
+        if self.running < len(self.seeds) - 1:
+            steps = min(steps, self.budget)
         return {
             self.metric: aggregate_seeds(list(self.costs.values()), self.objective),
             "last_cost": cost,
-            "timesteps": self.running * self.budget + int(row["timesteps"]),
+            "timesteps": self.running * self.budget + steps,
             "seed": seed,
             **{seed_column(s): c for s, c in self.costs.items()},
         }

@@ -397,8 +397,10 @@ def _params(row: Any, columns: Any) -> dict[str, Any]:
 
 def trials_table(grid: Any, seeds: tuple[int, ...]):
     """One row per trial: its objective (the aggregate over `seeds`), each seed's best
-    validation cost (NaN: the trial was stopped before that seed), its timesteps over all
-    seeds, its status and its sampled parameters."""
+    validation cost (NaN: the trial was stopped before that seed), its timesteps on the seeds'
+    common axis (`seed_objective`), its status and its sampled parameters. Best first: trials
+    that reached more seeds rank first (a partial objective over fewer seeds is not the
+    objective), then by the objective."""
     import pandas as pd
 
     rows = []
@@ -417,7 +419,10 @@ def trials_table(grid: Any, seeds: tuple[int, ...]):
                 **params,
             }
         )
-    return pd.DataFrame(rows).sort_values(METRIC, na_position="last").reset_index(drop=True)
+    table = pd.DataFrame(rows)
+    reached = table[[seed_column(s) for s in seeds]].notna().sum(axis=1)
+    order = table.assign(_reached=-reached).sort_values(["_reached", METRIC], na_position="last")
+    return order.drop(columns="_reached").reset_index(drop=True)
 
 
 def parameter_importances(config: TuneConfig, base: TrainConfig, table) -> dict[str, float]:
