@@ -274,9 +274,10 @@ def tune_trainable(config: dict[str, Any]) -> None:
     from agent_envs.training.commands.train import train
 
     base = TrainConfig.from_dict(config["base"])
-    seeds = tuple(config["seeds"])
+    # a search started before --seeds existed (resumed) has one seed, in its base config
+    seeds = tuple(config.get("seeds", (base.seed,)))
     name = f"trial_{tune.get_context().get_trial_id()}"
-    reports = SeedReports(seeds, base.timesteps, config["objective"], METRIC)
+    reports = SeedReports(seeds, base.timesteps, config.get("objective", "worst"), METRIC)
     for seed in seeds:
         run_name = name if len(seeds) == 1 else f"{name}__{seed}"
         trial = trial_train_config(base, config["sampled"], run_name)
@@ -426,11 +427,13 @@ def trials_table(grid: Any, seeds: tuple[int, ...]):
 
 
 def parameter_importances(config: TuneConfig, base: TrainConfig, table) -> dict[str, float]:
-    """Optuna's fANOVA importances of the finished trials: an in-memory study replays every
-    trial's parameters through the same search space with its measured cost."""
+    """Optuna's fANOVA importances of the finished trials (a cost on every training seed): an
+    in-memory study replays every trial's parameters through the same search space with its
+    measured cost."""
     import optuna
 
-    finished = table[table[METRIC].apply(math.isfinite)]
+    every_seed = table[[seed_column(s) for s in config.seeds]].notna().all(axis=1)
+    finished = table[every_seed & table[METRIC].apply(math.isfinite)]
     if len(finished) < 2:
         return {}
     optuna.logging.set_verbosity(optuna.logging.WARNING)
