@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DESIGN_SOURCES = [
     "training/commands/presets.py",
     "training/commands/tune.py",
+    "training/commands/seed_objective.py",
     "benchmarks/env_options.py",
     "benchmarks/max_control.py",
     "benchmarks/task_design.py",
