@@ -31,6 +31,7 @@ DESIGN_SOURCES = [
     "benchmarks/max_control.py",
     "benchmarks/task_design.py",
     "benchmarks/sweep_budget.py",
+    "benchmarks/shared_design.py",
 ]
 TEST_SEED_NAMES = {"DEFAULT_TEST_SEED", "DEFAULT_TEST_SEEDS", "test_seeds"}
 
