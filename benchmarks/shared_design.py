@@ -4,7 +4,7 @@
     python benchmarks/shared_design.py --collect DIR [DIR ...]     # writes runs.csv
 
 A *variant* (docs/results/shared-design/variants.json) changes the paper preset's ``ppo-shared``
-learner: its policy kwargs, ``normalize`` and env options (interface). One run trains it on a
+learner: its policy kwargs, ``normalize``, env options (interface) and budget (``timesteps``). One run trains it on a
 benchmark task's env (`agent_envs.training.commands.leaderboard.task_preset`) with one training
 seed and the preset's budget, validated during training on the task's validation seeds
 1000-1004; the test seeds are never read. ``--collect`` gathers the runs' learning curves into
@@ -38,6 +38,7 @@ def variant_learner(variant: str) -> object:
         hyperparams=hyper,
         env_kwargs={**base.env_kwargs, **changes.get("env_kwargs", {})},
         normalize=changes.get("normalize", base.normalize),
+        timesteps=int(changes.get("timesteps", base.timesteps)),
     )
 
 
