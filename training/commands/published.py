@@ -1,0 +1,244 @@
+"""`agent-envs tables`: every published result table, re-rendered from its committed files.
+
+    agent-envs tables            # rewrite every stale marked table of README.md and docs/
+    agent-envs tables --check    # exit 1 naming each stale table; write nothing
+
+A published table is a block of a page between the markers ``<!-- NAME:start -->`` and
+``<!-- NAME:end -->`` whose body is `render(root)`: a function that reads committed files under
+``docs/results/`` (or the tasks' shipped references) and formats them; nothing trains or
+simulates, so the whole command takes seconds. `PUBLISHED` lists them all (the inventory of
+docs/development.md, "Published tables and their files", names the tables that have no file
+behind them). A table is stale when the page's block, stripped of surrounding blank lines,
+differs from the render by a single character.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from agent_envs.training.config import option_field
+
+#: the results folder, relative to the repository root
+RESULTS = "docs/results"
+#: the quick preset's per-episode files, one per training seed
+QUICK_FILES = tuple(f"{RESULTS}/quick/seed{s}/episodes.csv" for s in range(3))
+
+
+@dataclass(frozen=True)
+class PublishedTable:
+    """One marked table: `marker` on `page` (relative to the repository root) is
+    `render(root)`, computed from `sources` (relative paths; the command checks they exist)."""
+
+    marker: str
+    page: str
+    sources: tuple[str, ...]
+    render: Callable[[Path], str]
+
+    @property
+    def name(self) -> str:
+        """``page#marker``: how the check names a stale table."""
+        return f"{self.page}#{self.marker}"
+
+
+# ------------------------------------------------------------------------------- renderers
+
+
+def _leaderboard(tasks: list[str] | None) -> Callable[[Path], str]:
+    def render(root: Path) -> str:
+        from agent_envs.training.commands.leaderboard import leaderboard_table, read_episodes
+
+        rows = read_episodes(root / RESULTS / "leaderboard" / "episodes.csv")
+        return leaderboard_table(rows, tasks=tasks)
+
+    return render
+
+
+def _quick(root: Path) -> str:
+    from agent_envs.training.commands.seed_table import seed_table_markdown
+
+    return seed_table_markdown("quick", [root / f for f in QUICK_FILES])
+
+
+def _task_references(root: Path) -> str:
+    from agent_envs.training.commands.task_evaluation import reference_table_markdown
+
+    return reference_table_markdown()
+
+
+def _task_design(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import design_table
+
+    return design_table(json.loads((root / RESULTS / "task-design.json").read_text()))
+
+
+def _env_options(name: str, first_cell: str, r2: bool) -> Callable[[Path], str]:
+    def render(root: Path) -> str:
+        from agent_envs.training.results.committed_tables import env_options_table
+
+        return env_options_table(root / RESULTS / "env-options" / name, first_cell, r2)
+
+    return render
+
+
+def _across_n(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import across_n_table
+
+    return across_n_table(root / RESULTS / "shared-across-n" / "across_n.csv")
+
+
+def _max_control(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import max_control_table
+
+    return max_control_table(root / RESULTS / "max-control" / "max_control.txt")
+
+
+#: every published table that `agent-envs tables` owns, in page order
+PUBLISHED: tuple[PublishedTable, ...] = (
+    PublishedTable(
+        "leaderboard-table",
+        "README.md",
+        (f"{RESULTS}/leaderboard/episodes.csv",),
+        _leaderboard(["agent_envs/StiffSwarm-v0"]),
+    ),
+    PublishedTable(
+        "leaderboard-table",
+        "docs/leaderboard.md",
+        (f"{RESULTS}/leaderboard/episodes.csv",),
+        _leaderboard(None),
+    ),
+    PublishedTable("quick-table", "docs/results.md", QUICK_FILES, _quick),
+    PublishedTable(
+        "across-n-table",
+        "docs/results.md",
+        (f"{RESULTS}/shared-across-n/across_n.csv",),
+        _across_n,
+    ),
+    PublishedTable(
+        "reference-table",
+        "docs/tasks.md",
+        ("agent_envs/tasks/data/SHA256SUMS",),
+        _task_references,
+    ),
+    PublishedTable("design-table", "docs/tasks.md", (f"{RESULTS}/task-design.json",), _task_design),
+    PublishedTable(
+        "env-options-table",
+        "docs/env-options.md",
+        (f"{RESULTS}/env-options/results.json",),
+        _env_options("results.json", "figure", r2=True),
+    ),
+    PublishedTable(
+        "env-options-eps1-table",
+        "docs/env-options.md",
+        (f"{RESULTS}/env-options/results_eps1.json",),
+        _env_options("results_eps1.json", "figure, eps = 1", r2=False),
+    ),
+    PublishedTable(
+        "max-control-table",
+        "docs/envs/gymnasium.md",
+        (f"{RESULTS}/max-control/max_control.txt",),
+        _max_control,
+    ),
+)
+
+
+# ------------------------------------------------------------------------------ markers
+
+
+def _block(marker: str) -> re.Pattern[str]:
+    return re.compile(
+        rf"(<!-- {re.escape(marker)}:start -->\n)(.*?)(<!-- {re.escape(marker)}:end -->)", re.S
+    )
+
+
+def marked_block(text: str, marker: str) -> str:
+    """The body between `marker`'s start and end lines of `text`, stripped."""
+    match = _block(marker).search(text)
+    if match is None:
+        raise ValueError(f"no <!-- {marker}:start --> ... <!-- {marker}:end --> block")
+    return match.group(2).strip()
+
+
+def replace_block(text: str, marker: str, body: str) -> str:
+    """`text` with `marker`'s block body replaced by `body` (one newline before the end)."""
+    marked_block(text, marker)  # raises when the markers are missing
+    return _block(marker).sub(lambda m: m.group(1) + body.strip() + "\n" + m.group(3), text, 1)
+
+
+def check_sources(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> None:
+    """Raise ValueError naming the first page or source file missing under `root`."""
+    for table in tables:
+        for relative in (table.page, *table.sources):
+            if not (root / relative).is_file():
+                raise ValueError(f"{table.name}: {root / relative} does not exist")
+
+
+def stale_tables(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> list[str]:
+    """The names of the tables whose page block differs from their render."""
+    check_sources(root, tables)
+    return [
+        t.name
+        for t in tables
+        if marked_block((root / t.page).read_text(), t.marker) != t.render(root).strip()
+    ]
+
+
+def write_tables(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> list[str]:
+    """Rewrite every stale table's block in its page; return their names."""
+    stale = stale_tables(root, tables)
+    for table in tables:
+        if table.name in stale:
+            page = root / table.page
+            page.write_text(replace_block(page.read_text(), table.marker, table.render(root)))
+    return stale
+
+
+# ---------------------------------------------------------------------------------- CLI
+
+
+@dataclass(frozen=True, kw_only=True)
+class TablesConfig:
+    """The options of `agent-envs tables`."""
+
+    root: Path = option_field(
+        Path("."), "the repository checkout holding README.md and docs/ (default: here)"
+    )
+    check: bool = option_field(
+        False, "write nothing; exit 1 naming each table that differs from its files"
+    )
+
+    def __post_init__(self) -> None:
+        root = Path(self.root)
+        object.__setattr__(self, "root", root)
+        if not (root / "README.md").is_file() or not (root / "docs").is_dir():
+            raise ValueError(f"--root: {root} is not a checkout (no README.md and docs/)")
+
+
+def run_tables(config: TablesConfig) -> int:
+    """`agent-envs tables` (module docstring): 0 when every table is (now) current."""
+    if config.check:
+        stale = stale_tables(config.root)
+        for name in stale:
+            print(f"stale: {name} (run agent-envs tables)")
+        print(f"{len(PUBLISHED) - len(stale)} of {len(PUBLISHED)} published tables current")
+        return 1 if stale else 0
+    for name in write_tables(config.root):
+        print(f"rewrote {name}")
+    print(f"{len(PUBLISHED)} published tables current")
+    return 0
+
+
+__all__ = [
+    "PUBLISHED",
+    "PublishedTable",
+    "TablesConfig",
+    "check_sources",
+    "marked_block",
+    "replace_block",
+    "run_tables",
+    "stale_tables",
+    "write_tables",
+]
