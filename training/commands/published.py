@@ -96,6 +96,15 @@ def _max_control(root: Path) -> str:
     return max_control_table(root / RESULTS / "max-control" / "max_control.txt")
 
 
+def _apg(name: str) -> Callable[[Path], str]:
+    def render(root: Path) -> str:
+        from agent_envs.training.results import committed_tables
+
+        return getattr(committed_tables, name)(root / RESULTS / "apg" / "results.json")
+
+    return render
+
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -116,6 +125,18 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/results.md",
         (f"{RESULTS}/shared-across-n/across_n.csv",),
         _across_n,
+    ),
+    PublishedTable(
+        "apg-paper-table",
+        "docs/learners/apg.md",
+        (f"{RESULTS}/apg/results.json",),
+        _apg("apg_paper_table"),
+    ),
+    PublishedTable(
+        "apg-quick-table",
+        "docs/learners/apg.md",
+        (f"{RESULTS}/apg/results.json",),
+        _apg("apg_quick_table"),
     ),
     PublishedTable(
         "reference-table",

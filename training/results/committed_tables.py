@@ -16,7 +16,10 @@ it):
   the largest |u_k^n| over the seeds, per (kernel, target) x (integrator, paths);
 - `design_table`: ``benchmarks/task_design.py``'s ``task-design.json`` (docs/tasks.md): per
   task and validation seed the largest |u| of the optimum and of the proportional law, and
-  MPC's cost over the open-loop plan's where the task has MPC.
+  MPC's cost over the open-loop plan's where the task has MPC;
+- `apg_paper_table`, `apg_quick_table`: ``benchmarks/bench_apg.py``'s ``apg/results.json``
+  (docs/learners/apg.md): per apg run the gap to optimal over the test seeds, the cost ratio to
+  the proportional law and the training time.
 """
 
 from __future__ import annotations
@@ -126,4 +129,54 @@ def design_table(rows: list[dict]) -> str:
             f"| `{r['task']}` | {r['seed']} | {r['optimal_max_u']:.2f} | "
             f"{r['proportional_max_u']:.2f} | {ratio} |"
         )
+    return "\n".join(lines)
+
+
+def _apg_run_cells(run: dict, minutes: bool) -> str:
+    """gap [min, max] | cost / proportional's | CPU (wall) training time of one apg run."""
+    gap = run["gap"]
+    if minutes:
+        time = f"{run['cpu_time_s'] / 60:.1f} min ({run['wall_time_s'] / 60:.1f} min)"
+    else:
+        time = f"{run['cpu_time_s']:.1f} s ({run['wall_time_s']:.0f} s)"
+    return (
+        f"{gap['mean']:+.3%} [{gap['min']:+.3%}, {gap['max']:+.3%}] | "
+        f"{run['ratio_to_proportional']:.4f} | {time}"
+    )
+
+
+def apg_quick_table(path: Path) -> str:
+    """docs/learners/apg.md's quick-setting table from ``apg/results.json`` (part ``quick``):
+    per training seed the gap to optimal, mean over the test seeds of (J - V) / V with its
+    min and max, the paired cost ratio to the proportional law, and CPU (wall) training time."""
+    runs = json.loads(Path(path).read_text())["quick"]["runs"]
+    lines = [
+        "| training seed | gap to optimal [min, max] | cost / proportional's | "
+        "training time, CPU (wall) |",
+        "|---|---|---|---|",
+    ]
+    lines += [f"| {run['seed']} | {_apg_run_cells(run, minutes=False)} |" for run in runs]
+    return "\n".join(lines)
+
+
+def apg_paper_table(path: Path) -> str:
+    """docs/learners/apg.md's paper-setting table from ``apg/results.json`` (parts ``paper``
+    and ``paper-linear``, the law without its MLP): the quick table's columns, one row per
+    run, then the proportional law's gap (beta = 12) over the same test seeds."""
+    data = json.loads(Path(path).read_text())
+    lines = [
+        "| policy | gap to optimal, mean over 20 test seeds [min, max] | cost / proportional's | "
+        "training time, CPU (wall) |",
+        "|---|---|---|---|",
+    ]
+    for run in data["paper"]["runs"]:
+        lines.append(f"| apg, seed {run['seed']} | {_apg_run_cells(run, minutes=True)} |")
+    for run in data["paper-linear"]["runs"]:
+        cells = _apg_run_cells(run, minutes=True)
+        lines.append(f"| apg without its MLP (`hidden = 0`), seed {run['seed']} | {cells} |")
+    gap = data["paper"]["proportional_gap"]
+    lines.append(
+        f"| proportional (beta = 12) | {gap['mean']:+.2%} [{gap['min']:+.2%}, "
+        f"{gap['max']:+.2%}] | 1 | - |"
+    )
     return "\n".join(lines)
