@@ -105,6 +105,12 @@ def _apg(name: str) -> Callable[[Path], str]:
     return render
 
 
+def _turnpike(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import turnpike_table
+
+    return turnpike_table(root / RESULTS / "turnpike" / "results.csv")
+
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -145,6 +151,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         _task_references,
     ),
     PublishedTable("design-table", "docs/tasks.md", (f"{RESULTS}/task-design.json",), _task_design),
+    PublishedTable(
+        "turnpike-table",
+        "docs/paper.md",
+        (f"{RESULTS}/turnpike/results.csv",),
+        _turnpike,
+    ),
     PublishedTable(
         "env-options-table",
         "docs/env-options.md",

@@ -19,7 +19,10 @@ it):
   MPC's cost over the open-loop plan's where the task has MPC;
 - `apg_paper_table`, `apg_quick_table`: ``benchmarks/bench_apg.py``'s ``apg/results.json``
   (docs/learners/apg.md): per apg run the gap to optimal over the test seeds, the cost ratio to
-  the proportional law and the training time.
+  the proportional law and the training time;
+- `turnpike_table`: ``agent-envs reproduce turnpike``'s ``results.csv`` (docs/paper.md): one
+  seed's runs and modes (tbar, L = ||E x - xbar||^2 at tbar and at T, RMS distance, cost,
+  max |u|, diverged).
 """
 
 from __future__ import annotations
@@ -179,4 +182,32 @@ def apg_paper_table(path: Path) -> str:
         f"| proportional (beta = 12) | {gap['mean']:+.2%} [{gap['min']:+.2%}, "
         f"{gap['max']:+.2%}] | 1 | - |"
     )
+    return "\n".join(lines)
+
+
+#: the turnpike table's columns after run and mode: (header, results.csv column)
+TURNPIKE_COLUMNS = (
+    ("tbar", "tbar"),
+    ("L at tbar", "L_at_tbar"),
+    ("L at T", "L_at_T"),
+    ("RMS dist. at T", "rms_distance_at_T"),
+    ("cost", "total_cost"),
+    ("max abs u", "max_abs_u"),
+)
+_KERNELS = {"symmetric": "sym.", "nonsymmetric": "non-sym."}
+
+
+def turnpike_table(path: Path, seed: int = 0) -> str:
+    """docs/paper.md's Section 5.2 table: `seed`'s rows of ``agent-envs reproduce turnpike``'s
+    ``results.csv`` (one row per run and mode), every figure to 3 significant digits."""
+    with open(path, newline="") as handle:
+        rows = [r for r in csv.DictReader(handle) if int(r["seed"]) == seed]
+    header = " | ".join(h for h, _ in TURNPIKE_COLUMNS)
+    lines = [f"| run | mode | {header} | diverged |", "|" + "---|" * (len(TURNPIKE_COLUMNS) + 3)]
+    for r in rows:
+        scheme = r["integrator"].replace(" (exact J)", " exact J")
+        run = f"{scheme}, {_KERNELS[r['kernel']]}, xbar = {float(r['target']):g}"
+        cells = [f"{float(r[column]):.3g}" for _, column in TURNPIKE_COLUMNS]
+        diverged = "yes" if r["diverged"] == "True" else "no"
+        lines.append(f"| {run} | {r['mode']} | " + " | ".join(cells) + f" | {diverged} |")
     return "\n".join(lines)
