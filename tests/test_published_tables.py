@@ -82,3 +82,27 @@ def test_replace_block_keeps_the_markers_and_refuses_a_missing_one():
     assert replace_block(text, "t", "new\n") == "a\n<!-- t:start -->\nnew\n<!-- t:end -->\nb\n"
     with pytest.raises(ValueError, match="no <!-- u:start -->"):
         replace_block(text, "u", "new")
+
+
+def _agrees(printed: str, value: float) -> bool:
+    """`printed` is `value` rounded to the printed digits."""
+    decimals = len(printed.split(".")[1]) if "." in printed else 0
+    return abs(float(printed) - value) <= 0.5 * 10.0**-decimals * 1.0001
+
+
+def test_long_horizon_figures_are_the_committed_run():
+    """docs/cheap-control-bound.md's "Longer horizons" V_fresh and F are the committed CSV's."""
+    from agent_envs.training.experiments.cheap_control_bound import read_rows
+
+    path = ROOT / "docs/results/cheap-control-bound/long-horizon/cheap_control_bound.csv"
+    rows = [r for r in read_rows(path) if r["case"] == "V(T)" and r["sigma"] > 0]
+    assert [r["T"] for r in rows] == [4.0, 8.0, 16.0, 32.0]
+    text = " ".join((ROOT / "docs" / "cheap-control-bound.md").read_text().split())
+    quoted = re.search(r"V_fresh = ([\d., ]+) for T = 4, 8, 16, 32 against F = ([\d., ]+) -", text)
+    assert quoted is not None
+    for group, column in ((1, "V_fresh"), (2, "floor")):
+        printed = [p.strip() for p in quoted.group(group).split(",")]
+        assert len(printed) == len(rows)
+        for cell, row in zip(printed, rows, strict=True):
+            assert _agrees(cell, row[column]), (column, cell, row[column])
+    assert all(r["corrected_holds"] for r in read_rows(path))

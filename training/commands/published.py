@@ -24,6 +24,8 @@ from agent_envs.training.config import option_field
 
 #: the results folder, relative to the repository root
 RESULTS = "docs/results"
+#: `agent-envs reproduce cheap-control-bound`'s summary, committed (its default options)
+CHEAP_CONTROL = f"{RESULTS}/cheap-control-bound/cheap_control_bound.csv"
 #: the quick preset's per-episode files, one per training seed
 QUICK_FILES = tuple(f"{RESULTS}/quick/seed{s}/episodes.csv" for s in range(3))
 
@@ -111,6 +113,16 @@ def _turnpike(root: Path) -> str:
     return turnpike_table(root / RESULTS / "turnpike" / "results.csv")
 
 
+def _cheap_control(selection: bool) -> Callable[[Path], str]:
+    def render(root: Path) -> str:
+        from agent_envs.training.experiments import cheap_control_bound as bound
+
+        rows = bound.read_rows(root / CHEAP_CONTROL)
+        return bound.selected_table(rows) if selection else bound.markdown(rows, bound.SUMMARY)
+
+    return render
+
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -156,6 +168,18 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/paper.md",
         (f"{RESULTS}/turnpike/results.csv",),
         _turnpike,
+    ),
+    PublishedTable(
+        "cheap-control-table",
+        "docs/cheap-control-bound.md",
+        (CHEAP_CONTROL,),
+        _cheap_control(selection=False),
+    ),
+    PublishedTable(
+        "cheap-control-selection",
+        "docs/turnpike-theory.md",
+        (CHEAP_CONTROL,),
+        _cheap_control(selection=True),
     ),
     PublishedTable(
         "env-options-table",
