@@ -123,6 +123,20 @@ def _cheap_control(selection: bool) -> Callable[[Path], str]:
     return render
 
 
+#: docs/evaluate.md's three evaluations: (env label, episodes file)
+EVALUATIONS = (
+    ("SERB, 1 path", f"{RESULTS}/evaluate/serb/episodes.csv"),
+    ("EM, 1 path", f"{RESULTS}/evaluate/em/episodes.csv"),
+    ("SERB, 20 paths", f"{RESULTS}/evaluate/serb20/episodes.csv"),
+)
+
+
+def _evaluations(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import evaluation_table
+
+    return evaluation_table([(label, root / path) for label, path in EVALUATIONS])
+
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -180,6 +194,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/turnpike-theory.md",
         (CHEAP_CONTROL,),
         _cheap_control(selection=True),
+    ),
+    PublishedTable(
+        "evaluation-table",
+        "docs/evaluate.md",
+        tuple(path for _, path in EVALUATIONS),
+        _evaluations,
     ),
     PublishedTable(
         "env-options-table",

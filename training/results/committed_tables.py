@@ -22,14 +22,19 @@ it):
   the proportional law and the training time;
 - `turnpike_table`: ``agent-envs reproduce turnpike``'s ``results.csv`` (docs/paper.md): one
   seed's runs and modes (tbar, L = ||E x - xbar||^2 at tbar and at T, RMS distance, cost,
-  max |u|, diverged).
+  max |u|, diverged);
+- `evaluation_table`: ``agent-envs evaluate``'s ``episodes.csv`` files (docs/evaluate.md): per
+  env and policy the mean cost with its 95% t-interval, the ratio to the turnpike controller's
+  mean cost, the mean final RMS distance and control energy.
 """
 
 from __future__ import annotations
 
 import csv
 import json
+import math
 import re
+from collections.abc import Sequence
 from pathlib import Path
 
 #: (label, key in results.json, format) of the env-options table's rows, in page order
@@ -210,4 +215,43 @@ def turnpike_table(path: Path, seed: int = 0) -> str:
         cells = [f"{float(r[column]):.3g}" for _, column in TURNPIKE_COLUMNS]
         diverged = "yes" if r["diverged"] == "True" else "no"
         lines.append(f"| {run} | {r['mode']} | " + " | ".join(cells) + f" | {diverged} |")
+    return "\n".join(lines)
+
+
+def _digits(value: float, significant: int, decimals: int) -> str:
+    """`value` with at least `significant` significant digits and at least `decimals`
+    decimals ("0" for zero): 7.371, 0.340, 0.0763 (3, 3); 731.9, 4.50 (3, 1)."""
+    if value == 0:
+        return "0"
+    exponent = math.floor(math.log10(abs(value)))
+    return f"{value:.{max(decimals, significant - 1 - exponent, 0)}f}"
+
+
+def evaluation_table(files: Sequence[tuple[str, Path]], reference: str = "turnpike") -> str:
+    """docs/evaluate.md's table from ``agent-envs evaluate``'s ``episodes.csv`` files, one per
+    env (label, path): per policy (in file order) the mean total cost with its 95% t-interval
+    over the episodes, the ratio of its mean cost to `reference`'s, the mean final RMS
+    distance to the target and the mean control energy."""
+    import pandas as pd
+
+    from agent_envs.training.results.tables import mean_confidence_interval
+
+    lines = [
+        f"| env | policy | mean cost [95% CI] | ratio to {reference} | final RMS distance | "
+        "control energy |",
+        "|---|---|---|---|---|---|",
+    ]
+    for label, path in files:
+        episodes = pd.read_csv(path)
+        by_policy = episodes.groupby("policy", sort=False)
+        base = by_policy["total_cost"].mean()[reference]
+        for policy, rows in by_policy:
+            mean, low, high = mean_confidence_interval(rows["total_cost"])
+            cost = " ".join(
+                (_digits(mean, 3, 3), f"[{_digits(low, 3, 3)},", f"{_digits(high, 3, 3)}]")
+            )
+            ratio = "1" if policy == reference else f"{mean / base:#.3g}"
+            distance = f"{rows['final_distance'].mean():#.3g}"
+            energy = _digits(float(rows["control_energy"].mean()), 3, 1)
+            lines.append(f"| {label} | {policy} | {cost} | {ratio} | {distance} | {energy} |")
     return "\n".join(lines)
