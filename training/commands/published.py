@@ -137,6 +137,12 @@ def _evaluations(root: Path) -> str:
     return evaluation_table([(label, root / path) for label, path in EVALUATIONS])
 
 
+def _turnpike_property(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import turnpike_property_table
+
+    return turnpike_property_table(root / RESULTS / "turnpike-property" / "turnpike_property.csv")
+
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -188,6 +194,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/cheap-control-bound.md",
         (CHEAP_CONTROL,),
         _cheap_control(selection=False),
+    ),
+    PublishedTable(
+        "turnpike-property-table",
+        "docs/turnpike-theory.md",
+        (f"{RESULTS}/turnpike-property/turnpike_property.csv",),
+        _turnpike_property,
     ),
     PublishedTable(
         "cheap-control-selection",

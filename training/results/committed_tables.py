@@ -25,7 +25,10 @@ it):
   max |u|, diverged);
 - `evaluation_table`: ``agent-envs evaluate``'s ``episodes.csv`` files (docs/evaluate.md): per
   env and policy the mean cost with its 95% t-interval, the ratio to the turnpike controller's
-  mean cost, the mean final RMS distance and control energy.
+  mean cost, the mean final RMS distance and control energy;
+- `turnpike_property_table`: ``agent-envs reproduce turnpike-property``'s
+  ``turnpike_property.csv`` (docs/turnpike-theory.md): per setting the entry rate, the share of
+  the horizon within delta, V and the lemma's bound over V.
 """
 
 from __future__ import annotations
@@ -254,4 +257,60 @@ def evaluation_table(files: Sequence[tuple[str, Path]], reference: str = "turnpi
             distance = f"{rows['final_distance'].mean():#.3g}"
             energy = _digits(float(rows["control_energy"].mean()), 3, 1)
             lines.append(f"| {label} | {policy} | {cost} | {ratio} | {distance} | {energy} |")
+    return "\n".join(lines)
+
+
+#: the turnpike-property table's rows: (kernel, epsilon, sigma), in page order
+TURNPIKE_PROPERTY_SETTINGS = (
+    ("symmetric", 0.05, 0.0),
+    ("symmetric", 0.05, 0.01),
+    ("symmetric", 0.05, 0.1),
+    ("symmetric", 1.0, 0.0),
+    ("symmetric", 1.0, 0.1),
+    ("nonsymmetric", 0.05, 0.0),
+    ("nonsymmetric", 0.05, 0.01),
+    ("nonsymmetric", 0.05, 0.1),
+    ("nonsymmetric", 1.0, 0.1),
+)
+#: the horizons of the share column
+TURNPIKE_SHARE_HORIZONS = (1.0, 2.0, 4.0, 8.0)
+
+
+def _ratio_text(value: float) -> str:
+    """3 significant digits below 1000 (270, 251), else 2 in the page's "1.2e5" form."""
+    if value < 1000:
+        return f"{value:.3g}"
+    mantissa, exponent = f"{value:.1e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def turnpike_property_table(path: Path) -> str:
+    """docs/turnpike-theory.md's findings from ``agent-envs reproduce turnpike-property``'s
+    ``turnpike_property.csv`` (seed 0): per setting the entry arc's fitted rate and the lemma's
+    bound over V at the longest horizon, the share of the horizon with D_n <= delta per T, and
+    V at the shortest and the longest horizon."""
+    with open(path, newline="") as handle:
+        rows = [r for r in csv.DictReader(handle) if r["seed"] == "0"]
+    lines = [
+        "| setting | entry rate | share within delta, T = "
+        + " / ".join(f"{t:g}" for t in TURNPIKE_SHARE_HORIZONS)
+        + " | V, T = 0.5 -> 8 | bound / V |",
+        "|---|---|---|---|---|",
+    ]
+    for kernel, epsilon, sigma in TURNPIKE_PROPERTY_SETTINGS:
+        by_t = {
+            float(r["T"]): r
+            for r in rows
+            if (r["kernel"], float(r["epsilon"]), float(r["sigma"])) == (kernel, epsilon, sigma)
+        }
+        first, last = by_t[min(by_t)], by_t[max(by_t)]
+        name = "non-symmetric" if kernel == "nonsymmetric" else kernel
+        shares = " / ".join(
+            f"{float(by_t[t]['share_within_delta']):.2f}" for t in TURNPIKE_SHARE_HORIZONS
+        )
+        lines.append(
+            f"| {name} eps = {epsilon:g}, sigma = {sigma:g} | {float(last['entry_rate']):.3g} | "
+            f"{shares} | {float(first['V']):.5f} -> {float(last['V']):.5f} | "
+            f"{_ratio_text(float(last['bound_over_V']))} |"
+        )
     return "\n".join(lines)
