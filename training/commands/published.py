@@ -177,6 +177,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         _apg("apg_quick_table"),
     ),
     PublishedTable(
+        "apg-across-n-table",
+        "docs/learners/apg.md",
+        (f"{RESULTS}/apg/results.json",),
+        _apg("apg_across_n_table"),
+    ),
+    PublishedTable(
         "reference-table",
         "docs/tasks.md",
         ("agent_envs/tasks/data/SHA256SUMS",),

@@ -17,9 +17,10 @@ it):
 - `design_table`: ``benchmarks/task_design.py``'s ``task-design.json`` (docs/tasks.md): per
   task and validation seed the largest |u| of the optimum and of the proportional law, and
   MPC's cost over the open-loop plan's where the task has MPC;
-- `apg_paper_table`, `apg_quick_table`: ``benchmarks/bench_apg.py``'s ``apg/results.json``
-  (docs/learners/apg.md): per apg run the gap to optimal over the test seeds, the cost ratio to
-  the proportional law and the training time;
+- `apg_paper_table`, `apg_quick_table`, `apg_across_n_table`: ``benchmarks/bench_apg.py``'s
+  ``apg/results.json`` (docs/learners/apg.md): per apg run the gap to optimal over the test
+  seeds, the cost ratio to the proportional law and the training time; across N, the laws
+  trained at N = 100 evaluated at other N;
 - `turnpike_table`: ``agent-envs reproduce turnpike``'s ``results.csv`` (docs/paper.md): one
   seed's runs and modes (tbar, L = ||E x - xbar||^2 at tbar and at T, RMS distance, cost,
   max |u|, diverged);
@@ -313,4 +314,42 @@ def turnpike_property_table(path: Path) -> str:
             f"{shares} | {float(first['V']):.5f} -> {float(last['V']):.5f} | "
             f"{_ratio_text(float(last['bound_over_V']))} |"
         )
+    return "\n".join(lines)
+
+
+#: row labels of apg's across-N table beyond the plain N
+APG_N_LABELS = {100: "100 (trained here)", 10_000: '10 000 (`linear_operator = "matrix_free"`)'}
+
+
+def apg_across_n_table(path: Path) -> str:
+    """docs/learners/apg.md's across-N table from ``apg/results.json`` (``across-n`` rows and,
+    at the training size N = 100, the ``paper`` runs): per N the gap to optimal of each
+    training seed's law, mean [worst] over the test seeds, the proportional law's gap, and
+    each law's cost ratio to the proportional law; "not solved" where no optimum was solved."""
+    data = json.loads(Path(path).read_text())
+    trained = data["paper"]
+    by_n: dict[int, list[dict]] = {
+        100: [
+            {**run, "proportional_gap": trained["proportional_gap"]["mean"]}
+            for run in trained["runs"]
+        ]
+    }
+    for row in data["across-n"]["rows"]:
+        by_n.setdefault(row["n_agents"], []).append(row)
+    lines = [
+        "| N | gap to optimal, per training seed: mean [worst] over 20 test seeds | "
+        "proportional's gap | cost / proportional's, per training seed |",
+        "|---|---|---|---|",
+    ]
+    unsolved = 0
+    for n in sorted(by_n):
+        runs = sorted(by_n[n], key=lambda r: r["seed"])
+        ratios = ", ".join(f"{r['ratio_to_proportional']:.4f}" for r in runs)
+        if all("gap" in r for r in runs):
+            gaps = ", ".join(f"{r['gap']['mean']:+.2%} [{r['gap']['max']:+.2%}]" for r in runs)
+            proportional = f"{runs[0]['proportional_gap']:+.2%}"
+        else:
+            gaps = "not solved (below)" if unsolved == 0 else "not solved"
+            proportional, unsolved = "not solved", unsolved + 1
+        lines.append(f"| {APG_N_LABELS.get(n, n)} | {gaps} | {proportional} | {ratios} |")
     return "\n".join(lines)
