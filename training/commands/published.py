@@ -143,6 +143,12 @@ def _turnpike_property(root: Path) -> str:
     return turnpike_property_table(root / RESULTS / "turnpike-property" / "turnpike_property.csv")
 
 
+def _optimum(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import optimum_table
+
+    return optimum_table(root / RESULTS / "evaluate" / "quick-optimum" / "episodes.csv")
+
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -218,6 +224,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/evaluate.md",
         tuple(path for _, path in EVALUATIONS),
         _evaluations,
+    ),
+    PublishedTable(
+        "optimum-table",
+        "docs/optimum.md",
+        (f"{RESULTS}/evaluate/quick-optimum/episodes.csv",),
+        _optimum,
     ),
     PublishedTable(
         "env-options-table",

@@ -29,7 +29,10 @@ it):
   mean cost, the mean final RMS distance and control energy;
 - `turnpike_property_table`: ``agent-envs reproduce turnpike-property``'s
   ``turnpike_property.csv`` (docs/turnpike-theory.md): per setting the entry rate, the share of
-  the horizon within delta, V and the lemma's bound over V.
+  the horizon within delta, V and the lemma's bound over V;
+- `optimum_table`: one ``agent-envs evaluate`` episodes file with the optimum evaluated
+  (docs/optimum.md): per policy the mean cost and the per-seed gap to optimal, each with its
+  95% t-interval, the mean final RMS distance and control energy.
 """
 
 from __future__ import annotations
@@ -352,4 +355,38 @@ def apg_across_n_table(path: Path) -> str:
             gaps = "not solved (below)" if unsolved == 0 else "not solved"
             proportional, unsolved = "not solved", unsolved + 1
         lines.append(f"| {APG_N_LABELS.get(n, n)} | {gaps} | {proportional} | {ratios} |")
+    return "\n".join(lines)
+
+
+def _gap_text(percent: float) -> str:
+    """A gap in percent: 2 decimals below 1% (-0.00%), else 3 significant digits (+33.3%,
+    +558%) and no decimals from 1000% on (+4671%)."""
+    text = f"{percent:+.2f}" if abs(percent) < 1 else _digits(percent, 3, 0)
+    return (text if text[0] in "+-" else "+" + text) + "%"
+
+
+def optimum_table(path: Path, optimum: str = "optimal") -> str:
+    """docs/optimum.md's gap-to-optimal table from one ``agent-envs evaluate`` episodes file:
+    per policy the mean cost with its 95% t-interval, the gap to optimal (the mean over the
+    seeds of (cost - V) / V, V = `optimum`'s cost on the same seed, with its t-interval; "0"
+    for the optimum itself), the mean final RMS distance and control energy."""
+    import pandas as pd
+
+    from agent_envs.training.results.tables import mean_confidence_interval
+
+    episodes = pd.read_csv(path)
+    costs = episodes.pivot(index="seed", columns="policy", values="total_cost")
+    lines = [
+        "| policy | mean cost [95% CI] | gap to optimal [95% CI] | final RMS distance | "
+        "control energy |",
+        "|---|---|---|---|---|",
+    ]
+    for policy, rows in episodes.groupby("policy", sort=False):
+        mean, low, high = (f"{v:.4g}" for v in mean_confidence_interval(rows["total_cost"]))
+        gaps = 100 * (costs[policy] - costs[optimum]) / costs[optimum]
+        g, lo, hi = (_gap_text(v) for v in mean_confidence_interval(gaps))
+        gap_text = "0" if policy == optimum else f"{g} [{lo}, {hi}]"
+        distance = _digits(float(rows["final_distance"].mean()), 3, 4)
+        energy = f"{rows['control_energy'].mean():.4g}"
+        lines.append(f"| {policy} | {mean} [{low}, {high}] | {gap_text} | {distance} | {energy} |")
     return "\n".join(lines)
