@@ -149,6 +149,13 @@ def _optimum(root: Path) -> str:
     return optimum_table(root / RESULTS / "evaluate" / "quick-optimum" / "episodes.csv")
 
 
+def _convergence_orders(root: Path) -> str:
+    from agent_envs.training.results.committed_tables import convergence_orders_table
+
+    path = root / RESULTS / "convergence-orders" / "convergence_orders.txt"
+    return convergence_orders_table(path)
+
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -230,6 +237,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/optimum.md",
         (f"{RESULTS}/evaluate/quick-optimum/episodes.csv",),
         _optimum,
+    ),
+    PublishedTable(
+        "convergence-orders-table",
+        "docs/core.md",
+        (f"{RESULTS}/convergence-orders/convergence_orders.txt",),
+        _convergence_orders,
     ),
     PublishedTable(
         "env-options-table",

@@ -32,7 +32,9 @@ it):
   the horizon within delta, V and the lemma's bound over V;
 - `optimum_table`: one ``agent-envs evaluate`` episodes file with the optimum evaluated
   (docs/optimum.md): per policy the mean cost and the per-seed gap to optimal, each with its
-  95% t-interval, the mean final RMS distance and control energy.
+  95% t-interval, the mean final RMS distance and control energy;
+- `convergence_orders_table`: ``benchmarks/convergence_orders.py``'s printed table
+  (docs/core.md): the measured deterministic and strong orders per scheme.
 """
 
 from __future__ import annotations
@@ -390,3 +392,21 @@ def optimum_table(path: Path, optimum: str = "optimal") -> str:
         energy = f"{rows['control_energy'].mean():.4g}"
         lines.append(f"| {policy} | {mean} [{low}, {high}] | {gap_text} | {distance} | {energy} |")
     return "\n".join(lines)
+
+
+#: the core page's names of the convergence script's schemes (EM without noise is explicit Euler)
+SCHEME_LABELS = {"em": "em / ee"}
+
+
+def convergence_orders_table(path: Path) -> str:
+    """docs/core.md's measured orders from ``benchmarks/convergence_orders.py``'s printed table
+    (fitted slopes of log error against log tau): its rows, the schemes named as the page names
+    them."""
+    lines = [line for line in Path(path).read_text().splitlines() if line.startswith("|")]
+    out = lines[:2]
+    for line in lines[2:]:
+        cells = line.strip("|").split("|")
+        scheme = cells[0].strip()
+        cells[0] = f" {SCHEME_LABELS.get(scheme, scheme)} "
+        out.append("|" + "|".join(cells) + "|")
+    return "\n".join(out)
