@@ -108,7 +108,7 @@ def _apg(name: str) -> Callable[[Path], str]:
 
 
 def _turnpike(root: Path) -> str:
-    from agent_envs.training.results.committed_tables import turnpike_table
+    from agent_envs.training.results.command_tables import turnpike_table
 
     return turnpike_table(root / RESULTS / "turnpike" / "results.csv")
 
@@ -132,19 +132,19 @@ EVALUATIONS = (
 
 
 def _evaluations(root: Path) -> str:
-    from agent_envs.training.results.committed_tables import evaluation_table
+    from agent_envs.training.results.command_tables import evaluation_table
 
     return evaluation_table([(label, root / path) for label, path in EVALUATIONS])
 
 
 def _turnpike_property(root: Path) -> str:
-    from agent_envs.training.results.committed_tables import turnpike_property_table
+    from agent_envs.training.results.command_tables import turnpike_property_table
 
     return turnpike_property_table(root / RESULTS / "turnpike-property" / "turnpike_property.csv")
 
 
 def _optimum(root: Path) -> str:
-    from agent_envs.training.results.committed_tables import optimum_table
+    from agent_envs.training.results.command_tables import optimum_table
 
     return optimum_table(root / RESULTS / "evaluate" / "quick-optimum" / "episodes.csv")
 
