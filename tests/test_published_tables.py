@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.parametrize("table", PUBLISHED, ids=[t.name for t in PUBLISHED])
 def test_published_table_is_its_files(table):
     page = (ROOT / table.page).read_text()
-    assert marked_block(page, table.marker) == table.render(ROOT).strip(), table.name
+    assert marked_block(page, table.marker) == table.rendered(ROOT).strip(), table.name
 
 
 def test_every_marker_on_the_pages_is_registered_once():

@@ -4,7 +4,7 @@
     agent-envs tables --check    # exit 1 naming each stale table; write nothing
 
 A published table is a block of a page between the markers ``<!-- NAME:start -->`` and
-``<!-- NAME:end -->`` whose body is `render(root)`: a function that reads committed files under
+``<!-- NAME:end -->`` whose body is `render(files)`: a function that reads committed files under
 ``docs/results/`` (or the tasks' shipped references) and formats them; nothing trains or
 simulates, so the whole command takes seconds. `PUBLISHED` lists them all (the inventory of
 docs/development.md, "Published tables and their files", names the tables that have no file
@@ -14,110 +14,96 @@ differs from the render by a single character.
 
 from __future__ import annotations
 
+import importlib
 import json
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from agent_envs.training.config import option_field
 
 #: the results folder, relative to the repository root
 RESULTS = "docs/results"
-#: `agent-envs reproduce cheap-control-bound`'s summary, committed (its default options)
-CHEAP_CONTROL = f"{RESULTS}/cheap-control-bound/cheap_control_bound.csv"
 #: the quick preset's per-episode files, one per training seed
 QUICK_FILES = tuple(f"{RESULTS}/quick/seed{s}/episodes.csv" for s in range(3))
 
 
+#: a table's render function: its source files (resolved under the root, in `sources` order)
+#: -> the Markdown table
+Render = Callable[[list[Path]], str]
+
+
 @dataclass(frozen=True)
 class PublishedTable:
-    """One marked table: `marker` on `page` (relative to the repository root) is
-    `render(root)`, computed from `sources` (relative paths; the command checks they exist)."""
+    """One marked table: `marker` on `page` (relative to the repository root) is `render` of
+    the files `sources` (relative paths; the command checks they exist and hands them to
+    `render`, so the files named are the files read)."""
 
     marker: str
     page: str
     sources: tuple[str, ...]
-    render: Callable[[Path], str]
+    render: Render
 
     @property
     def name(self) -> str:
         """``page#marker``: how the check names a stale table."""
         return f"{self.page}#{self.marker}"
 
+    def rendered(self, root: Path) -> str:
+        """The table from the files under `root`."""
+        return self.render([root / source for source in self.sources])
+
 
 # ------------------------------------------------------------------------------- renderers
 
 
-def _leaderboard(tasks: list[str] | None) -> Callable[[Path], str]:
-    def render(root: Path) -> str:
-        from agent_envs.training.commands.leaderboard import leaderboard_table, read_episodes
+def _renderer(module: str, function: str, **options: Any) -> Render:
+    """``agent_envs.training.MODULE.FUNCTION(*files, **options)``, imported when it renders
+    (the leaderboard's and the cheap-control experiment's imports are not free)."""
 
-        rows = read_episodes(root / RESULTS / "leaderboard" / "episodes.csv")
-        return leaderboard_table(rows, tasks=tasks)
+    def render(files: list[Path]) -> str:
+        found = importlib.import_module(f"agent_envs.training.{module}")
+        return getattr(found, function)(*files, **options)
 
     return render
 
 
-def _quick(root: Path) -> str:
+def _leaderboard(tasks: list[str] | None) -> Render:
+    def render(files: list[Path]) -> str:
+        from agent_envs.training.commands.leaderboard import leaderboard_table, read_episodes
+
+        return leaderboard_table(read_episodes(files[0]), tasks=tasks)
+
+    return render
+
+
+def _quick(files: list[Path]) -> str:
     from agent_envs.training.commands.seed_table import seed_table_markdown
 
-    return seed_table_markdown("quick", [root / f for f in QUICK_FILES])
+    return seed_table_markdown("quick", files)
 
 
-def _task_references(root: Path) -> str:
+def _task_references(files: list[Path]) -> str:
+    """The tasks' reference table, from the shipped data of the installed package (`files`:
+    its hash list, whose change means new data)."""
     from agent_envs.training.commands.task_evaluation import reference_table_markdown
 
     return reference_table_markdown()
 
 
-def _task_design(root: Path) -> str:
+def _task_design(files: list[Path]) -> str:
     from agent_envs.training.results.committed_tables import design_table
 
-    return design_table(json.loads((root / RESULTS / "task-design.json").read_text()))
+    return design_table(json.loads(files[0].read_text()))
 
 
-def _env_options(name: str, first_cell: str, r2: bool) -> Callable[[Path], str]:
-    def render(root: Path) -> str:
-        from agent_envs.training.results.committed_tables import env_options_table
-
-        return env_options_table(root / RESULTS / "env-options" / name, first_cell, r2)
-
-    return render
-
-
-def _across_n(root: Path) -> str:
-    from agent_envs.training.results.committed_tables import across_n_table
-
-    return across_n_table(root / RESULTS / "shared-across-n" / "across_n.csv")
-
-
-def _max_control(root: Path) -> str:
-    from agent_envs.training.results.committed_tables import max_control_table
-
-    return max_control_table(root / RESULTS / "max-control" / "max_control.txt")
-
-
-def _apg(name: str) -> Callable[[Path], str]:
-    def render(root: Path) -> str:
-        from agent_envs.training.results import committed_tables
-
-        return getattr(committed_tables, name)(root / RESULTS / "apg" / "results.json")
-
-    return render
-
-
-def _turnpike(root: Path) -> str:
-    from agent_envs.training.results.command_tables import turnpike_table
-
-    return turnpike_table(root / RESULTS / "turnpike" / "results.csv")
-
-
-def _cheap_control(selection: bool) -> Callable[[Path], str]:
-    def render(root: Path) -> str:
+def _cheap_control(selection: bool) -> Render:
+    def render(files: list[Path]) -> str:
         from agent_envs.training.experiments import cheap_control_bound as bound
 
-        rows = bound.read_rows(root / CHEAP_CONTROL)
+        rows = bound.read_rows(files[0])
         return bound.selected_table(rows) if selection else bound.markdown(rows, bound.SUMMARY)
 
     return render
@@ -131,99 +117,70 @@ EVALUATIONS = (
 )
 
 
-def _evaluations(root: Path) -> str:
+def _evaluations(files: list[Path]) -> str:
     from agent_envs.training.results.command_tables import evaluation_table
 
-    return evaluation_table([(label, root / path) for label, path in EVALUATIONS])
+    labels = [label for label, _ in EVALUATIONS]
+    return evaluation_table(list(zip(labels, files, strict=True)))
 
 
-def _turnpike_property(root: Path) -> str:
-    from agent_envs.training.results.command_tables import turnpike_property_table
-
-    return turnpike_property_table(root / RESULTS / "turnpike-property" / "turnpike_property.csv")
-
-
-def _optimum(root: Path) -> str:
-    from agent_envs.training.results.command_tables import optimum_table
-
-    return optimum_table(root / RESULTS / "evaluate" / "quick-optimum" / "episodes.csv")
-
-
-def _convergence_orders(root: Path) -> str:
-    from agent_envs.training.results.committed_tables import convergence_orders_table
-
-    path = root / RESULTS / "convergence-orders" / "convergence_orders.txt"
-    return convergence_orders_table(path)
-
+_BENCHMARK = "results.committed_tables"
+_COMMAND = "results.command_tables"
+_LEADERBOARD = (f"{RESULTS}/leaderboard/episodes.csv",)
+_APG = (f"{RESULTS}/apg/results.json",)
+_CHEAP_CONTROL = (f"{RESULTS}/cheap-control-bound/cheap_control_bound.csv",)
 
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
-        "leaderboard-table",
-        "README.md",
-        (f"{RESULTS}/leaderboard/episodes.csv",),
-        _leaderboard(["agent_envs/StiffSwarm-v0"]),
+        "leaderboard-table", "README.md", _LEADERBOARD, _leaderboard(["agent_envs/StiffSwarm-v0"])
     ),
-    PublishedTable(
-        "leaderboard-table",
-        "docs/leaderboard.md",
-        (f"{RESULTS}/leaderboard/episodes.csv",),
-        _leaderboard(None),
-    ),
+    PublishedTable("leaderboard-table", "docs/leaderboard.md", _LEADERBOARD, _leaderboard(None)),
     PublishedTable("quick-table", "docs/results.md", QUICK_FILES, _quick),
     PublishedTable(
         "across-n-table",
         "docs/results.md",
         (f"{RESULTS}/shared-across-n/across_n.csv",),
-        _across_n,
+        _renderer(_BENCHMARK, "across_n_table"),
     ),
     PublishedTable(
-        "apg-paper-table",
-        "docs/learners/apg.md",
-        (f"{RESULTS}/apg/results.json",),
-        _apg("apg_paper_table"),
+        "apg-paper-table", "docs/learners/apg.md", _APG, _renderer(_BENCHMARK, "apg_paper_table")
     ),
     PublishedTable(
-        "apg-quick-table",
-        "docs/learners/apg.md",
-        (f"{RESULTS}/apg/results.json",),
-        _apg("apg_quick_table"),
+        "apg-quick-table", "docs/learners/apg.md", _APG, _renderer(_BENCHMARK, "apg_quick_table")
     ),
     PublishedTable(
         "apg-across-n-table",
         "docs/learners/apg.md",
-        (f"{RESULTS}/apg/results.json",),
-        _apg("apg_across_n_table"),
+        _APG,
+        _renderer(_BENCHMARK, "apg_across_n_table"),
     ),
     PublishedTable(
-        "reference-table",
-        "docs/tasks.md",
-        ("agent_envs/tasks/data/SHA256SUMS",),
-        _task_references,
+        "reference-table", "docs/tasks.md", ("agent_envs/tasks/data/SHA256SUMS",), _task_references
     ),
     PublishedTable("design-table", "docs/tasks.md", (f"{RESULTS}/task-design.json",), _task_design),
     PublishedTable(
         "turnpike-table",
         "docs/paper.md",
         (f"{RESULTS}/turnpike/results.csv",),
-        _turnpike,
+        _renderer(_COMMAND, "turnpike_table"),
     ),
     PublishedTable(
         "cheap-control-table",
         "docs/cheap-control-bound.md",
-        (CHEAP_CONTROL,),
+        _CHEAP_CONTROL,
         _cheap_control(selection=False),
     ),
     PublishedTable(
         "turnpike-property-table",
         "docs/turnpike-theory.md",
         (f"{RESULTS}/turnpike-property/turnpike_property.csv",),
-        _turnpike_property,
+        _renderer(_COMMAND, "turnpike_property_table"),
     ),
     PublishedTable(
         "cheap-control-selection",
         "docs/turnpike-theory.md",
-        (CHEAP_CONTROL,),
+        _CHEAP_CONTROL,
         _cheap_control(selection=True),
     ),
     PublishedTable(
@@ -236,31 +193,31 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "optimum-table",
         "docs/optimum.md",
         (f"{RESULTS}/evaluate/quick-optimum/episodes.csv",),
-        _optimum,
+        _renderer(_COMMAND, "optimum_table"),
     ),
     PublishedTable(
         "convergence-orders-table",
         "docs/core.md",
         (f"{RESULTS}/convergence-orders/convergence_orders.txt",),
-        _convergence_orders,
+        _renderer(_BENCHMARK, "convergence_orders_table"),
     ),
     PublishedTable(
         "env-options-table",
         "docs/env-options.md",
         (f"{RESULTS}/env-options/results.json",),
-        _env_options("results.json", "figure", r2=True),
+        _renderer(_BENCHMARK, "env_options_table", first_cell="figure", r2=True),
     ),
     PublishedTable(
         "env-options-eps1-table",
         "docs/env-options.md",
         (f"{RESULTS}/env-options/results_eps1.json",),
-        _env_options("results_eps1.json", "figure, eps = 1", r2=False),
+        _renderer(_BENCHMARK, "env_options_table", first_cell="figure, eps = 1", r2=False),
     ),
     PublishedTable(
         "max-control-table",
         "docs/envs/gymnasium.md",
         (f"{RESULTS}/max-control/max_control.txt",),
-        _max_control,
+        _renderer(_BENCHMARK, "max_control_table"),
     ),
 )
 
@@ -302,7 +259,7 @@ def stale_tables(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> 
     return [
         t.name
         for t in tables
-        if marked_block((root / t.page).read_text(), t.marker) != t.render(root).strip()
+        if marked_block((root / t.page).read_text(), t.marker) != t.rendered(root).strip()
     ]
 
 
@@ -312,7 +269,7 @@ def write_tables(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> 
     for table in tables:
         if table.name in stale:
             page = root / table.page
-            page.write_text(replace_block(page.read_text(), table.marker, table.render(root)))
+            page.write_text(replace_block(page.read_text(), table.marker, table.rendered(root)))
     return stale
 
 
