@@ -130,8 +130,9 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         runners.run_tune,
         description="Search the hyperparameters of one learner of a preset with Optuna's TPE "
         "sampler on Ray Tune (rl-zoo3's search spaces; ASHA or median early stopping on the "
-        "validation cost); writes OUT/tune_summary.md, OUT/trials.csv and "
-        "OUT/best_hyperparams.yml (needs the 'sweep' extra).",
+        "validation cost, or on its worst, median or mean over several --seeds); writes "
+        "OUT/tune_summary.md, OUT/trials.csv and OUT/best_hyperparams.yml (needs the 'sweep' "
+        "extra).",
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.

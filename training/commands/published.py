@@ -124,6 +124,14 @@ def _evaluations(files: list[Path]) -> str:
     return evaluation_table(list(zip(labels, files, strict=True)))
 
 
+def _shared_design(files: list[Path]) -> str:
+    """The parameter-shared learners' design runs (runs.csv) against the optimum measured in
+    the env-options folder (files[1:]: its two results files)."""
+    from agent_envs.training.results.design_runs import design_table
+
+    return design_table(files[0], files[1].parent)
+
+
 _BENCHMARK = "results.committed_tables"
 _COMMAND = "results.command_tables"
 _LEADERBOARD = (f"{RESULTS}/leaderboard/episodes.csv",)
@@ -154,6 +162,16 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/learners/apg.md",
         _APG,
         _renderer(_BENCHMARK, "apg_across_n_table"),
+    ),
+    PublishedTable(
+        "shared-design-table",
+        "docs/learners/shared.md",
+        (
+            f"{RESULTS}/shared-design/runs.csv",
+            f"{RESULTS}/env-options/results.json",
+            f"{RESULTS}/env-options/results_eps1.json",
+        ),
+        _shared_design,
     ),
     PublishedTable(
         "reference-table", "docs/tasks.md", ("agent_envs/tasks/data/SHA256SUMS",), _task_references
