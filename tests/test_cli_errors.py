@@ -361,6 +361,10 @@ BATTERY: list[tuple[list[str], str]] = [
     (["leaderboard", "--out", "{out}", "--learners", "ppo-magic"], "--learners"),
     (["leaderboard", "--out", "{out}", "--timesteps-scale", "0"], "--timesteps-scale"),
     (["leaderboard", "--out", "{out}", "--table", "{file}/t.md"], "--table"),
+    # the published tables
+    (["tables", "--root", "{out}"], "--root"),
+    (["tables", "--root", "{file}", "--check"], "--root"),
+    (["tables", "--check=x"], "--check"),
 ]
 
 

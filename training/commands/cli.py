@@ -10,8 +10,8 @@ they configure (`experiments.uncontrolled.UncontrolledConfig`, `experiments.turn
 TurnpikeReproductionConfig`, `experiments.turnpike_property.TurnpikePropertyConfig`,
 `evaluate_options.EvaluateConfig`, `task_evaluation.TasksConfig`, `report.ReportConfig`,
 `config.TrainConfig`, `compare.CompareConfig`, `sweep.SweepConfig`,
-`leaderboard.LeaderboardConfig`) and are imported only when their subcommand is chosen, so
-`agent-envs reproduce uncontrolled` does not pay for importing torch.
+`leaderboard.LeaderboardConfig`, `published.TablesConfig`) and are imported only when their
+subcommand is chosen, so `agent-envs reproduce uncontrolled` does not pay for importing torch.
 
 Conventions shared by every subcommand:
 
@@ -117,6 +117,12 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         "tasks' test seeds; resumable in parts",
         _T + "commands.leaderboard:LeaderboardConfig",
         runners.run_leaderboard,
+    ),
+    "tables": Subcommand(
+        "re-render every published result table of README.md and docs/ from its committed "
+        "files (no training); --check exits 1 naming each stale one",
+        _T + "commands.published:TablesConfig",
+        runners.run_tables,
     ),
     "tune": Subcommand(
         "hyperparameter search for one learner of a preset (Ray Tune + Optuna)",
