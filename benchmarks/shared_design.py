@@ -4,9 +4,9 @@
     python benchmarks/shared_design.py --collect DIR [DIR ...]     # writes runs.csv
 
 A *variant* (docs/results/shared-design/variants.json) changes the paper preset's ``ppo-shared``
-learner: its policy kwargs, ``normalize``, env options (interface) and budget (``timesteps``). One run trains it on a
-benchmark task's env (`agent_envs.training.commands.leaderboard.task_preset`) with one training
-seed and the preset's budget, validated during training on the task's validation seeds
+learner: its policy kwargs, ``normalize``, env options (interface) and budget (``timesteps``).
+One run trains it on a benchmark task's env (`agent_envs.training.commands.leaderboard.
+task_preset`) with one training seed, validated during training on the task's validation seeds
 1000-1004; the test seeds are never read. ``--collect`` gathers the runs' learning curves into
 ``runs.csv``, from which `agent_envs.training.results.design_runs.design_table` renders the table
 of docs/learners/shared.md. Each run takes 4-8 minutes on one of 2 cores (docs/learners/shared.md).

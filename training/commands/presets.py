@@ -445,6 +445,7 @@ def get_preset(name: str) -> Preset:
 
 
 __all__ = [
+    "LOCAL_TEAM",
     "OPTIMUM_POLICIES",
     "PAPER_BUDGETS",
     "PAPER_ENV",
@@ -452,7 +453,6 @@ __all__ = [
     "PRESETS",
     "QUICK_BUDGETS",
     "QUICK_ENV",
-    "LOCAL_TEAM",
     "SWARM_TEAM",
     "EnvSetting",
     "Learner",
