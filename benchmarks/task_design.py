@@ -26,6 +26,7 @@ import numpy as np
 import agent_envs  # noqa: F401  (registers the task ids)
 from agent_envs.baselines import make_baseline
 from agent_envs.tasks import TASK_LIST
+from agent_envs.training.results.committed_tables import design_table
 
 
 def episode(task_id: str, name: str, seed: int) -> tuple[float, float]:
@@ -41,21 +42,6 @@ def episode(task_id: str, name: str, seed: int) -> tuple[float, float]:
         largest = max(largest, float(np.abs(info["control"]).max()))
         done = terminated or truncated
     return cost, largest
-
-
-def design_table(rows: list[dict]) -> str:
-    """The Markdown table of the rows (docs/tasks.md shows it; a test re-renders it)."""
-    lines = [
-        "| task | seed | optimal max \\|u\\| | proportional max \\|u\\| | MPC / open loop |",
-        "|---|---|---|---|---|",
-    ]
-    for r in rows:
-        ratio = f"{r['mpc_cost'] / r['optimal_cost']:.3f}" if "mpc_cost" in r else "-"
-        lines.append(
-            f"| `{r['task']}` | {r['seed']} | {r['optimal_max_u']:.2f} | "
-            f"{r['proportional_max_u']:.2f} | {ratio} |"
-        )
-    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:

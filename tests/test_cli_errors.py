@@ -296,7 +296,9 @@ BATTERY: list[tuple[list[str], str]] = [
     (["tune", "--out", "{out}", "--setting", "eps1"], "--setting"),
     (["tune", "--out", "{file}", "--dry-run"], "--out"),
     (["tune", "--out", "{out}", "--num-samples", "0"], "--num-samples"),
-    (["tune", "--out", "{out}", "--seed", "-1"], "--seed"),
+    (["tune", "--out", "{out}", "--seeds", "-1"], "--seeds"),
+    (["tune", "--out", "{out}", "--seeds", "0", "1", "0"], "--seeds"),
+    (["tune", "--out", "{out}", "--seed-objective", "best"], "--seed-objective"),
     (["tune", "--out", "{out}", "--sampler-seed", "-3"], "--sampler-seed"),
     (["tune", "--out", "{out}", "--pruner", "hyperband"], "--pruner"),
     (["tune", "--out", "{out}", "--num-cpus", "0"], "--num-cpus"),
@@ -356,8 +358,13 @@ BATTERY: list[tuple[list[str], str]] = [
     (["leaderboard", "--out", "{out}", "--tasks", "Nope-v0"], "the tasks are"),
     (["leaderboard", "--out", "{out}", "--seeds", "x"], "--seeds"),
     (["leaderboard", "--out", "{out}", "--workers", "0"], "--workers"),
+    (["leaderboard", "--out", "{out}", "--learners", "ppo-magic"], "--learners"),
     (["leaderboard", "--out", "{out}", "--timesteps-scale", "0"], "--timesteps-scale"),
     (["leaderboard", "--out", "{out}", "--table", "{file}/t.md"], "--table"),
+    # the published tables
+    (["tables", "--root", "{out}"], "--root"),
+    (["tables", "--root", "{file}", "--check"], "--root"),
+    (["tables", "--check=x"], "--check"),
 ]
 
 

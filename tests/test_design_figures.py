@@ -40,3 +40,34 @@ def test_max_control_table_is_the_committed_output():
     largest = max(peaks.values())
     assert f"largest {largest:.1f} against 150" in (ROOT / "docs/envs/gymnasium.md").read_text()
     assert f"largest |u| = {largest:.2f}" in out and "never clipped" in out
+
+
+def test_shared_design_table_is_its_runs_file():
+    """docs/learners/shared.md's design table is rendered from the committed runs.csv; every run
+    was validated on the validation seeds 1000-1004 (its proportional-law cost is the one
+    env-options measured there) and every variant it names is defined."""
+    import json
+
+    import pytest
+
+    from agent_envs.training.results.design_runs import (
+        OPTIMUM_FILES,
+        design_table,
+        read_runs,
+    )
+
+    results = ROOT / "docs" / "results"
+    runs = results / "shared-design" / "runs.csv"
+    page = (ROOT / "docs" / "learners" / "shared.md").read_text()
+    block = re.search(
+        r"<!-- shared-design-table:start -->\n(.*?)\n<!-- shared-design-table:end -->", page, re.S
+    )
+    assert block is not None
+    assert block.group(1) == design_table(runs, results / "env-options")
+    variants = json.loads((results / "shared-design" / "variants.json").read_text())
+    rows = read_runs(runs)
+    assert {r["variant"] for r in rows} <= set(variants)
+    for row in rows:
+        measured = json.loads((results / "env-options" / OPTIMUM_FILES[row["task"]]).read_text())
+        law = measured["results"]["proportional"]["cost"]
+        assert row["proportional_cost"] == pytest.approx(law, rel=1e-6), row

@@ -50,13 +50,21 @@ def test_leaderboard_page_is_its_episodes_file():
 
 def test_leaderboard_file_is_complete_and_consistent():
     from agent_envs.tasks.scores import gap, normalized_score
-    from agent_envs.training.commands.leaderboard import LEARNERS, TRAINING_SEEDS, read_episodes
+    from agent_envs.training.commands.leaderboard import (
+        LEARNERS,
+        TRAINING_SEEDS,
+        read_episodes,
+        runs_on,
+    )
 
     rows = read_episodes(EPISODES)
     for task in TASK_LIST:
         refs = load_references(task)
         mine = [r for r in rows if r["task"] == task.id]
-        for learner in LEARNERS:
+        assert {r["policy"] for r in mine if r["kind"] == "learner"} == {
+            name for name in LEARNERS if runs_on(name, task.id)
+        }, task.id
+        for learner in (name for name in LEARNERS if runs_on(name, task.id)):
             for seed in TRAINING_SEEDS:
                 got = [
                     r for r in mine if r["policy"] == learner and r["training_seed"] == str(seed)
@@ -143,15 +151,35 @@ def test_leaderboard_prose_quotes_the_table():
 
 
 def test_tasks_page_design_table_is_its_file():
-    import importlib.util
     import json
 
-    spec = importlib.util.spec_from_file_location(
-        "task_design", ROOT / "benchmarks" / "task_design.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    from agent_envs.training.results.committed_tables import design_table
+
     rows = json.loads((DOCS / "results" / "task-design.json").read_text())
     assert all(r["seed"] in get_task(r["task"]).validation_seeds for r in rows)
     page = (DOCS / "tasks.md").read_text()
-    assert _between(page, "design-table") == module.design_table(rows)
+    assert _between(page, "design-table") == design_table(rows)
+
+
+def test_units_follow_each_learners_tasks():
+    """apg and SAC run on every task; the parameter-shared learners on the two stiffness regimes
+    and the transfer to N = 10^4; `--learners` picks a part; transfers come last."""
+    from agent_envs.training.commands.leaderboard import LEARNER_TASKS, units
+
+    ids = [t.id for t in TASK_LIST]
+    every = units(ids, seeds=(0,))
+    for name in ("apg", "sac"):
+        assert sorted(u.task for u in every if u.learner == name) == sorted(ids)
+    for name, tasks in LEARNER_TASKS.items():
+        assert sorted(u.task for u in every if u.learner == name) == sorted(tasks)
+    part = units(["agent_envs/StiffSwarm-v0"], seeds=(0, 1), learners=("ppo-local",))
+    assert [(u.learner, u.seed) for u in part] == [("ppo-local", 0), ("ppo-local", 1)]
+    kinds = [u.task != u.source for u in every]
+    assert kinds == sorted(kinds)  # transfers after the units they read
+
+
+def test_leaderboard_learners_bad_input(tmp_path):
+    from agent_envs.training.commands.leaderboard import LeaderboardConfig
+
+    with pytest.raises(ValueError, match="--learners must be among"):
+        LeaderboardConfig(learners=("ppo-magic",), out=tmp_path / "lb")

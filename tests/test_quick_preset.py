@@ -54,7 +54,11 @@ def test_quick_preset_is_the_paper_study_in_miniature():
             twin.env_id,
             twin.env_kwargs,
         )
-        assert (learner.n_envs, learner.normalize) == (twin.n_envs, twin.normalize)
+        assert learner.n_envs == twin.n_envs
+        # the paper preset's ppo-shared normalizes its observations since issue 41; the quick
+        # preset's published learner does not (QUICK's comment)
+        wanted = False if learner.name == "ppo-shared" else twin.normalize
+        assert learner.normalize == wanted, learner.name
         changed = {k for k in twin.hyperparams if learner.hyperparams.get(k) != twin.hyperparams[k]}
         # the replay buffer holds the budget; the shared policy starts near the zero control
         assert changed <= {"buffer_size", "policy_kwargs"}, (learner.name, changed)

@@ -2,7 +2,8 @@
 the CLI's own parser (nothing runs), and the published tables agree with the committed result
 files they come from: the README's headline table is the benchmark leaderboard's first task
 (docs/results/leaderboard/episodes.csv), the Results page's paper-scale tables the sweep's
-(docs/results/paper-sweep/*.csv, docs/results/apg/results.json).
+(docs/results/paper-sweep/*.csv). The tables `agent-envs tables` renders (env options, the
+shared policy across N, apg's, ...) are checked digit for digit in tests/test_published_tables.py.
 
 A number in the README counts as agreeing when it is the source value rounded to the digits
 printed (|printed - source| <= half a unit of the last printed digit).
@@ -244,53 +245,3 @@ def test_table_checker_can_fail():
     assert agrees("0.1041", 0.10413) and not agrees("0.1092", 0.10413)
     assert agrees("+309%", 3.0899, 100.0) and not agrees("+310%", 3.0849, 100.0)
     assert agrees("3.30", 3.2984) and not agrees("3.30", 3.31)
-
-
-@pytest.mark.parametrize(
-    ("results", "first_cell"),
-    [("results.json", "figure"), ("results_eps1.json", "figure, eps = 1")],
-)
-def test_env_options_design_table_is_the_benchmarks_output(results, first_cell):
-    """docs/env-options.md's design figures are benchmarks/env_options.py's committed output."""
-    import json
-
-    page = (ROOT / "docs" / "env-options.md").read_text()
-    page = page[page.index(f"| {first_cell} | optimal control |") :].split("\n\n")[0]
-    data = json.loads((ROOT / "docs" / "results" / "env-options" / results).read_text())
-    rows = {
-        "mean cost (5 episodes)": ("cost", 1.0),
-        "largest \\|u_k^n\\| / max_control": ("max_abs_u_action_units", 1.0),
-        "largest \\|mean_k u_k^n\\| / max_control": ("max_abs_common_u_action_units", 1.0),
-        "common mode's share of the control energy": ("common_energy_share", 100.0),
-        'cost with the common mode alone (`action_basis="common"`)': ("common_only_cost", 1.0),
-        "... per episode, against the controller itself": ("common_only_ratio", 1.0),
-    }
-    checked = 0
-    for line in page.splitlines():
-        escaped = line.strip().strip("|").replace("\\|", "\0")  # a literal | in a cell
-        cells = [c.strip().replace("\0", "\\|") for c in escaped.split("|")]
-        if len(cells) == 3 and cells[0] in rows:
-            key, scale = rows[cells[0]]
-            for printed, policy in zip(cells[1:], ("optimal", "proportional"), strict=True):
-                value = data["results"][policy][key]
-                assert agrees(printed.replace(" ", ""), value, scale), (cells[0], policy)
-                checked += 1
-    assert checked == 2 * len(rows)
-
-
-def test_shared_policy_across_n_table_is_the_benchmarks_output():
-    """The Results page's across-N table is benchmarks/shared_across_n.py's committed CSV."""
-    path = ROOT / "docs" / "results" / "shared-across-n" / "across_n.csv"
-    with open(path, newline="") as f:
-        data = {(r["policy"], int(r["n_agents"])): r for r in csv.DictReader(f)}
-    shared = sorted({p for p, _ in data if p.startswith("shared")})
-    rows = readme_table("### The parameter-shared policy at other N", "N")
-    assert [int(cells[0]) for cells in rows] == [20, 100, 1000, 10000]
-    for cells in rows:
-        n = int(cells[0])
-        for cell, policy in zip(cells[1:4], shared, strict=True):
-            cost, ratio = _numbers(cell)[:2]
-            assert agrees(cost, float(data[(policy, n)]["mean_cost"])), (n, policy, cell)
-            assert agrees(ratio, float(data[(policy, n)]["ratio_to_proportional"])), cell
-        for cell, policy in zip(cells[4:6], ("proportional", "zero"), strict=True):
-            assert agrees(cell, float(data[(policy, n)]["mean_cost"])), (n, policy, cell)

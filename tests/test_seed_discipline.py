@@ -26,11 +26,13 @@ ROOT = Path(__file__).resolve().parents[1]
 DESIGN_SOURCES = [
     "training/commands/presets.py",
     "training/commands/tune.py",
+    "training/commands/seed_objective.py",
     "benchmarks/env_options.py",
     "benchmarks/max_control.py",
     "benchmarks/task_design.py",
     "benchmarks/sweep_budget.py",
     "benchmarks/benchmarl_action_scale.py",
+    "benchmarks/shared_design.py",
 ]
 TEST_SEED_NAMES = {"DEFAULT_TEST_SEED", "DEFAULT_TEST_SEEDS", "test_seeds"}
 

@@ -108,10 +108,12 @@ def test_paper_preset_definition():
     trials = build_trials(preset, ExperimentOptions(vec_env="dummy"))
     learners = [t for t in trials if t.kind == LEARNER]
     main = {(t.policy, t.seed) for t in learners if t.setting == "main"}
-    names = ("ppo", "ppo-modes", "sac", "td3", "ppo-shared", "apg")
+    names = ("ppo", "ppo-modes", "sac", "td3", "ppo-shared", "ppo-local", "apg")
     assert main == {(a, s) for a in names for s in preset.seeds}
-    contrasts = {t.policy for t in learners if t.setting in ("eps1", "em-to-serb")}
-    assert contrasts == {"ppo", "sac", "apg"}
+    eps1 = {t.policy for t in learners if t.setting == "eps1"}
+    assert eps1 == {"ppo", "sac", "ppo-shared", "ppo-local", "apg"}
+    em = {t.policy for t in learners if t.setting == "em-to-serb"}
+    assert em == {"ppo", "sac", "apg"}
     # apg: APGConfig's defaults (what benchmarks/bench_apg.py measured) on the setting's env
     apg = next(t for t in learners if t.policy == "apg" and t.setting == "main")
     assert apg.train["iterations"] == 300 and apg.train["eval_freq"] == 25
@@ -124,6 +126,7 @@ def test_paper_preset_definition():
         "sac": {"observation": "summary", "action_basis": "common"},
         "td3": {"observation": "summary", "action_basis": "common"},
         "ppo-shared": {"observation": "swarm", "agent_reward": "team"},
+        "ppo-local": {"observation": "local", "neighbours": 6, "agent_reward": "team"},
     }
     entries = read_hyperparams_file("paper")
     for trial in (t for t in learners if t.setting == "main" and t.policy != "apg"):

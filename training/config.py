@@ -102,7 +102,8 @@ def json_field(help: str) -> Any:
 
 def command_line(prog: str, config: Any) -> str:
     """The `agent-envs PROG` command line of an options dataclass: non-default options only
-    (`preset` always), ``--no-x`` for a false flag, dicts as quoted JSON."""
+    (`preset` always), ``--no-x`` for a false flag, dicts as quoted JSON, a tuple or list as
+    its items."""
     parts = ["agent-envs", prog]
     default = type(config)()
     for f in dataclasses.fields(config):
@@ -114,6 +115,8 @@ def command_line(prog: str, config: Any) -> str:
             parts.append(flag if value else "--no-" + f.name.replace("_", "-"))
         elif isinstance(value, dict):
             parts += [flag, shlex.quote(json.dumps(value))]
+        elif isinstance(value, (tuple, list)):
+            parts += [flag, *(shlex.quote(str(v)) for v in value)]
         else:
             parts += [flag, shlex.quote(str(value))]
     return " ".join(parts)

@@ -10,8 +10,8 @@ they configure (`experiments.uncontrolled.UncontrolledConfig`, `experiments.turn
 TurnpikeReproductionConfig`, `experiments.turnpike_property.TurnpikePropertyConfig`,
 `evaluate_options.EvaluateConfig`, `task_evaluation.TasksConfig`, `report.ReportConfig`,
 `config.TrainConfig`, `compare.CompareConfig`, `sweep.SweepConfig`,
-`leaderboard.LeaderboardConfig`) and are imported only when their subcommand is chosen, so
-`agent-envs reproduce uncontrolled` does not pay for importing torch.
+`leaderboard.LeaderboardConfig`, `published.TablesConfig`) and are imported only when their
+subcommand is chosen, so `agent-envs reproduce uncontrolled` does not pay for importing torch.
 
 Conventions shared by every subcommand:
 
@@ -118,14 +118,21 @@ SUBCOMMANDS: dict[str, Subcommand] = {
         _T + "commands.leaderboard:LeaderboardConfig",
         runners.run_leaderboard,
     ),
+    "tables": Subcommand(
+        "re-render every published result table of README.md and docs/ from its committed "
+        "files (no training); --check exits 1 naming each stale one",
+        _T + "commands.published:TablesConfig",
+        runners.run_tables,
+    ),
     "tune": Subcommand(
         "hyperparameter search for one learner of a preset (Ray Tune + Optuna)",
         _T + "commands.tune:TuneConfig",
         runners.run_tune,
         description="Search the hyperparameters of one learner of a preset with Optuna's TPE "
         "sampler on Ray Tune (rl-zoo3's search spaces; ASHA or median early stopping on the "
-        "validation cost); writes OUT/tune_summary.md, OUT/trials.csv and "
-        "OUT/best_hyperparams.yml (needs the 'sweep' extra).",
+        "validation cost, or on its worst, median or mean over several --seeds); writes "
+        "OUT/tune_summary.md, OUT/trials.csv and OUT/best_hyperparams.yml (needs the 'sweep' "
+        "extra).",
     ),
 }
 #: `agent-envs reproduce NAME` is an alias of `agent-envs reproduce-NAME`.

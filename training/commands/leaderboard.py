@@ -46,13 +46,32 @@ from agent_envs.training.config import option_field
 from agent_envs.training.storage import write_text_atomic
 
 #: The learners of the leaderboard, by their name in the paper preset: `apg` (a per-agent
-#: feedback law trained through SERB) and SAC with the summary observation and one common
-#: control, the best SB3 learner of the paper study (docs/results.md).
-LEARNERS = ("apg", "sac")
+#: feedback law trained through SERB), SAC with the summary observation and one common
+#: control, the best SB3 learner of the paper study (docs/results.md), and the two
+#: parameter-shared PPO learners of the PettingZoo env: `ppo-shared` (swarm observation, team
+#: reward) and `ppo-local` (local observation: own offset and K nearest neighbours, team reward).
+LEARNERS = ("apg", "sac", "ppo-shared", "ppo-local")
 #: Training seeds of every learner.
 TRAINING_SEEDS = (0, 1, 2)
 #: Tasks whose learners are not trained there but transferred from another task.
 TRANSFERS = {"agent_envs/LargeSwarm-v0": "agent_envs/StiffSwarm-v0"}
+#: The tasks a learner is run on where not every task: the parameter-shared learners are run on
+#: the paper's two stiffness regimes (and transferred from the stiff one to N = 10^4).
+LEARNER_TASKS = {
+    name: (
+        "agent_envs/StiffSwarm-v0",
+        "agent_envs/WeakCouplingSwarm-v0",
+        "agent_envs/LargeSwarm-v0",
+    )
+    for name in ("ppo-shared", "ppo-local")
+}
+
+
+def runs_on(learner: str, task_id: str) -> bool:
+    """Whether the leaderboard runs `learner` on `task_id` (`LEARNER_TASKS`; else every task)."""
+    return task_id in LEARNER_TASKS.get(learner, (task_id,))
+
+
 #: The best simple law in SAC's interface (its fair baseline, docs/env-options.md): the
 #: proportional law on the swarm's centre (`interface_references.CentreLaw`), scored live
 CENTRE_LAW_INTERFACE = INTERFACE_REFERENCES[CENTRE_LAW]
@@ -79,7 +98,9 @@ def task_preset(task: TaskSpec, timesteps_scale: float = 1.0) -> Any:
     from agent_envs.training.commands.presets import PRESETS, EnvSetting, Preset
 
     paper = PRESETS["paper"]
-    learners = tuple(lr for lr in paper.learners if lr.name in LEARNERS)
+    learners = tuple(
+        lr for lr in paper.learners if lr.name in LEARNERS and runs_on(lr.name, task.id)
+    )
     return Preset(
         name=f"task-{task.file_stem}",
         description=f"the learners of the leaderboard on {task.id}",
@@ -95,12 +116,19 @@ def task_preset(task: TaskSpec, timesteps_scale: float = 1.0) -> Any:
     )
 
 
-def units(tasks: Sequence[str], seeds: Sequence[int] = TRAINING_SEEDS) -> list[Unit]:
-    """Every unit of `tasks` (transfers after the units they read)."""
+def units(
+    tasks: Sequence[str],
+    seeds: Sequence[int] = TRAINING_SEEDS,
+    learners: Sequence[str] = LEARNERS,
+) -> list[Unit]:
+    """Every unit of `tasks` x `learners` x `seeds` that the leaderboard runs (`runs_on`;
+    transfers after the units they read)."""
     out = []
     for task_id in tasks:
         source = TRANSFERS.get(task_id, task_id)
-        out += [Unit(task_id, lr, s, source) for lr in LEARNERS for s in seeds]
+        out += [
+            Unit(task_id, lr, s, source) for lr in learners if runs_on(lr, task_id) for s in seeds
+        ]
     return sorted(out, key=lambda u: u.task != u.source)
 
 
@@ -206,6 +234,8 @@ def read_episodes(path: Path) -> list[dict[str, Any]]:
 POLICY_LABELS = {
     "apg": "apg (per-agent feedback, trained through SERB)",
     "sac": "sac (summary observation, common control)",
+    "ppo-shared": "ppo-shared (parameter-shared PPO: swarm observation, team reward)",
+    "ppo-local": "ppo-local (parameter-shared PPO: own offset and 6 nearest neighbours)",
     "optimal": "optimal (open-loop plan, 20 paths)",
     "mpc": "mpc (re-solve every step)",
     "lower_bound": "lower bound (certified, not a policy)",
@@ -286,6 +316,9 @@ class LeaderboardConfig:
         None, "task ids to run (default: all)", nargs="+", metavar="ID"
     )
     seeds: tuple[int, ...] = option_field(TRAINING_SEEDS, "training seeds of every learner")
+    learners: tuple[str, ...] = option_field(
+        LEARNERS, "learners to run (default: all)", nargs="+", metavar="NAME"
+    )
     workers: int = option_field(1, "units run in parallel processes")
     timesteps_scale: float = option_field(1.0, "multiply every training budget (a smoke run: 0.01)")
     table: Path | None = option_field(
@@ -308,6 +341,10 @@ class LeaderboardConfig:
             if source and source not in self.tasks:
                 object.__setattr__(self, "tasks", (source, *self.tasks))
         object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
+        object.__setattr__(self, "learners", tuple(self.learners))
+        for name in self.learners:
+            if name not in LEARNERS:
+                raise ValueError(f"--learners must be among {', '.join(LEARNERS)}; got {name!r}")
         for s in self.seeds:
             check_int("--seeds", s, 0, 999)
         check_int("--workers", self.workers, 1, 64)
@@ -325,10 +362,11 @@ def run_leaderboard(config: LeaderboardConfig) -> int:
         return 0
     todo = [
         u
-        for u in units(config.tasks, config.seeds)
+        for u in units(config.tasks, config.seeds, config.learners)
         if not (config.out / "units" / f"{u.stem}.csv").is_file()
     ]
-    print(f"{len(todo)} units to run ({len(units(config.tasks, config.seeds)) - len(todo)} done)")
+    total = len(units(config.tasks, config.seeds, config.learners))
+    print(f"{len(todo)} units to run ({total - len(todo)} done)")
     direct = [u for u in todo if u.task == u.source]
     transfer = [u for u in todo if u.task != u.source]
     for batch in (direct, transfer):
@@ -348,7 +386,7 @@ def run_leaderboard(config: LeaderboardConfig) -> int:
     meta = {
         "tasks": list(config.tasks),
         "seeds": list(config.seeds),
-        "learners": LEARNERS,
+        "learners": list(config.learners),
         "timesteps_scale": config.timesteps_scale,
     }
     write_text_atomic(config.out / "leaderboard.json", json.dumps(meta, indent=1) + "\n")
@@ -358,6 +396,7 @@ def run_leaderboard(config: LeaderboardConfig) -> int:
 __all__ = [
     "EPISODE_COLUMNS",
     "LEARNERS",
+    "LEARNER_TASKS",
     "TRAINING_SEEDS",
     "TRANSFERS",
     "LeaderboardConfig",
@@ -367,6 +406,7 @@ __all__ = [
     "read_episodes",
     "run_leaderboard",
     "run_unit",
+    "runs_on",
     "task_preset",
     "units",
 ]

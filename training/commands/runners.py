@@ -159,6 +159,12 @@ def run_leaderboard(config: Any) -> int:
     return leaderboard(config)
 
 
+def run_tables(config: Any) -> int:
+    from agent_envs.training.commands.published import run_tables as tables
+
+    return tables(config)
+
+
 def run_tasks(config: Any) -> int:
     from agent_envs.training.commands.task_evaluation import run_tasks_command
 

@@ -8,17 +8,21 @@ The way the SB3 ecosystem tunes (rl-zoo3's ``hyperparams_opt.py``): Optuna's TPE
 proposes the hyperparameters (`SEARCH_SPACES`: rl-zoo3's ranges, with gamma's range widened to
 the short episodes here and the options the issue asks for: normalize, log_std_init, ortho_init,
 n_envs, net_arch), Ray Tune runs the trials (`ray.tune.search.optuna.OptunaSearch`, one trial =
-one `agent-envs train` run of the learner with the sampled hyperparameters, its validation cost
-reported at every evaluation), and a scheduler stops the unpromising ones early (ASHA on the
-timesteps, or the median stopping rule). The objective is the best validation cost of the run
-so far (the model `compare`/`sweep` would evaluate): validation seeds only, the held-out test
-seeds stay unseen.
+one `agent-envs train` run of the learner with the sampled hyperparameters per training seed of
+``--seeds``, its validation cost reported at every evaluation), and a scheduler stops the
+unpromising ones early (ASHA on the timesteps, or the median stopping rule). The objective is
+the best validation cost of a run (the model `compare`/`sweep` would evaluate), with several
+training seeds their worst, median or mean (``--seed-objective``; the seeds run one after the
+other inside the trial, `seed_objective` says how they are reported): validation seeds only,
+the held-out test seeds stay unseen.
 
-Each trial trains into ``OUT/runs/trial_{id}`` (the usual run folder); Tune's experiment state
-goes to ``OUT/tune``. At the end ``OUT/tune_summary.md`` lists the best trials with their
-hyperparameters and Optuna's parameter importances (fANOVA), ``OUT/trials.csv`` every trial, and
+Each trial trains into ``OUT/runs/trial_{id}`` (the usual run folder; ``trial_{id}__{seed}``
+per seed with several seeds); Tune's experiment state goes to ``OUT/tune``. At the end
+``OUT/tune_summary.md`` lists the best trials with their per-seed costs, their hyperparameters
+and Optuna's parameter importances (fANOVA), ``OUT/trials.csv`` every trial, and
 ``OUT/best_hyperparams.yml`` the best trial's hyperparameters in the shipped YAML format, with
-a comment naming the study, ready to paste into ``training/hyperparams/{algo}.yml``.
+a comment naming the study, its seeds and objective, ready to paste into
+``training/hyperparams/{algo}.yml``.
 """
 
 from __future__ import annotations
@@ -36,15 +40,24 @@ from typing import Any
 from agent_envs.params import SwarmParams
 from agent_envs.training.commands.experiment import ExperimentArguments, learner_config
 from agent_envs.training.commands.presets import PRESETS, Learner, get_preset
+from agent_envs.training.commands.seed_objective import (
+    SEED_COLUMN_PREFIX,
+    SEED_OBJECTIVES,
+    SeedReports,
+    aggregate_seeds,
+    seed_column,
+)
 from agent_envs.training.commands.sweep import RayArguments
 from agent_envs.training.config import TrainConfig, command_line, option_field
-from agent_envs.training.defaults import is_multiagent
+from agent_envs.training.defaults import is_multiagent, parse_seeds, seed_text
 from agent_envs.validation import MAX_SEED, check_int
 
 #: Tune's experiment folder under OUT
 TUNE_NAME = "tune"
 #: what the trials report and the search minimizes
 METRIC = "validation_cost"
+#: the training seeds of every trial when --seeds is left out
+DEFAULT_SEEDS = (0,)
 #: schedulers that stop unpromising trials early
 PRUNERS = ("asha", "median", "none")
 #: net_arch choices (rl-zoo3's names)
@@ -175,7 +188,18 @@ class TuneConfig(ExperimentArguments, RayArguments):
     )
     out: str | None = option_field(None, "output directory (default tune-{preset}-{learner})")
     num_samples: int = option_field(20, "trials (hyperparameter sets) to run")
-    seed: int = option_field(0, "training seed of every trial")
+    seeds: tuple[int, ...] = option_field(
+        DEFAULT_SEEDS,
+        "training seeds of every trial, each a run of the sampled hyperparameters: '0 1 2', "
+        "'0-2' or '0,1,2'",
+        nargs="+",
+        type=str,
+    )
+    seed_objective: str = option_field(
+        "worst",
+        "a trial's objective over its training seeds' best validation costs",
+        choices=SEED_OBJECTIVES,
+    )
     sampler_seed: int = option_field(0, "seed of Optuna's TPE sampler")
     pruner: str = option_field(
         "asha", "early stopping of unpromising trials on the validation cost", choices=PRUNERS
@@ -189,7 +213,8 @@ class TuneConfig(ExperimentArguments, RayArguments):
         preset = get_preset(self.preset)
         preset.setting(self.setting)
         check_int("--num-samples", self.num_samples, 1, 100_000)
-        check_int("--seed", self.seed, 0, MAX_SEED)
+        self.seeds = tuple(parse_seeds(self.seeds, "--seeds", default=DEFAULT_SEEDS))
+        aggregate_seeds([0.0], self.seed_objective)  # ValueError naming --seed-objective
         check_int("--sampler-seed", self.sampler_seed, 0, MAX_SEED)
         if self.pruner not in PRUNERS:
             raise ValueError(f"--pruner must be one of {', '.join(PRUNERS)}, got {self.pruner!r}")
@@ -215,13 +240,13 @@ class TuneConfig(ExperimentArguments, RayArguments):
         """The learner's `TrainConfig` in the preset (its budget times --timesteps-scale, its
         validation schedule), before the sampled hyperparameters."""
         preset = get_preset(self.preset)
-        options = self.experiment_options(seeds=(self.seed,), run_names=False)
+        options = self.experiment_options(seeds=self.seeds, run_names=False)
         options.check(preset)
         config = learner_config(
             preset,
             preset.setting(self.setting),
             self.learner_entry(),
-            self.seed,
+            self.seeds[0],
             options,
             self.out_dir / "runs",
         )
@@ -230,55 +255,77 @@ class TuneConfig(ExperimentArguments, RayArguments):
     def command(self) -> str:
         return command_line("tune", self)
 
+    def objective_text(self) -> str:
+        """The objective in words, e.g. ``the worst over training seeds 0,1,2``."""
+        if len(self.seeds) == 1:
+            return f"training seed {self.seeds[0]}"
+        return f"the {self.seed_objective} over training seeds {seed_text(self.seeds)}"
+
 
 # ------------------------------------------------------------------------------------ trials
 
 
 def tune_trainable(config: dict[str, Any]) -> None:
-    """One Tune trial: train with the sampled settings, reporting the best validation cost so
-    far at every evaluation (the scheduler may stop the trial there)."""
+    """One Tune trial: train with the sampled settings on each training seed in turn,
+    reporting at every evaluation the objective so far over the seeds (`SeedReports`: the
+    scheduler may stop the trial there)."""
     from ray import tune
 
     from agent_envs.training.commands.train import train
 
     base = TrainConfig.from_dict(config["base"])
-    trial = trial_train_config(
-        base, config["sampled"], f"trial_{tune.get_context().get_trial_id()}"
-    )
-    best = math.inf
-
-    def report(row: dict[str, Any]) -> None:
-        nonlocal best
-        best = min(best, float(row["cost_mean"]))
-        tune.report(
-            {METRIC: best, "last_cost": float(row["cost_mean"]), "timesteps": row["timesteps"]}
+    # a search started before --seeds existed (resumed) has one seed, in its base config
+    seeds = tuple(config.get("seeds", (base.seed,)))
+    name = f"trial_{tune.get_context().get_trial_id()}"
+    reports = SeedReports(seeds, base.timesteps, config.get("objective", "worst"), METRIC)
+    for seed in seeds:
+        run_name = name if len(seeds) == 1 else f"{name}__{seed}"
+        trial = trial_train_config(base, config["sampled"], run_name)
+        train(
+            dataclasses.replace(trial, seed=seed),
+            on_evaluation=lambda row: tune.report(reports.evaluation(row)),
         )
-
-    train(trial, on_evaluation=report)
+        reports.next_seed()
 
 
 @dataclass(frozen=True)
 class DefineByRun:
     """The define-by-run function OptunaSearch calls (picklable: Tune checkpoints the
-    searcher): samples, and returns the constants a trial needs, its base config and the
-    sampled settings in the form `trial_train_config` takes."""
+    searcher): samples, and returns the constants a trial needs (`CONSTANTS`: its base config,
+    the sampled settings in the form `trial_train_config` takes, its training seeds and their
+    objective)."""
 
     base: dict[str, Any]
+    seeds: tuple[int, ...] = DEFAULT_SEEDS
+    objective: str = SEED_OBJECTIVES[0]
 
     def __call__(self, trial: Any) -> dict[str, Any]:
         sample = search_space(
             self.base["algo"], int(self.base["timesteps"]), agents_per_copy(self.base)
         )
-        return {"base": self.base, "sampled": sample(trial)}
+        return {
+            "base": self.base,
+            "sampled": sample(trial),
+            "seeds": list(self.seeds),
+            "objective": self.objective,
+        }
+
+
+#: the keys of a trial's config that `DefineByRun` returns (not sampled parameters)
+CONSTANTS = ("base", "sampled", "seeds", "objective")
 
 
 def _scheduler(config: TuneConfig, base: TrainConfig) -> Any:
+    """The pruner on the trials' time axis: the seeds' timesteps end to end."""
     from ray.tune.schedulers import ASHAScheduler, FIFOScheduler, MedianStoppingRule
 
     grace = 2 * max(base.eval_freq, 1)  # two evaluations before a trial can be stopped
     if config.pruner == "asha":
         return ASHAScheduler(
-            time_attr="timesteps", max_t=base.timesteps, grace_period=grace, reduction_factor=2
+            time_attr="timesteps",
+            max_t=base.timesteps * len(config.seeds),
+            grace_period=grace,
+            reduction_factor=2,
         )
     if config.pruner == "median":
         return MedianStoppingRule(time_attr="timesteps", grace_period=grace)
@@ -303,7 +350,7 @@ def run_search(config: TuneConfig, base: TrainConfig) -> Any:
             str(path), trainable=trainable, resume_unfinished=True, restart_errored=True
         ).fit()
     search = OptunaSearch(
-        space=DefineByRun(base.to_dict()),
+        space=DefineByRun(base.to_dict(), config.seeds, config.seed_objective),
         metric=METRIC,
         mode="min",
         sampler=optuna.samplers.TPESampler(seed=config.sampler_seed),
@@ -330,8 +377,13 @@ def run_search(config: TuneConfig, base: TrainConfig) -> Any:
 # ----------------------------------------------------------------------------------- summary
 
 
-#: columns of the trials table that are not sampled parameters
+#: columns of the trials table that are not sampled parameters (and the per-seed costs)
 RESULT_COLUMNS = ("trial", METRIC, "timesteps", "error")
+
+
+def _is_result(column: str) -> bool:
+    """Whether a column of the trials table is a result, not a sampled parameter."""
+    return column in RESULT_COLUMNS or column.startswith(SEED_COLUMN_PREFIX)
 
 
 def _params(row: Any, columns: Any) -> dict[str, Any]:
@@ -340,38 +392,48 @@ def _params(row: Any, columns: Any) -> dict[str, Any]:
     return {
         k: v
         for k, v in values.items()
-        if k not in RESULT_COLUMNS and not (isinstance(v, float) and math.isnan(v))
+        if not _is_result(k) and not (isinstance(v, float) and math.isnan(v))
     }
 
 
-def trials_table(grid: Any):
-    """One row per trial: its sampled parameters, best validation cost, timesteps, status."""
+def trials_table(grid: Any, seeds: tuple[int, ...]):
+    """One row per trial: its objective (the aggregate over `seeds`), each seed's best
+    validation cost (NaN: the trial was stopped before that seed), its timesteps on the seeds'
+    common axis (`seed_objective`), its status and its sampled parameters. Best first: trials
+    that reached more seeds rank first (a partial objective over fewer seeds is not the
+    objective), then by the objective."""
     import pandas as pd
 
     rows = []
     for result in grid:
         if not result.config:
             continue
-        params = {k: v for k, v in result.config.items() if k not in ("base", "sampled")}
+        params = {k: v for k, v in result.config.items() if k not in CONSTANTS}
         metrics = result.metrics or {}
         rows.append(
             {
                 "trial": metrics.get("trial_id", ""),
                 METRIC: metrics.get(METRIC, math.nan),
+                **{seed_column(s): metrics.get(seed_column(s), math.nan) for s in seeds},
                 "timesteps": metrics.get("timesteps", 0),
                 "error": bool(result.error),
                 **params,
             }
         )
-    return pd.DataFrame(rows).sort_values(METRIC, na_position="last").reset_index(drop=True)
+    table = pd.DataFrame(rows)
+    reached = table[[seed_column(s) for s in seeds]].notna().sum(axis=1)
+    order = table.assign(_reached=-reached).sort_values(["_reached", METRIC], na_position="last")
+    return order.drop(columns="_reached").reset_index(drop=True)
 
 
 def parameter_importances(config: TuneConfig, base: TrainConfig, table) -> dict[str, float]:
-    """Optuna's fANOVA importances of the finished trials: an in-memory study replays every
-    trial's parameters through the same search space with its measured cost."""
+    """Optuna's fANOVA importances of the finished trials (a cost on every training seed): an
+    in-memory study replays every trial's parameters through the same search space with its
+    measured cost."""
     import optuna
 
-    finished = table[table[METRIC].apply(math.isfinite)]
+    every_seed = table[[seed_column(s) for s in config.seeds]].notna().all(axis=1)
+    finished = table[every_seed & table[METRIC].apply(math.isfinite)]
     if len(finished) < 2:
         return {}
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -379,10 +441,7 @@ def parameter_importances(config: TuneConfig, base: TrainConfig, table) -> dict[
     study = optuna.create_study(direction="minimize")
     costs = []
     for _, row in finished.iterrows():
-        params = {
-            k: row[k] for k in finished.columns if k not in ("trial", METRIC, "timesteps", "error")
-        }
-        study.enqueue_trial({k: v for k, v in params.items() if v == v})
+        study.enqueue_trial(_params(row, finished.columns))
         costs.append(float(row[METRIC]))
     values = iter(costs)
     study.optimize(lambda t: (sample(t), next(values))[1], n_trials=len(costs))
@@ -407,9 +466,11 @@ def best_yaml(config: TuneConfig, base: TrainConfig, table) -> str:
         "normalize": sampled["normalize"],
         **{k: v for k, v in sampled["hyperparams"].items()},
     }
+    per_seed = ", ".join(f"{best[seed_column(s)]:.6g}" for s in config.seeds)
     header = (
         f"# tuned by `{config.command()}` ({time.strftime('%Y-%m-%d')}): best of "
-        f"{len(table)} trials, validation cost {best[METRIC]:.6g} on the validation seeds\n"
+        f"{len(table)} trials, validation cost {best[METRIC]:.6g} on the validation seeds "
+        f"({config.objective_text()}" + (f": {per_seed}" if len(config.seeds) > 1 else "") + ")\n"
     )
     return header + yaml.safe_dump({base.env_id: entry}, sort_keys=False)
 
@@ -420,7 +481,7 @@ def write_summary(config: TuneConfig, base: TrainConfig, grid: Any) -> dict[str,
     from agent_envs.training.storage import write_text_atomic
 
     out = config.out_dir
-    table = trials_table(grid)
+    table = trials_table(grid, config.seeds)
     table.to_csv(out / "trials.csv", index=False)
     importances = parameter_importances(config, base, table)
     lines = [
@@ -428,8 +489,9 @@ def write_summary(config: TuneConfig, base: TrainConfig, grid: Any) -> dict[str,
         f"{config.preset}",
         "",
         f"Command: `{config.command()}`. {len(table)} trials, {base.timesteps} timesteps each "
-        f"at most (pruner {config.pruner}); objective: the best validation cost of a run "
-        f"(validation seeds {base.eval_seed}..{base.eval_seed + base.eval_episodes - 1}).",
+        f"at most per training seed (pruner {config.pruner}); objective: the best validation "
+        f"cost of a run, {config.objective_text()} (validation seeds "
+        f"{base.eval_seed}..{base.eval_seed + base.eval_episodes - 1}).",
         "",
         "## Best trials",
         "",
@@ -477,7 +539,7 @@ def tune_learner(config: TuneConfig) -> dict[str, Any]:
             forget_session(out)
     paths = write_summary(config, base, grid)
     print(paths["summary"].read_text())
-    return {"paths": paths, "table": trials_table(grid), "base": base}
+    return {"paths": paths, "table": trials_table(grid, config.seeds), "base": base}
 
 
 __all__ = ["TuneConfig", "search_space", "tune_learner"]

@@ -117,6 +117,48 @@ def markdown(rows: list[dict], columns: tuple[str, ...]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _typed(text: str) -> Any:
+    """A CSV cell back as `reproduce` wrote it: a bool, an int, a float or a string."""
+    if text in ("True", "False"):
+        return text == "True"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def read_rows(path: str | Path) -> list[dict]:
+    """The rows of a written ``cheap_control_bound.csv`` or ``contraction.csv``, typed back, so
+    that `markdown` prints them as the run printed them (the published tables are rendered from
+    the committed CSVs, docs/results/cheap-control-bound/)."""
+    with open(path, newline="") as fh:
+        return [{k: _typed(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+
+#: the rows' columns of the turnpike page's selection, and their headers there
+SELECTED = {
+    "case": "case", "sigma": "sigma", "N": "N", "T": "T", "V": "V",
+    "V_fresh": "V on fresh paths", "floor": "floor F", "lemma_rhs": "lemma's bound",
+    "upper": "corrected U", "corrected_holds": "corrected holds",
+}  # fmt: skip
+
+
+def selected_table(rows: list[dict]) -> str:
+    """docs/turnpike-theory.md's selection of the summary: the V(T) sweep and x^0 = xbar rows,
+    and the N-scaling rows at an N other than the sweep's (its row is the sweep's T row)."""
+    base_n = {r["N"] for r in rows if r["case"] == "V(T)"}
+    chosen = [
+        r
+        for r in rows
+        if r["case"] in ("V(T)", "x0=xbar") or (r["case"] == "N-scaling" and r["N"] not in base_n)
+    ]
+    lines = ["| " + " | ".join(SELECTED.values()) + " |", "|" + "---|" * len(SELECTED)]
+    lines += ["| " + " | ".join(_fmt(r[c]) for c in SELECTED) + " |" for r in chosen]
+    return "\n".join(lines)
+
+
 def _write_csv(rows: list[dict], columns: tuple[str, ...], path: Path) -> None:
     with open(path, "w", newline="") as fh:
         writer = csv.writer(fh)

@@ -1,0 +1,108 @@
+"""Every published result table is its committed files, digit for digit (`agent-envs tables`).
+
+One case per registered table (`published.PUBLISHED`): the page's marked block equals the
+table rendered from the files under docs/results/. The inventory in docs/development.md lists
+every result table of README.md and docs/ with its files (or "no file"); the tables it marks
+as rendered are exactly the registered ones.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from agent_envs.training.commands.published import (
+    PUBLISHED,
+    marked_block,
+    replace_block,
+    stale_tables,
+    write_tables,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("table", PUBLISHED, ids=[t.name for t in PUBLISHED])
+def test_published_table_is_its_files(table):
+    page = (ROOT / table.page).read_text()
+    assert marked_block(page, table.marker) == table.rendered(ROOT).strip(), table.name
+
+
+def test_every_marker_on_the_pages_is_registered_once():
+    """A marked block no table owns would go stale silently; a name registered twice would be
+    rewritten twice."""
+    names = [t.name for t in PUBLISHED]
+    assert len(names) == len(set(names))
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("**/*.md"))]
+    found = set()
+    for path in pages:
+        for marker in re.findall(r"^<!-- ([\w-]+):start -->$", path.read_text(), re.M):
+            found.add(f"{path.relative_to(ROOT)}#{marker}")
+    assert found == set(names)
+
+
+def test_inventory_names_every_registered_table():
+    """docs/development.md's "Published tables and their files" names each registered table."""
+    text = (ROOT / "docs" / "development.md").read_text()
+    inventory = text.split("## Published tables and their files", 1)[1].split("\n## ", 1)[0]
+    for table in PUBLISHED:
+        assert f"`{table.marker}`" in inventory, table.name
+
+
+def _copy(tmp_path: Path) -> Path:
+    """README.md, the pages and the results of a checkout (what the command reads)."""
+    root = tmp_path / "root"
+    shutil.copytree(ROOT / "docs", root / "docs")
+    shutil.copy(ROOT / "README.md", root / "README.md")
+    (root / "agent_envs" / "tasks" / "data").mkdir(parents=True)
+    shutil.copy(ROOT / "agent_envs/tasks/data/SHA256SUMS", root / "agent_envs/tasks/data")
+    return root
+
+
+def test_check_names_a_stale_table_and_writing_restores_it(tmp_path, capsys):
+    from agent_envs.training.commands.cli import main
+
+    root = _copy(tmp_path)
+    page = root / "docs" / "env-options.md"
+    original = page.read_text()
+    page.write_text(original.replace("| 0.06756 |", "| 0.06757 |"))
+    assert stale_tables(root) == ["docs/env-options.md#env-options-table"]
+    assert main(["tables", "--root", str(root), "--check"]) == 1
+    assert "stale: docs/env-options.md#env-options-table" in capsys.readouterr().out
+    assert write_tables(root) == ["docs/env-options.md#env-options-table"]
+    assert page.read_text() == original
+    assert main(["tables", "--root", str(root), "--check"]) == 0
+
+
+def test_replace_block_keeps_the_markers_and_refuses_a_missing_one():
+    text = "a\n<!-- t:start -->\nold\n\n<!-- t:end -->\nb\n"
+    assert replace_block(text, "t", "new\n") == "a\n<!-- t:start -->\nnew\n<!-- t:end -->\nb\n"
+    with pytest.raises(ValueError, match="no <!-- u:start -->"):
+        replace_block(text, "u", "new")
+
+
+def _agrees(printed: str, value: float) -> bool:
+    """`printed` is `value` rounded to the printed digits."""
+    decimals = len(printed.split(".")[1]) if "." in printed else 0
+    return abs(float(printed) - value) <= 0.5 * 10.0**-decimals * 1.0001
+
+
+def test_long_horizon_figures_are_the_committed_run():
+    """docs/cheap-control-bound.md's "Longer horizons" V_fresh and F are the committed CSV's."""
+    from agent_envs.training.experiments.cheap_control_bound import read_rows
+
+    path = ROOT / "docs/results/cheap-control-bound/long-horizon/cheap_control_bound.csv"
+    rows = [r for r in read_rows(path) if r["case"] == "V(T)" and r["sigma"] > 0]
+    assert [r["T"] for r in rows] == [4.0, 8.0, 16.0, 32.0]
+    text = " ".join((ROOT / "docs" / "cheap-control-bound.md").read_text().split())
+    quoted = re.search(r"V_fresh = ([\d., ]+) for T = 4, 8, 16, 32 against F = ([\d., ]+) -", text)
+    assert quoted is not None
+    for group, column in ((1, "V_fresh"), (2, "floor")):
+        printed = [p.strip() for p in quoted.group(group).split(",")]
+        assert len(printed) == len(rows)
+        for cell, row in zip(printed, rows, strict=True):
+            assert _agrees(cell, row[column]), (column, cell, row[column])
+    assert all(r["corrected_holds"] for r in read_rows(path))

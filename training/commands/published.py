@@ -1,0 +1,339 @@
+"""`agent-envs tables`: every published result table, re-rendered from its committed files.
+
+    agent-envs tables            # rewrite every stale marked table of README.md and docs/
+    agent-envs tables --check    # exit 1 naming each stale table; write nothing
+
+A published table is a block of a page between the markers ``<!-- NAME:start -->`` and
+``<!-- NAME:end -->`` whose body is `render(files)`: a function that reads committed files under
+``docs/results/`` (or the tasks' shipped references) and formats them; nothing trains or
+simulates, so the whole command takes seconds. `PUBLISHED` lists them all (the inventory of
+docs/development.md, "Published tables and their files", names the tables that have no file
+behind them). A table is stale when the page's block, stripped of surrounding blank lines,
+differs from the render by a single character.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from agent_envs.training.config import option_field
+
+#: the results folder, relative to the repository root
+RESULTS = "docs/results"
+#: the quick preset's per-episode files, one per training seed
+QUICK_FILES = tuple(f"{RESULTS}/quick/seed{s}/episodes.csv" for s in range(3))
+
+
+#: a table's render function: its source files (resolved under the root, in `sources` order)
+#: -> the Markdown table
+Render = Callable[[list[Path]], str]
+
+
+@dataclass(frozen=True)
+class PublishedTable:
+    """One marked table: `marker` on `page` (relative to the repository root) is `render` of
+    the files `sources` (relative paths; the command checks they exist and hands them to
+    `render`, so the files named are the files read)."""
+
+    marker: str
+    page: str
+    sources: tuple[str, ...]
+    render: Render
+
+    @property
+    def name(self) -> str:
+        """``page#marker``: how the check names a stale table."""
+        return f"{self.page}#{self.marker}"
+
+    def rendered(self, root: Path) -> str:
+        """The table from the files under `root`."""
+        return self.render([root / source for source in self.sources])
+
+
+# ------------------------------------------------------------------------------- renderers
+
+
+def _renderer(module: str, function: str, **options: Any) -> Render:
+    """``agent_envs.training.MODULE.FUNCTION(*files, **options)``, imported when it renders
+    (the leaderboard's and the cheap-control experiment's imports are not free)."""
+
+    def render(files: list[Path]) -> str:
+        found = importlib.import_module(f"agent_envs.training.{module}")
+        return getattr(found, function)(*files, **options)
+
+    return render
+
+
+def _leaderboard(tasks: list[str] | None) -> Render:
+    def render(files: list[Path]) -> str:
+        from agent_envs.training.commands.leaderboard import leaderboard_table, read_episodes
+
+        return leaderboard_table(read_episodes(files[0]), tasks=tasks)
+
+    return render
+
+
+def _quick(files: list[Path]) -> str:
+    from agent_envs.training.commands.seed_table import seed_table_markdown
+
+    return seed_table_markdown("quick", files)
+
+
+def _task_references(files: list[Path]) -> str:
+    """The tasks' reference table, from the shipped data of the installed package (`files`:
+    its hash list, whose change means new data)."""
+    from agent_envs.training.commands.task_evaluation import reference_table_markdown
+
+    return reference_table_markdown()
+
+
+def _task_design(files: list[Path]) -> str:
+    from agent_envs.training.results.committed_tables import design_table
+
+    return design_table(json.loads(files[0].read_text()))
+
+
+def _cheap_control(selection: bool) -> Render:
+    def render(files: list[Path]) -> str:
+        from agent_envs.training.experiments import cheap_control_bound as bound
+
+        rows = bound.read_rows(files[0])
+        return bound.selected_table(rows) if selection else bound.markdown(rows, bound.SUMMARY)
+
+    return render
+
+
+#: docs/evaluate.md's three evaluations: (env label, episodes file)
+EVALUATIONS = (
+    ("SERB, 1 path", f"{RESULTS}/evaluate/serb/episodes.csv"),
+    ("EM, 1 path", f"{RESULTS}/evaluate/em/episodes.csv"),
+    ("SERB, 20 paths", f"{RESULTS}/evaluate/serb20/episodes.csv"),
+)
+
+
+def _evaluations(files: list[Path]) -> str:
+    from agent_envs.training.results.command_tables import evaluation_table
+
+    labels = [label for label, _ in EVALUATIONS]
+    return evaluation_table(list(zip(labels, files, strict=True)))
+
+
+def _shared_design(files: list[Path]) -> str:
+    """The parameter-shared learners' design runs (runs.csv) against the optimum measured in
+    the env-options folder (files[1:]: its two results files)."""
+    from agent_envs.training.results.design_runs import design_table
+
+    return design_table(files[0], files[1].parent)
+
+
+_BENCHMARK = "results.committed_tables"
+_COMMAND = "results.command_tables"
+_LEADERBOARD = (f"{RESULTS}/leaderboard/episodes.csv",)
+_APG = (f"{RESULTS}/apg/results.json",)
+_CHEAP_CONTROL = (f"{RESULTS}/cheap-control-bound/cheap_control_bound.csv",)
+
+#: every published table that `agent-envs tables` owns, in page order
+PUBLISHED: tuple[PublishedTable, ...] = (
+    PublishedTable(
+        "leaderboard-table", "README.md", _LEADERBOARD, _leaderboard(["agent_envs/StiffSwarm-v0"])
+    ),
+    PublishedTable("leaderboard-table", "docs/leaderboard.md", _LEADERBOARD, _leaderboard(None)),
+    PublishedTable("quick-table", "docs/results.md", QUICK_FILES, _quick),
+    PublishedTable(
+        "across-n-table",
+        "docs/results.md",
+        (f"{RESULTS}/shared-across-n/across_n.csv",),
+        _renderer(_BENCHMARK, "across_n_table"),
+    ),
+    PublishedTable(
+        "apg-paper-table", "docs/learners/apg.md", _APG, _renderer(_BENCHMARK, "apg_paper_table")
+    ),
+    PublishedTable(
+        "apg-quick-table", "docs/learners/apg.md", _APG, _renderer(_BENCHMARK, "apg_quick_table")
+    ),
+    PublishedTable(
+        "apg-across-n-table",
+        "docs/learners/apg.md",
+        _APG,
+        _renderer(_BENCHMARK, "apg_across_n_table"),
+    ),
+    PublishedTable(
+        "shared-design-table",
+        "docs/learners/shared.md",
+        (
+            f"{RESULTS}/shared-design/runs.csv",
+            f"{RESULTS}/env-options/results.json",
+            f"{RESULTS}/env-options/results_eps1.json",
+        ),
+        _shared_design,
+    ),
+    PublishedTable(
+        "reference-table", "docs/tasks.md", ("agent_envs/tasks/data/SHA256SUMS",), _task_references
+    ),
+    PublishedTable("design-table", "docs/tasks.md", (f"{RESULTS}/task-design.json",), _task_design),
+    PublishedTable(
+        "turnpike-table",
+        "docs/paper.md",
+        (f"{RESULTS}/turnpike/results.csv",),
+        _renderer(_COMMAND, "turnpike_table"),
+    ),
+    PublishedTable(
+        "cheap-control-table",
+        "docs/cheap-control-bound.md",
+        _CHEAP_CONTROL,
+        _cheap_control(selection=False),
+    ),
+    PublishedTable(
+        "turnpike-property-table",
+        "docs/turnpike-theory.md",
+        (f"{RESULTS}/turnpike-property/turnpike_property.csv",),
+        _renderer(_COMMAND, "turnpike_property_table"),
+    ),
+    PublishedTable(
+        "cheap-control-selection",
+        "docs/turnpike-theory.md",
+        _CHEAP_CONTROL,
+        _cheap_control(selection=True),
+    ),
+    PublishedTable(
+        "evaluation-table",
+        "docs/evaluate.md",
+        tuple(path for _, path in EVALUATIONS),
+        _evaluations,
+    ),
+    PublishedTable(
+        "optimum-table",
+        "docs/optimum.md",
+        (f"{RESULTS}/evaluate/quick-optimum/episodes.csv",),
+        _renderer(_COMMAND, "optimum_table"),
+    ),
+    PublishedTable(
+        "convergence-orders-table",
+        "docs/core.md",
+        (f"{RESULTS}/convergence-orders/convergence_orders.txt",),
+        _renderer(_BENCHMARK, "convergence_orders_table"),
+    ),
+    PublishedTable(
+        "env-options-table",
+        "docs/env-options.md",
+        (f"{RESULTS}/env-options/results.json",),
+        _renderer(_BENCHMARK, "env_options_table", first_cell="figure", r2=True),
+    ),
+    PublishedTable(
+        "env-options-eps1-table",
+        "docs/env-options.md",
+        (f"{RESULTS}/env-options/results_eps1.json",),
+        _renderer(_BENCHMARK, "env_options_table", first_cell="figure, eps = 1", r2=False),
+    ),
+    PublishedTable(
+        "max-control-table",
+        "docs/envs/gymnasium.md",
+        (f"{RESULTS}/max-control/max_control.txt",),
+        _renderer(_BENCHMARK, "max_control_table"),
+    ),
+)
+
+
+# ------------------------------------------------------------------------------ markers
+
+
+def _block(marker: str) -> re.Pattern[str]:
+    return re.compile(
+        rf"(<!-- {re.escape(marker)}:start -->\n)(.*?)(<!-- {re.escape(marker)}:end -->)", re.S
+    )
+
+
+def marked_block(text: str, marker: str) -> str:
+    """The body between `marker`'s start and end lines of `text`, stripped."""
+    match = _block(marker).search(text)
+    if match is None:
+        raise ValueError(f"no <!-- {marker}:start --> ... <!-- {marker}:end --> block")
+    return match.group(2).strip()
+
+
+def replace_block(text: str, marker: str, body: str) -> str:
+    """`text` with `marker`'s block body replaced by `body` (one newline before the end)."""
+    marked_block(text, marker)  # raises when the markers are missing
+    return _block(marker).sub(lambda m: m.group(1) + body.strip() + "\n" + m.group(3), text, 1)
+
+
+def check_sources(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> None:
+    """Raise ValueError naming the first page or source file missing under `root`."""
+    for table in tables:
+        for relative in (table.page, *table.sources):
+            if not (root / relative).is_file():
+                raise ValueError(f"{table.name}: {root / relative} does not exist")
+
+
+def stale_tables(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> list[str]:
+    """The names of the tables whose page block differs from their render."""
+    check_sources(root, tables)
+    return [
+        t.name
+        for t in tables
+        if marked_block((root / t.page).read_text(), t.marker) != t.rendered(root).strip()
+    ]
+
+
+def write_tables(root: Path, tables: tuple[PublishedTable, ...] = PUBLISHED) -> list[str]:
+    """Rewrite every stale table's block in its page; return their names."""
+    stale = stale_tables(root, tables)
+    for table in tables:
+        if table.name in stale:
+            page = root / table.page
+            page.write_text(replace_block(page.read_text(), table.marker, table.rendered(root)))
+    return stale
+
+
+# ---------------------------------------------------------------------------------- CLI
+
+
+@dataclass(frozen=True, kw_only=True)
+class TablesConfig:
+    """The options of `agent-envs tables`."""
+
+    root: Path = option_field(
+        Path("."), "the repository checkout holding README.md and docs/ (default: here)"
+    )
+    check: bool = option_field(
+        False, "write nothing; exit 1 naming each table that differs from its files"
+    )
+
+    def __post_init__(self) -> None:
+        root = Path(self.root)
+        object.__setattr__(self, "root", root)
+        if not (root / "README.md").is_file() or not (root / "docs").is_dir():
+            raise ValueError(f"--root: {root} is not a checkout (no README.md and docs/)")
+
+
+def run_tables(config: TablesConfig) -> int:
+    """`agent-envs tables` (module docstring): 0 when every table is (now) current."""
+    if config.check:
+        stale = stale_tables(config.root)
+        for name in stale:
+            print(f"stale: {name} (run agent-envs tables)")
+        print(f"{len(PUBLISHED) - len(stale)} of {len(PUBLISHED)} published tables current")
+        return 1 if stale else 0
+    for name in write_tables(config.root):
+        print(f"rewrote {name}")
+    print(f"{len(PUBLISHED)} published tables current")
+    return 0
+
+
+__all__ = [
+    "PUBLISHED",
+    "PublishedTable",
+    "TablesConfig",
+    "check_sources",
+    "marked_block",
+    "replace_block",
+    "run_tables",
+    "stale_tables",
+    "write_tables",
+]

@@ -1,0 +1,244 @@
+"""Markdown tables of the committed outputs of the scripts under benchmarks/.
+
+Each function reads one committed file and returns the table the docs publish, digit for digit
+(`agent-envs tables` puts it between the page's markers; tests/test_published_tables.py checks
+it):
+
+- `env_options_table`: ``benchmarks/env_options.py``'s ``results.json`` (docs/env-options.md):
+  per controller (optimal, proportional) the mean cost over the episodes, the largest |u_k^n|
+  and |mean_k u_k^n| in action units (u / max_control), the common mode's share of the control
+  energy sum |mean_k u|^2 / sum |u|^2, the R^2 of the common control on the centre offset, and
+  the cost (and per-episode ratio) of the common mode alone;
+- `across_n_table`: ``benchmarks/shared_across_n.py``'s ``across_n.csv`` (docs/results.md):
+  per swarm size N, each shared policy's mean cost over the test seeds with its ratio to the
+  proportional controller's, then the proportional and zero controllers' mean costs;
+- `max_control_table`: ``benchmarks/max_control.py``'s printed output (docs/envs/gymnasium.md):
+  the largest |u_k^n| over the seeds, per (kernel, target) x (integrator, paths);
+- `design_table`: ``benchmarks/task_design.py``'s ``task-design.json`` (docs/tasks.md): per
+  task and validation seed the largest |u| of the optimum and of the proportional law, and
+  MPC's cost over the open-loop plan's where the task has MPC;
+- `apg_paper_table`, `apg_quick_table`, `apg_across_n_table`: ``benchmarks/bench_apg.py``'s
+  ``apg/results.json`` (docs/learners/apg.md): per apg run the gap to optimal over the test
+  seeds, the cost ratio to the proportional law and the training time; across N, the laws
+  trained at N = 100 evaluated at other N;
+- `convergence_orders_table`: ``benchmarks/convergence_orders.py``'s printed table
+  (docs/core.md): the measured deterministic and strong orders per scheme.
+
+The outputs of `agent-envs` commands (reproductions, evaluations) have theirs in
+`command_tables`.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+from pathlib import Path
+
+#: (label, key in results.json, format) of the env-options table's rows, in page order
+ENV_OPTIONS_ROWS: tuple[tuple[str, str, str], ...] = (
+    ("mean cost ({episodes} episodes)", "cost", "{:.4g}"),
+    ("largest \\|u_k^n\\| / max_control", "max_abs_u_action_units", "{:.3f}"),
+    ("largest \\|mean_k u_k^n\\| / max_control", "max_abs_common_u_action_units", "{:.3f}"),
+    ("common mode's share of the control energy", "common_energy_share", "{:.1%}"),
+    ("R^2 of the common control on xbar - c^n, one gain per step", "common_linear_r2", "{:.3f}"),
+    ('cost with the common mode alone (`action_basis="common"`)', "common_only_cost", "{:.4g}"),
+    ("... per episode, against the controller itself", "common_only_ratio", "{:.3f}"),
+)
+#: the env-options table's columns: the controllers of results.json
+ENV_OPTIONS_POLICIES = ("optimal", "proportional")
+
+
+def env_options_table(path: Path, first_cell: str = "figure", r2: bool = True) -> str:
+    """The env-options design table of one ``results.json`` (`r2`: include the R^2 row)."""
+    data = json.loads(Path(path).read_text())
+    episodes = len(data["seeds"])
+    lines = [f"| {first_cell} | optimal control | proportional law |", "|---|---|---|"]
+    for label, key, fmt in ENV_OPTIONS_ROWS:
+        if key == "common_linear_r2" and not r2:
+            continue
+        cells = [fmt.format(data["results"][p][key]) for p in ENV_OPTIONS_POLICIES]
+        cells = [c.replace("%", " %") for c in cells]  # the page's "99.7 %"
+        lines.append(f"| {label.format(episodes=episodes)} | {' | '.join(cells)} |")
+    return "\n".join(lines)
+
+
+def across_n_table(path: Path) -> str:
+    """The shared policy across swarm sizes, from ``across_n.csv`` (columns policy, n_agents,
+    mean_cost, ratio_to_proportional, ...): costs to 4 significant digits, ratios to 2
+    decimals."""
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    shared = sorted({r["policy"] for r in rows if r["policy"].startswith("shared")})
+    sizes = sorted({int(r["n_agents"]) for r in rows})
+    data = {(r["policy"], int(r["n_agents"])): r for r in rows}
+    seeds = " | ".join(f"seed {i}" for i in range(1, len(shared)))
+    lines = [
+        f"| N | ppo-shared seed 0 | {seeds} | proportional | zero |",
+        "|" + "---|" * (len(shared) + 3),
+    ]
+    for n in sizes:
+        cells = [str(n)]
+        for policy in shared:
+            r = data[(policy, n)]
+            cells.append(f"{float(r['mean_cost']):.4g} ({float(r['ratio_to_proportional']):.2f}x)")
+        cells += [f"{float(data[(p, n)]['mean_cost']):.4g}" for p in ("proportional", "zero")]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+#: (kernel, xbar) -> the row label of the max_control table, in page order
+MAX_CONTROL_SETTINGS: dict[tuple[str, float], str] = {
+    ("symmetric", 0.7): "symmetric eps = 0.05, xbar = 0.7",
+    ("symmetric", -1.7): "symmetric eps = 0.05, xbar = -1.7",
+    ("nonsymmetric", 2.3): "non-symmetric eps in [0.01, 0.1], xbar = 2.3",
+}
+#: the max_control table's columns: (integrator, paths)
+MAX_CONTROL_COLUMNS = (("serb", 20), ("em", 20), ("serb", 1), ("em", 1))
+_MAX_CONTROL_LINE = re.compile(r"^\s*(\w+)\s+(-?[\d.]+)\s+(serb|em)\s+(\d+) \|\s+([\d.]+)", re.M)
+
+
+def max_control_peaks(path: Path) -> dict[tuple[str, float, str, int], float]:
+    """(kernel, xbar, integrator, paths) -> the largest |u_k^n| of max_control.py's output."""
+    return {
+        (kernel, float(xbar), integrator, int(paths)): float(peak)
+        for kernel, xbar, integrator, paths, peak in _MAX_CONTROL_LINE.findall(
+            Path(path).read_text()
+        )
+    }
+
+
+def max_control_table(path: Path) -> str:
+    """The "Why max_control = 150" table: peaks to one decimal."""
+    peaks = max_control_peaks(path)
+    header = " | ".join(
+        f"{integrator.upper()}, {paths} path{'s' if paths > 1 else ''}"
+        for integrator, paths in MAX_CONTROL_COLUMNS
+    )
+    lines = [f"| setting | {header} |", "|" + "---|" * (len(MAX_CONTROL_COLUMNS) + 1)]
+    for (kernel, xbar), label in MAX_CONTROL_SETTINGS.items():
+        cells = [f"{peaks[(kernel, xbar, i, p)]:.1f}" for i, p in MAX_CONTROL_COLUMNS]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def design_table(rows: list[dict]) -> str:
+    """The task-design table of ``task-design.json``'s rows: max |u| to 2 decimals, the
+    MPC / open loop cost ratio to 3 ("-" where the task has no MPC reference)."""
+    lines = [
+        "| task | seed | optimal max \\|u\\| | proportional max \\|u\\| | MPC / open loop |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        ratio = f"{r['mpc_cost'] / r['optimal_cost']:.3f}" if "mpc_cost" in r else "-"
+        lines.append(
+            f"| `{r['task']}` | {r['seed']} | {r['optimal_max_u']:.2f} | "
+            f"{r['proportional_max_u']:.2f} | {ratio} |"
+        )
+    return "\n".join(lines)
+
+
+def _apg_run_cells(run: dict, minutes: bool) -> str:
+    """gap [min, max] | cost / proportional's | CPU (wall) training time of one apg run."""
+    gap = run["gap"]
+    if minutes:
+        time = f"{run['cpu_time_s'] / 60:.1f} min ({run['wall_time_s'] / 60:.1f} min)"
+    else:
+        time = f"{run['cpu_time_s']:.1f} s ({run['wall_time_s']:.0f} s)"
+    return (
+        f"{gap['mean']:+.3%} [{gap['min']:+.3%}, {gap['max']:+.3%}] | "
+        f"{run['ratio_to_proportional']:.4f} | {time}"
+    )
+
+
+def apg_quick_table(path: Path) -> str:
+    """docs/learners/apg.md's quick-setting table from ``apg/results.json`` (part ``quick``):
+    per training seed the gap to optimal, mean over the test seeds of (J - V) / V with its
+    min and max, the paired cost ratio to the proportional law, and CPU (wall) training time."""
+    runs = json.loads(Path(path).read_text())["quick"]["runs"]
+    lines = [
+        "| training seed | gap to optimal [min, max] | cost / proportional's | "
+        "training time, CPU (wall) |",
+        "|---|---|---|---|",
+    ]
+    lines += [f"| {run['seed']} | {_apg_run_cells(run, minutes=False)} |" for run in runs]
+    return "\n".join(lines)
+
+
+def apg_paper_table(path: Path) -> str:
+    """docs/learners/apg.md's paper-setting table from ``apg/results.json`` (parts ``paper``
+    and ``paper-linear``, the law without its MLP): the quick table's columns, one row per
+    run, then the proportional law's gap (beta = 12) over the same test seeds."""
+    data = json.loads(Path(path).read_text())
+    lines = [
+        "| policy | gap to optimal, mean over 20 test seeds [min, max] | cost / proportional's | "
+        "training time, CPU (wall) |",
+        "|---|---|---|---|",
+    ]
+    for run in data["paper"]["runs"]:
+        lines.append(f"| apg, seed {run['seed']} | {_apg_run_cells(run, minutes=True)} |")
+    for run in data["paper-linear"]["runs"]:
+        cells = _apg_run_cells(run, minutes=True)
+        lines.append(f"| apg without its MLP (`hidden = 0`), seed {run['seed']} | {cells} |")
+    gap = data["paper"]["proportional_gap"]
+    lines.append(
+        f"| proportional (beta = 12) | {gap['mean']:+.2%} [{gap['min']:+.2%}, "
+        f"{gap['max']:+.2%}] | 1 | - |"
+    )
+    return "\n".join(lines)
+
+
+#: row labels of apg's across-N table beyond the plain N
+APG_N_LABELS = {100: "100 (trained here)", 10_000: '10 000 (`linear_operator = "matrix_free"`)'}
+
+
+def apg_across_n_table(path: Path) -> str:
+    """docs/learners/apg.md's across-N table from ``apg/results.json`` (``across-n`` rows and,
+    at the training size N = 100, the ``paper`` runs): per N the gap to optimal of each
+    training seed's law, mean [worst] over the test seeds, the proportional law's gap, and
+    each law's cost ratio to the proportional law; "not solved" where no optimum was solved."""
+    data = json.loads(Path(path).read_text())
+    trained = data["paper"]
+    by_n: dict[int, list[dict]] = {
+        100: [
+            {**run, "proportional_gap": trained["proportional_gap"]["mean"]}
+            for run in trained["runs"]
+        ]
+    }
+    for row in data["across-n"]["rows"]:
+        by_n.setdefault(row["n_agents"], []).append(row)
+    lines = [
+        "| N | gap to optimal, per training seed: mean [worst] over 20 test seeds | "
+        "proportional's gap | cost / proportional's, per training seed |",
+        "|---|---|---|---|",
+    ]
+    unsolved = 0
+    for n in sorted(by_n):
+        runs = sorted(by_n[n], key=lambda r: r["seed"])
+        ratios = ", ".join(f"{r['ratio_to_proportional']:.4f}" for r in runs)
+        if all("gap" in r for r in runs):
+            gaps = ", ".join(f"{r['gap']['mean']:+.2%} [{r['gap']['max']:+.2%}]" for r in runs)
+            proportional = f"{runs[0]['proportional_gap']:+.2%}"
+        else:
+            gaps = "not solved (below)" if unsolved == 0 else "not solved"
+            proportional, unsolved = "not solved", unsolved + 1
+        lines.append(f"| {APG_N_LABELS.get(n, n)} | {gaps} | {proportional} | {ratios} |")
+    return "\n".join(lines)
+
+
+#: the core page's names of the convergence script's schemes (EM without noise is explicit Euler)
+SCHEME_LABELS = {"em": "em / ee"}
+
+
+def convergence_orders_table(path: Path) -> str:
+    """docs/core.md's measured orders from ``benchmarks/convergence_orders.py``'s printed table
+    (fitted slopes of log error against log tau): its rows, the schemes named as the page names
+    them."""
+    lines = [line for line in Path(path).read_text().splitlines() if line.startswith("|")]
+    out = lines[:2]
+    for line in lines[2:]:
+        cells = line.strip("|").split("|")
+        scheme = cells[0].strip()
+        cells[0] = f" {SCHEME_LABELS.get(scheme, scheme)} "
+        out.append("|" + "|".join(cells) + "|")
+    return "\n".join(out)
