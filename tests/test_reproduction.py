@@ -3,6 +3,7 @@
 import json
 
 from agent_envs.training.commands.cli import main
+from agent_envs.training.experiments import uncontrolled
 
 
 def test_reproduce_uncontrolled_writes_table_and_figures(tmp_path):
@@ -27,3 +28,6 @@ def test_reproduce_uncontrolled_writes_table_and_figures(tmp_path):
     # frozen-kernel exponential Euler reaches consensus at every m (sigma = 0)
     assert all(r["spread_at_T"] < 1e-9 for r in frozen)
     assert all({"spread_at_T", "max_abs_mean_x", "diverged", "wall_time_s"} <= set(r) for r in rows)
+    # results.csv holds the same rows, bit for bit, and renders results.md's table
+    assert uncontrolled.read_rows(out / "results.csv") == rows
+    assert uncontrolled.csv_table(out / "results.csv") in (out / "results.md").read_text()

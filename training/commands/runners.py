@@ -22,7 +22,7 @@ def run_uncontrolled(config: Any) -> int:
     check_output_dir(config.out)
     rows = reproduce(config.out, config.n_agents, config.n_paths, config.seed)
     print(markdown_table(rows))
-    print(f"wrote {config.out}/results.md, results.json and the figures")
+    print(f"wrote {config.out}/results.md, results.json, results.csv and the figures")
     return 0
 
 

@@ -12,15 +12,18 @@
   positions, sigma = 0, m = 10 ... 400.
 
 It writes one PNG per figure (the path-mean trajectory of every agent against time), a
-`results.md` table and `results.json`. Without control the agents should reach consensus at the
+`results.md` table, `results.json` and `results.csv` (one row per run, `COLUMNS`; `read_rows`
+reads it back typed, and `csv_table` renders docs/paper.md's table from the committed copy,
+docs/results/uncontrolled/results.csv). Without control the agents should reach consensus at the
 mean of the initial positions; the table's "spread at T" (max_k - min_k of E x_k(T)) measures
 that, and "max |E x|" flags oscillation/blow-up.
 """
 
 from __future__ import annotations
 
+import csv
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -114,6 +117,48 @@ def run_one(run: Run, n_agents: int, n_paths: int, seed: int) -> tuple[dict, Tra
     return row, traj
 
 
+#: results.csv's columns: a run's fields, then its measurements (`run_one`'s row keys)
+COLUMNS: tuple[str, ...] = (
+    *(f.name for f in fields(Run)),
+    "n_paths",
+    "spread_at_T",
+    "max_abs_mean_x",
+    "consensus_error_at_T",
+    "diverged",
+    "wall_time_s",
+)
+_INTS = ("n_steps", "n_paths")
+_BOOLS = ("evenly_spaced", "diverged")
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    """`rows` as a CSV of `COLUMNS`, one line per run (floats in repr, so they read back
+    bit for bit; a run without a Jacobian choice has an empty ``jacobian`` cell)."""
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
+        writer.writeheader()
+        writer.writerows({c: row[c] for c in COLUMNS} for row in rows)
+
+
+def _typed(column: str, text: str) -> object:
+    """One cell of results.csv back as `run_one` made it."""
+    if column in _INTS:
+        return int(text)
+    if column in _BOOLS:
+        return text == "True"
+    if column in ("figure", "integrator"):
+        return text
+    if column == "jacobian":
+        return text or None
+    return float(text)
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows of a written results.csv, typed back (`run_one`'s dicts, in run order)."""
+    with open(path, newline="") as handle:
+        return [{c: _typed(c, v) for c, v in row.items()} for row in csv.DictReader(handle)]
+
+
 def _label(row: dict) -> str:
     name = row["integrator"].upper()
     if row["jacobian"]:
@@ -172,6 +217,11 @@ def markdown_table(rows: list[dict]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def csv_table(path: Path) -> str:
+    """`markdown_table` of a written results.csv: docs/paper.md's table (`agent-envs tables`)."""
+    return markdown_table(read_rows(path))
+
+
 def _progress(runs: tuple[Run, ...]):
     """`runs` with a tqdm bar when tqdm (the ``train`` extra) is installed, else plainly.
 
@@ -190,7 +240,7 @@ def reproduce(
     n_paths: int = UncontrolledConfig.n_paths,
     seed: int = UncontrolledConfig.seed,
 ) -> list[dict]:
-    """Run every experiment, write figures, results.md and results.json into `out`.
+    """Run every experiment, write figures, results.md, results.json and results.csv into `out`.
 
     The defaults are `UncontrolledConfig`'s (the paper's N = 100 and 20 paths, seed 0).
     """
@@ -207,6 +257,7 @@ def reproduce(
         out / "jacobian_study.png", [r for r in rows if r["figure"] == "jacobian_study"]
     )
     (out / "results.json").write_text(json.dumps(rows, indent=2))
+    write_csv(rows, out / "results.csv")
     text = (
         "# Uncontrolled experiments (paper Section 5.1)\n\n"
         f"N = {n_agents} agents uniform on [-1, 1] (seed {seed}), T = 1, alpha = 0.1, "
