@@ -178,6 +178,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
     ),
     PublishedTable("design-table", "docs/tasks.md", (f"{RESULTS}/task-design.json",), _task_design),
     PublishedTable(
+        "uncontrolled-table",
+        "docs/paper.md",
+        (f"{RESULTS}/uncontrolled/results.csv",),
+        _renderer("experiments.uncontrolled", "csv_table"),
+    ),
+    PublishedTable(
         "turnpike-table",
         "docs/paper.md",
         (f"{RESULTS}/turnpike/results.csv",),
