@@ -109,6 +109,12 @@ def _cheap_control(selection: bool) -> Render:
     return render
 
 
+def _contraction(files: list[Path]) -> str:
+    from agent_envs.training.experiments import cheap_control_bound as bound
+
+    return bound.markdown(bound.read_rows(files[0]), bound.CONTRACTION_COLUMNS)
+
+
 #: docs/evaluate.md's three evaluations: (env label, episodes file)
 EVALUATIONS = (
     ("SERB, 1 path", f"{RESULTS}/evaluate/serb/episodes.csv"),
@@ -194,6 +200,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/cheap-control-bound.md",
         _CHEAP_CONTROL,
         _cheap_control(selection=False),
+    ),
+    PublishedTable(
+        "contraction-table",
+        "docs/cheap-control-bound.md",
+        (f"{RESULTS}/cheap-control-bound/contraction.csv",),
+        _contraction,
     ),
     PublishedTable(
         "turnpike-property-table",
