@@ -254,6 +254,17 @@ def test_smoke_sweep_writes_the_report_and_the_run_folders(tmp_path):
     assert stats.loc["ppo", "runs"] == 2 and stats.loc["ppo", "episodes"] == 10
     assert stats.loc["ppo", "iqm_cost"] == pytest.approx(-iqm(-np.stack(costs)))
     assert set(stats.index) == {"ppo", "turnpike", "proportional", "zero"}
+    # docs/sweep.md's table renders from the episodes files alone as the report shows it
+    from agent_envs.training.commands.sweep_report import across_seed_markdown
+
+    files = [
+        out / "runs" / f"main__ppo__{seed}" / "test_evaluation" / "episodes.csv" for seed in (0, 1)
+    ]
+    files += [
+        out / "references" / "main" / r / "episodes.csv"
+        for r in ("turnpike", "proportional", "zero")
+    ]
+    assert across_seed_markdown(*files) in report
     assert not any(Path.cwd().glob("ray_results"))
     # every trial's wall time, as Tune recorded it, in grid order
     times = pd.read_csv(out / "report" / "trial_wall_times.csv")

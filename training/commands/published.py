@@ -143,6 +143,12 @@ _COMMAND = "results.command_tables"
 _LEADERBOARD = (f"{RESULTS}/leaderboard/episodes.csv",)
 _APG = (f"{RESULTS}/apg/results.json",)
 _CHEAP_CONTROL = (f"{RESULTS}/cheap-control-bound/cheap_control_bound.csv",)
+#: the smoke sweep's per-episode files, in the sweep's trial order (learner runs, references):
+#: OUT/runs/main__ppo__{seed}/test_evaluation/ and OUT/references/main/{ref}/ of the sweep
+_SMOKE_SWEEP = tuple(
+    f"{RESULTS}/smoke-sweep/{run}/episodes.csv"
+    for run in ("ppo-seed0", "ppo-seed1", "turnpike", "proportional", "zero")
+)
 
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
@@ -230,6 +236,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/optimum.md",
         (f"{RESULTS}/evaluate/quick-optimum/episodes.csv",),
         _renderer(_COMMAND, "optimum_table"),
+    ),
+    PublishedTable(
+        "smoke-sweep-table",
+        "docs/sweep.md",
+        _SMOKE_SWEEP,
+        _renderer("commands.sweep_report", "across_seed_markdown"),
     ),
     PublishedTable(
         "convergence-orders-table",

@@ -67,16 +67,44 @@ def policy_scores(trials: list[Trial], setting: str, out: Path) -> dict[str, Any
             continue
         episodes = EvaluationResults.load(evaluation_dir(trial, out)).episodes
         episodes = episodes.set_index("seed").loc[list(trial.test_seeds)]
-        rows[trial.policy].append(
-            (
-                episodes["total_cost"].to_numpy(float),
-                episodes["diverged"].astype(bool).to_numpy(),
-            )
-        )
+        rows[trial.policy].append(_costs_and_divergence(episodes))
     return {
         name: PolicyScores(np.stack([c for c, _ in runs]), np.stack([d for _, d in runs]))
         for name, runs in rows.items()
     }
+
+
+def _costs_and_divergence(episodes: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """One run's (test episodes,) total costs and diverged flags, in the frame's row order."""
+    return episodes["total_cost"].to_numpy(float), episodes["diverged"].astype(bool).to_numpy()
+
+
+def across_seed_markdown(*files: Path, bootstrap_seed: int = 0) -> str:
+    """The report's across-seed table of one setting from its trials' ``episodes.csv`` files
+    (a learner run's ``test_evaluation/`` or a reference's folder; one policy each, the test
+    seeds in the same order in every file), given in the sweep's trial order: what
+    `agent-envs tables` renders from the committed files (docs/sweep.md). The bootstrap's
+    generator is seeded with `bootstrap_seed` as the report's is, so the intervals are the
+    report's digit for digit when the setting is the sweep's first."""
+    from agent_envs.training.results.report import markdown_table
+    from agent_envs.training.results.seed_statistics import (
+        PolicyScores,
+        across_seed_table,
+        display_across_seed_table,
+    )
+
+    rows: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
+    for path in files:
+        episodes = pd.read_csv(path)
+        (policy,) = episodes["policy"].unique()
+        rows[policy].append(_costs_and_divergence(episodes))
+    scores = {
+        name: PolicyScores(np.stack([c for c, _ in runs]), np.stack([d for _, d in runs]))
+        for name, runs in rows.items()
+    }
+    refs = [r for r in IMPROVEMENT_REFERENCES if r in scores]
+    table = across_seed_table(scores, refs, np.random.default_rng(bootstrap_seed))
+    return markdown_table(display_across_seed_table(table, refs))
 
 
 #: references the training callback does not log on the validation seeds (too costly to run at
