@@ -216,13 +216,15 @@ def parse_seeds(
 
 #: The env kwargs that set the learner's interface (`agent_envs.envs.interface`), not the
 #: dynamics: a policy trained with them is evaluated on the default interface through
-#: `agent_envs.training.learners.policies.InterfacePolicy` / `PerAgentPolicy`.
-INTERFACE_OPTIONS = ("observation", "action_basis", "agent_reward")
+#: `agent_envs.training.learners.policies.InterfacePolicy` / `PerAgentPolicy`. ``neighbours``
+#: (K of the "local" observation) goes with the observation.
+INTERFACE_OPTIONS = ("observation", "action_basis", "agent_reward", "neighbours")
 
 
 def default_interface(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
     """`env_kwargs` without the interface options: the same dynamics, cost and draws with the
-    default observation ("absolute"), action basis ("agents") and agent reward ("own")."""
+    default observation ("absolute", no neighbours), action basis ("agents") and agent reward
+    ("own")."""
     return {k: v for k, v in (env_kwargs or {}).items() if k not in INTERFACE_OPTIONS}
 
 
