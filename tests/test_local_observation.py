@@ -223,3 +223,14 @@ def test_rows_from_the_gymnasium_observation_match_the_pettingzoo_env(dim):
     action, _ = policy.predict(g)
     own = agent_observations_from_global(g, 9, dim, "local", 3)[:, :dim]
     np.testing.assert_array_equal(action, own.reshape(-1))
+
+
+def test_default_interface_drops_neighbours():
+    """A local-observation run's reference and validation envs (the Gymnasium env, default
+    interface) are made from its env kwargs without the interface options, K included: the
+    Gymnasium env refuses `neighbours`."""
+    from agent_envs.training.defaults import default_interface
+
+    kwargs = {"n_agents": 5, "observation": "local", "neighbours": 3, "agent_reward": "team"}
+    assert default_interface(kwargs) == {"n_agents": 5}
+    gym.make("agent_envs/Swarm-v0", **default_interface(kwargs)).reset(seed=0)
