@@ -78,8 +78,10 @@ def test_quick_preset_is_the_paper_study_in_miniature():
 
 def test_fair_baselines_by_interface():
     assert fair_baseline(SUMMARY_COMMON) == CENTRE_LAW
-    assert fair_baseline(SWARM_TEAM) == fair_baseline({}) == "proportional"
-    assert fair_baseline({"observation": "modes", "action_basis": "modes"}) == "proportional"
+    # the swarm row shows the centre: the centre law is a law of that interface too
+    assert fair_baseline(SWARM_TEAM) == CENTRE_LAW
+    assert fair_baseline({"observation": "modes", "action_basis": "modes"}) == CENTRE_LAW
+    assert fair_baseline({}) == fair_baseline({"observation": "local"}) == "proportional"
 
 
 def test_the_centre_law_reference_is_a_trial_compare_evaluates():
