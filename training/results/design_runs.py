@@ -84,10 +84,10 @@ def validation_optimum(task: str, env_options: Path) -> float:
 
 
 def design_table(runs: Path, env_options: Path) -> str:
-    """One Markdown row per run (task, variant, seed in file order): the number of evaluations,
+    """One Markdown row per run (sorted by task, variant, seed): its last evaluation's agent-steps,
     the first and best validation cost, the best's gap to V and the proportional law's gap."""
     rows = read_runs(runs)
-    keys = list(dict.fromkeys((r["task"], r["variant"], r["training_seed"]) for r in rows))
+    keys = sorted({(r["task"], r["variant"], r["training_seed"]) for r in rows})
     out = [
         "| task | variant | training seed | agent-steps | first validation | best validation "
         "| best's gap to V | proportional's gap |",
