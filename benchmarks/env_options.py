@@ -17,8 +17,17 @@ proportional law u_k = beta (xbar - E x_k):
   ``action_basis="common"``: the controller's mean control broadcast to every agent) against
   the controller itself on the same seeds: what the "common" action basis can lose.
 
+With ``--out DIR/STEM.json`` it writes, beside the summary, the per-episode figures
+``DIR/STEM_episodes.csv`` and the per-step common control and centre offset
+``DIR/STEM_steps.csv`` (`agent_envs.training.results.env_options_episodes`): the summary is
+computed from those rows, so `agent-envs tables` recomputes the published table from them.
+
     OPENBLAS_NUM_THREADS=1 python benchmarks/env_options.py [--seeds 5] [--out FILE.json]
         [--env-kwargs '{"epsilon": 1.0}']    # another setting (over the paper's)
+
+docs/env-options.md's tables: ``--out docs/results/env-options/results.json`` (183 s on 2
+cores) and ``--env-kwargs '{"epsilon": 1.0}' --out docs/results/env-options/results_eps1.json``
+(475 s).
 """
 
 from __future__ import annotations
@@ -34,6 +43,12 @@ import agent_envs  # noqa: F401  (registers the env)
 from agent_envs.baselines import make_baseline
 from agent_envs.training.commands.presets import PAPER_ENV
 from agent_envs.training.defaults import DEFAULT_EVAL_SEED
+from agent_envs.training.results.env_options_episodes import (
+    episode_files,
+    episode_rows,
+    summary_from_rows,
+)
+from agent_envs.training.results.episode_csv import Row, write_rows
 
 #: The env of the figures: the paper's, with --env-kwargs over it.
 SETTING = dict(PAPER_ENV)
@@ -57,31 +72,17 @@ def episode(name: str, seed: int, **options: str) -> dict[str, np.ndarray | floa
     return {"cost": cost, "controls": np.array(controls), "offsets": np.array(offsets)}
 
 
-def linear_fit_r2(common: np.ndarray, offsets: np.ndarray) -> float:
-    """R^2 of common (S, m) on offsets (S, m) with one gain per step (no intercept)."""
-    gains = (common * offsets).sum(axis=0) / np.maximum((offsets**2).sum(axis=0), 1e-300)
-    residual = ((common - gains * offsets) ** 2).sum()
-    total = ((common - common.mean()) ** 2).sum()
-    return float(1.0 - residual / total)
-
-
-def measure(name: str, seeds: list[int], max_control: float) -> dict[str, float]:
+def measure(name: str, seeds: list[int], max_control: float) -> tuple[list[Row], list[Row]]:
+    """The episode and step rows of controller `name` on `seeds`
+    (`agent_envs.training.results.env_options_episodes`)."""
     runs = [episode(name, s) for s in seeds]
     common_runs = [episode(name, s, action_basis="common") for s in seeds]
-    controls = np.stack([r["controls"] for r in runs])  # (S, m, N)
-    common = controls.mean(axis=-1)
-    n = controls.shape[-1]
-    costs = np.array([r["cost"] for r in runs])
-    common_costs = np.array([r["cost"] for r in common_runs])
-    return {
-        "cost": float(costs.mean()),
-        "max_abs_u_action_units": float(np.abs(controls).max() / max_control),
-        "max_abs_common_u_action_units": float(np.abs(common).max() / max_control),
-        "common_energy_share": float(n * (common**2).sum() / (controls**2).sum()),
-        "common_linear_r2": linear_fit_r2(common, np.stack([r["offsets"] for r in runs])),
-        "common_only_cost": float(common_costs.mean()),
-        "common_only_ratio": float((common_costs / costs).mean()),
-    }
+    episodes, steps = [], []
+    for seed, run, common_run in zip(seeds, runs, common_runs, strict=True):
+        row, step_rows = episode_rows(name, seed, run, common_run["cost"], max_control)
+        episodes.append(row)
+        steps += step_rows
+    return episodes, steps
 
 
 def main() -> None:
@@ -95,9 +96,12 @@ def main() -> None:
     SETTING.update(json.loads(args.env_kwargs))
     seeds = list(range(DEFAULT_EVAL_SEED, DEFAULT_EVAL_SEED + args.seeds))
     start = time.perf_counter()
-    results = {
-        name: measure(name, seeds, SETTING["max_control"]) for name in ("optimal", "proportional")
-    }
+    episodes, steps = [], []
+    for name in ("optimal", "proportional"):
+        rows, step_rows = measure(name, seeds, SETTING["max_control"])
+        episodes += rows
+        steps += step_rows
+    results = summary_from_rows(episodes, steps)
     elapsed = time.perf_counter() - start
     print(f"{SETTING}, validation seeds {seeds[0]}..{seeds[-1]} ({elapsed:.0f} s)")
     keys = list(results["optimal"])
@@ -107,6 +111,9 @@ def main() -> None:
     if args.out:
         with open(args.out, "w") as fh:
             json.dump({"seeds": seeds, "env_kwargs": SETTING, "results": results}, fh, indent=2)
+        episodes_path, steps_path = episode_files(args.out)
+        write_rows(episodes_path, episodes)
+        write_rows(steps_path, steps)
 
 
 if __name__ == "__main__":

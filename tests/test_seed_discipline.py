@@ -15,6 +15,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from agent_envs.tasks import TASKS
@@ -118,7 +119,9 @@ def test_env_options_figures_come_from_validation_seeds(monkeypatch, tmp_path):
 
     def measure(name, seeds, max_control):
         asked.extend(seeds)
-        return {"cost": 1.0}
+        run = {"cost": 1.0, "controls": np.ones((2, 3)), "offsets": np.ones(2)}
+        rows = [module.episode_rows(name, s, run, 1.0, max_control) for s in seeds]
+        return [e for e, _ in rows], [step for _, steps in rows for step in steps]
 
     monkeypatch.setattr(module, "measure", measure)
     out = tmp_path / "figures.json"

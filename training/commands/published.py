@@ -45,6 +45,10 @@ class PublishedTable:
     page: str
     sources: tuple[str, ...]
     render: Render
+    #: per-episode files the summary in `sources` aggregates; `render` gets them after the
+    #: sources and recomputes the table from them when they exist (until a rerun commits
+    #: them, the summary renders: `check_sources` does not require them)
+    per_episode: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -52,8 +56,8 @@ class PublishedTable:
         return f"{self.page}#{self.marker}"
 
     def rendered(self, root: Path) -> str:
-        """The table from the files under `root`."""
-        return self.render([root / source for source in self.sources])
+        """The table from the files under `root` (`sources`, then `per_episode`)."""
+        return self.render([root / source for source in (*self.sources, *self.per_episode)])
 
 
 # ------------------------------------------------------------------------------- renderers
@@ -143,6 +147,14 @@ _COMMAND = "results.command_tables"
 _LEADERBOARD = (f"{RESULTS}/leaderboard/episodes.csv",)
 _APG = (f"{RESULTS}/apg/results.json",)
 _CHEAP_CONTROL = (f"{RESULTS}/cheap-control-bound/cheap_control_bound.csv",)
+
+
+def _env_options_episodes(stem: str) -> tuple[str, str]:
+    """``benchmarks/env_options.py --out env-options/STEM.json``'s per-episode and per-step
+    files (`env_options_episodes.episode_files`)."""
+    return (f"{RESULTS}/env-options/{stem}_episodes.csv", f"{RESULTS}/env-options/{stem}_steps.csv")
+
+
 #: the smoke sweep's per-episode files, in the sweep's trial order (learner runs, references):
 #: OUT/runs/main__ppo__{seed}/test_evaluation/ and OUT/references/main/{ref}/ of the sweep
 _SMOKE_SWEEP = tuple(
@@ -254,12 +266,14 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/env-options.md",
         (f"{RESULTS}/env-options/results.json",),
         _renderer(_BENCHMARK, "env_options_table", first_cell="figure", r2=True),
+        _env_options_episodes("results"),
     ),
     PublishedTable(
         "env-options-eps1-table",
         "docs/env-options.md",
         (f"{RESULTS}/env-options/results_eps1.json",),
         _renderer(_BENCHMARK, "env_options_table", first_cell="figure, eps = 1", r2=False),
+        _env_options_episodes("results_eps1"),
     ),
     PublishedTable(
         "max-control-table",

@@ -8,7 +8,8 @@ it):
   per controller (optimal, proportional) the mean cost over the episodes, the largest |u_k^n|
   and |mean_k u_k^n| in action units (u / max_control), the common mode's share of the control
   energy sum |mean_k u|^2 / sum |u|^2, the R^2 of the common control on the centre offset, and
-  the cost (and per-episode ratio) of the common mode alone;
+  the cost (and per-episode ratio) of the common mode alone; from the per-episode and per-step
+  files beside it (``results_episodes.csv``, ``results_steps.csv``) when they are there;
 - `across_n_table`: ``benchmarks/shared_across_n.py``'s ``across_n.csv`` (docs/results.md):
   per swarm size N, each shared policy's mean cost over the test seeds with its ratio to the
   proportional controller's, then the proportional and zero controllers' mean costs;
@@ -35,6 +36,8 @@ import json
 import re
 from pathlib import Path
 
+from agent_envs.training.results.env_options_episodes import read_summary
+
 #: (label, key in results.json, format) of the env-options table's rows, in page order
 ENV_OPTIONS_ROWS: tuple[tuple[str, str, str], ...] = (
     ("mean cost ({episodes} episodes)", "cost", "{:.4g}"),
@@ -49,9 +52,15 @@ ENV_OPTIONS_ROWS: tuple[tuple[str, str, str], ...] = (
 ENV_OPTIONS_POLICIES = ("optimal", "proportional")
 
 
-def env_options_table(path: Path, first_cell: str = "figure", r2: bool = True) -> str:
-    """The env-options design table of one ``results.json`` (`r2`: include the R^2 row)."""
+def env_options_table(
+    path: Path, *per_episode: Path, first_cell: str = "figure", r2: bool = True
+) -> str:
+    """The env-options design table of one ``results.json`` (`r2`: include the R^2 row);
+    recomputed from its per-episode and per-step files (`per_episode`, written beside it:
+    `env_options_episodes.episode_files`) when both exist."""
     data = json.loads(Path(path).read_text())
+    if per_episode and all(Path(p).is_file() for p in per_episode):
+        data["seeds"], data["results"] = read_summary(*per_episode)
     episodes = len(data["seeds"])
     lines = [f"| {first_cell} | optimal control | proportional law |", "|---|---|---|"]
     for label, key, fmt in ENV_OPTIONS_ROWS:
