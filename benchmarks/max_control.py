@@ -17,21 +17,35 @@ SERB (the paper's) and EM; n_paths = 1 (the env's default) and 20 (the paper's).
 conditions come from the validation seeds 1000, 1001, ... (`training.defaults.DEFAULT_EVAL_SEED`,
 also the tasks' validation seeds): this chooses a bound, so it never reads a test seed.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/max_control.py [--seeds 20]
+    OPENBLAS_NUM_THREADS=1 python benchmarks/max_control.py [--seeds 20] [--out DIR]
+
+With ``--out DIR`` it writes the printed output to ``DIR/max_control.txt`` and one row per run
+(setting and seed: peak, its time, tbar, diverged) to ``DIR/episodes.csv``
+(`agent_envs.training.results.max_control_seeds`, which prints the summary from those rows);
+docs/envs/gymnasium.md's table: ``--out docs/results/max-control``.
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
 from agent_envs import SwarmModel, SwarmParams, simulate
 from agent_envs.baselines import DEFAULT_BETA, DEFAULT_DELTA, turnpike_time
 from agent_envs.simulator import DEFAULT_MAX_CONTROL
+from agent_envs.training.results.episode_csv import write_rows
+from agent_envs.training.results.max_control_seeds import (
+    SEEDS_FILE,
+    largest_peak,
+    seed_row,
+    setting_lines,
+)
 
 #: the first validation seed (`agent_envs.training.defaults.DEFAULT_EVAL_SEED`; this script
-#: needs only the core, so the number is written here and a test checks that they agree)
+#: needs only the core and two light results modules, so the number is written here and a test
+#: checks that they agree)
 VALIDATION_SEED = 1000
 BETA = DEFAULT_BETA
 DELTA = DEFAULT_DELTA
@@ -43,10 +57,10 @@ SETTINGS = (
 
 
 def peak_control(
-    kernel: str, target: float, integrator: str, n_paths: int, seed: int
+    kernel: str, target: float, integrator: str, n_paths: int, seed: int, n_agents: int = 100
 ) -> tuple[float, float, float, bool]:
-    """(max |u|, time of the max, tbar, diverged) of one turnpike-controlled run."""
-    params = SwarmParams(kernel=kernel, target=target)
+    """(max |u|, time of the max, tbar, diverged) of one turnpike-controlled run of N agents."""
+    params = SwarmParams(kernel=kernel, target=target, n_agents=n_agents)
     model = SwarmModel(params)
     x0 = np.random.default_rng(seed).uniform(-1.0, 1.0, size=(params.n_agents, 1))
     tbar = turnpike_time(x0, target, BETA, DELTA, params.horizon)
@@ -76,29 +90,32 @@ def peak_control(
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20, help="initial conditions per setting")
+    parser.add_argument("--n-agents", type=int, default=100, help="N (the paper's: 100)")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="write max_control.txt and episodes.csv here"
+    )
     args = parser.parse_args()
-    print(f"turnpike cheap control, beta={BETA}, delta={DELTA}, N=100, m=50, {args.seeds} seeds")
-    header = f"{'kernel':>12} {'xbar':>5} {'integr':>6} {'paths':>5} | {'max|u|':>7} "
-    header += f"{'median':>7} {'t(max)':>6} {'tbar':>5} {'div':>3}"
-    print(header)
-    overall = 0.0
-    for kernel, target in SETTINGS:
-        for integrator in ("serb", "em"):
-            for n_paths in (1, 20):
-                runs = [
-                    peak_control(kernel, target, integrator, n_paths, seed)
-                    for seed in range(VALIDATION_SEED, VALIDATION_SEED + args.seeds)
-                ]
-                peaks = np.array([r[0] for r in runs])
-                worst = runs[int(np.argmax(peaks))]
-                overall = max(overall, worst[0])
-                print(
-                    f"{kernel:>12} {target:>5} {integrator:>6} {n_paths:>5} | "
-                    f"{worst[0]:7.2f} {np.median(peaks):7.2f} {worst[1]:6.2f} {worst[2]:5.3f} "
-                    f"{sum(r[3] for r in runs):>3}"
-                )
+    rows = [
+        seed_row(kernel, target, integrator, n_paths, seed, run)
+        for kernel, target in SETTINGS
+        for integrator in ("serb", "em")
+        for n_paths in (1, 20)
+        for seed in range(VALIDATION_SEED, VALIDATION_SEED + args.seeds)
+        for run in [peak_control(kernel, target, integrator, n_paths, seed, args.n_agents)]
+    ]
+    overall = largest_peak(rows)
     verdict = "never clipped" if overall <= DEFAULT_MAX_CONTROL else "CLIPPED"
-    print(f"largest |u| = {overall:.2f}; default max_control = {DEFAULT_MAX_CONTROL}: {verdict}")
+    lines = [
+        f"turnpike cheap control, beta={BETA}, delta={DELTA}, N={args.n_agents}, m=50, "
+        f"{args.seeds} seeds",
+        *setting_lines(rows),
+        f"largest |u| = {overall:.2f}; default max_control = {DEFAULT_MAX_CONTROL}: {verdict}",
+    ]
+    print("\n".join(lines))
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "max_control.txt").write_text("\n".join(lines) + "\n")
+        write_rows(args.out / SEEDS_FILE, rows)
     return 0
 
 

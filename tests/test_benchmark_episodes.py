@@ -44,3 +44,21 @@ def test_env_options_episodes_recompute_its_summary(monkeypatch, tmp_path):
     for r2 in (True, False):
         from_episodes = committed_tables.env_options_table(out, episodes, steps, r2=r2)
         assert from_episodes == committed_tables.env_options_table(out, r2=r2)
+
+
+def test_max_control_episodes_reprint_its_output(monkeypatch, tmp_path):
+    from agent_envs.training.results.episode_csv import read_rows
+    from agent_envs.training.results.max_control_seeds import largest_peak, setting_lines
+
+    module = _load("max_control.py")
+    argv = ["max_control.py", "--seeds", "2", "--n-agents", "4", "--out", str(tmp_path)]
+    monkeypatch.setattr(sys, "argv", argv)
+    assert module.main() == 0
+    printed = (tmp_path / "max_control.txt").read_text().splitlines()
+    rows = read_rows(tmp_path / "episodes.csv")
+    assert len(rows) == 12 * 2  # (kernel, xbar) x integrator x paths, 2 seeds each
+    assert printed[1:-1] == setting_lines(rows)  # character for character
+    assert f"largest |u| = {largest_peak(rows):.2f};" in printed[-1]
+    summary = tmp_path / "max_control.txt"
+    from_seeds = committed_tables.max_control_table(summary, tmp_path / "episodes.csv")
+    assert from_seeds == committed_tables.max_control_table(summary)

@@ -136,7 +136,7 @@ def test_max_control_runs_on_validation_seeds(monkeypatch):
     assert module.VALIDATION_SEED == DEFAULT_EVAL_SEED
     asked = []
 
-    def peak_control(kernel, target, integrator, n_paths, seed):
+    def peak_control(kernel, target, integrator, n_paths, seed, n_agents=100):
         asked.append(seed)
         return 1.0, 0.0, 0.5, False
 

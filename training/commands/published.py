@@ -280,6 +280,7 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/envs/gymnasium.md",
         (f"{RESULTS}/max-control/max_control.txt",),
         _renderer(_BENCHMARK, "max_control_table"),
+        (f"{RESULTS}/max-control/episodes.csv",),
     ),
 )
 

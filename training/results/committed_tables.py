@@ -14,7 +14,8 @@ it):
   per swarm size N, each shared policy's mean cost over the test seeds with its ratio to the
   proportional controller's, then the proportional and zero controllers' mean costs;
 - `max_control_table`: ``benchmarks/max_control.py``'s printed output (docs/envs/gymnasium.md):
-  the largest |u_k^n| over the seeds, per (kernel, target) x (integrator, paths);
+  the largest |u_k^n| over the seeds, per (kernel, target) x (integrator, paths); printed from
+  its per-seed ``episodes.csv`` when it is there;
 - `design_table`: ``benchmarks/task_design.py``'s ``task-design.json`` (docs/tasks.md): per
   task and validation seed the largest |u| of the optimum and of the proportional law, and
   MPC's cost over the open-loop plan's where the task has MPC;
@@ -37,6 +38,8 @@ import re
 from pathlib import Path
 
 from agent_envs.training.results.env_options_episodes import read_summary
+from agent_envs.training.results.episode_csv import read_rows
+from agent_envs.training.results.max_control_seeds import setting_lines
 
 #: (label, key in results.json, format) of the env-options table's rows, in page order
 ENV_OPTIONS_ROWS: tuple[tuple[str, str, str], ...] = (
@@ -107,19 +110,23 @@ MAX_CONTROL_COLUMNS = (("serb", 20), ("em", 20), ("serb", 1), ("em", 1))
 _MAX_CONTROL_LINE = re.compile(r"^\s*(\w+)\s+(-?[\d.]+)\s+(serb|em)\s+(\d+) \|\s+([\d.]+)", re.M)
 
 
-def max_control_peaks(path: Path) -> dict[tuple[str, float, str, int], float]:
-    """(kernel, xbar, integrator, paths) -> the largest |u_k^n| of max_control.py's output."""
+def max_control_peaks(path: Path, *per_seed: Path) -> dict[tuple[str, float, str, int], float]:
+    """(kernel, xbar, integrator, paths) -> the largest |u_k^n| of max_control.py's output
+    (`path`), or of the output printed from its per-seed file (`per_seed`) when it exists: the
+    peaks as printed (2 decimals), so both give the same table."""
+    if per_seed and all(Path(p).is_file() for p in per_seed):
+        text = "\n".join(setting_lines(read_rows(per_seed[0])))
+    else:
+        text = Path(path).read_text()
     return {
         (kernel, float(xbar), integrator, int(paths)): float(peak)
-        for kernel, xbar, integrator, paths, peak in _MAX_CONTROL_LINE.findall(
-            Path(path).read_text()
-        )
+        for kernel, xbar, integrator, paths, peak in _MAX_CONTROL_LINE.findall(text)
     }
 
 
-def max_control_table(path: Path) -> str:
-    """The "Why max_control = 150" table: peaks to one decimal."""
-    peaks = max_control_peaks(path)
+def max_control_table(path: Path, *per_seed: Path) -> str:
+    """The "Why max_control = 150" table: peaks to one decimal (`max_control_peaks`)."""
+    peaks = max_control_peaks(path, *per_seed)
     header = " | ".join(
         f"{integrator.upper()}, {paths} path{'s' if paths > 1 else ''}"
         for integrator, paths in MAX_CONTROL_COLUMNS
