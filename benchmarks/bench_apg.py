@@ -29,7 +29,12 @@ script can be stopped and run again, part by part, on a small machine):
     OPENBLAS_NUM_THREADS=1 nice -n 5 python benchmarks/bench_apg.py --out /tmp/bench-apg \
         --parts paper quick across-n eps1 em-serb --seeds 0 1 2
 
-Prints Markdown tables; writes ``{out}/results.json``.
+Prints Markdown tables; writes ``{out}/results.json`` and, one row per test episode of every
+evaluated law (its cost, the optimum's and the proportional law's), ``{out}/episodes.csv``
+(`agent_envs.training.results.apg_episodes`, whose functions of those rows give the gaps and
+ratios of results.json). docs/learners/apg.md's tables: ``--out docs/results/apg --parts paper
+quick across-n`` and ``--parts paper-linear --seeds 0`` (about 46 min on the shared 2-core
+machine: 89 s, 17, 18 and 10 min, the parts' ``part_wall_time_s`` in results.json).
 """
 
 from __future__ import annotations
@@ -52,6 +57,14 @@ from agent_envs.training.commands.presets import PAPER_ENV
 from agent_envs.training.defaults import DEFAULT_TEST_SEED
 from agent_envs.training.learners.apg import load_apg_policy, train_apg
 from agent_envs.training.learners.apg_config import APGConfig
+from agent_envs.training.results.apg_episodes import (
+    ACROSS_N,
+    EPISODES_FILE,
+    episode_rows,
+    gap_stats,
+    law_figures,
+)
+from agent_envs.training.results.episode_csv import read_rows, write_rows
 from agent_envs.training.results.tables import EvaluationResults
 
 QUICK_ENV = {**PAPER_ENV, "n_agents": 10, "n_steps": 20}
@@ -112,18 +125,6 @@ def evaluate_law(out: Path, name: str, run: Path, env_kwargs: dict, seeds) -> di
     return costs_by_seed(results, "apg")
 
 
-def gap_stats(costs: dict[int, float], reference: dict[int, float]) -> dict[str, Any]:
-    seeds = sorted(set(costs) & set(reference))
-    gaps = np.array([costs[s] / reference[s] - 1.0 for s in seeds])
-    return {
-        "seeds": seeds,
-        "mean": float(gaps.mean()),
-        "min": float(gaps.min()),
-        "max": float(gaps.max()),
-        "worst_seed": int(seeds[int(np.argmax(gaps))]),
-    }
-
-
 def learned_setting(out: Path, setting: str, train_kwargs: dict, eval_kwargs: dict, args) -> dict:
     """Train every seed, evaluate on the test seeds, gaps to optimal and proportional."""
     seeds = list(range(DEFAULT_TEST_SEED, DEFAULT_TEST_SEED + args.test_seeds))
@@ -141,19 +142,22 @@ def learned_setting(out: Path, setting: str, train_kwargs: dict, eval_kwargs: di
         seeds,
     )
     optimum, proportional = costs_by_seed(refs, "optimal"), costs_by_seed(refs, "proportional")
-    rows = []
+    rows, episodes = [], []
     for seed, summary in summaries.items():
         if isinstance(summary, str):
             rows.append({"seed": seed, "failed": summary})
             continue
         run = Path(summary["run_dir"])
         costs = evaluate_law(out, f"{setting}/seed{seed}", run, eval_kwargs, seeds)
+        law = episode_rows(setting, eval_kwargs["n_agents"], seed, costs, optimum, proportional)
+        episodes += law
+        figures = law_figures(law)
         rows.append(
             {
                 "seed": seed,
-                "gap": gap_stats(costs, optimum),
-                "ratio_to_proportional": gap_stats(costs, proportional)["mean"] + 1.0,
-                "mean_cost": float(np.mean(list(costs.values()))),
+                "gap": figures["gap"],
+                "ratio_to_proportional": figures["ratio_to_proportional"],
+                "mean_cost": figures["mean_cost"],
                 "wall_time_s": summary["wall_time_s"],
                 "cpu_time_s": summary.get("cpu_time_s"),
                 "best_validation_cost": summary["best_validation_cost"],
@@ -165,11 +169,12 @@ def learned_setting(out: Path, setting: str, train_kwargs: dict, eval_kwargs: di
         "optimal_mean_cost": float(np.mean(list(optimum.values()))),
         "proportional_gap": gap_stats(proportional, optimum),
         "runs": rows,
+        "episodes": episodes,  # main writes them to episodes.csv, not to results.json
     }
 
 
 def across_n(out: Path, args) -> dict:
-    rows = []
+    rows, episodes = [], []
     for n in args.across_n:
         kwargs = {**PAPER_ENV, "n_agents": n}
         if n >= 5000:
@@ -189,18 +194,21 @@ def across_n(out: Path, args) -> dict:
                 continue
             start = time.perf_counter()
             costs = evaluate_law(out, f"N{n}-{len(seeds)}seeds/seed{seed}", run, kwargs, seeds)
+            law = episode_rows(ACROSS_N, n, seed, costs, optimum, proportional)
+            episodes += law
+            figures = law_figures(law)
             row = {
                 "n_agents": n,
                 "seed": seed,
                 "test_seeds": len(seeds),
-                "ratio_to_proportional": gap_stats(costs, proportional)["mean"] + 1.0,
+                "ratio_to_proportional": figures["ratio_to_proportional"],
                 "eval_wall_time_s": round(time.perf_counter() - start, 1),
             }
             if optimum is not None:
-                row["gap"] = gap_stats(costs, optimum)
-                row["proportional_gap"] = gap_stats(proportional, optimum)["mean"]
+                row["gap"] = figures["gap"]
+                row["proportional_gap"] = figures["proportional_gap"]["mean"]
             rows.append(row)
-    return {"rows": rows}
+    return {"rows": rows, "episodes": episodes}
 
 
 def gradient_norms(args) -> dict:
@@ -317,6 +325,8 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "results.json"
     results = json.loads(path.read_text()) if path.is_file() else {}
+    episodes_path = args.out / EPISODES_FILE
+    episodes = read_rows(episodes_path) if episodes_path.is_file() else []
     jobs = {
         "paper": lambda: learned_setting(args.out, "paper", PAPER_ENV, PAPER_ENV, args),
         "quick": lambda: learned_setting(args.out, "quick", QUICK_ENV, QUICK_ENV, args),
@@ -330,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         "em-serb-eps1": lambda: learned_setting(
             args.out, "em-serb-eps1", {**EPS1_ENV, "integrator": "em"}, EPS1_ENV, args
         ),
-        "across-n": lambda: across_n(args.out, args),
+        ACROSS_N: lambda: across_n(args.out, args),
         "gradient": lambda: gradient_norms(args),
     }
     for part in args.parts:
@@ -341,6 +351,11 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
             continue
         results[part]["part_wall_time_s"] = round(time.perf_counter() - began, 1)
+        if "episodes" in results[part]:  # the part's rows replace its rows of a former run
+            rows = results[part].pop("episodes")
+            episodes = [r for r in episodes if r["part"] != part] + rows
+            if episodes:
+                write_rows(episodes_path, episodes)
         path.write_text(json.dumps(results, indent=2))
     for part in PARTS:
         if part not in results:

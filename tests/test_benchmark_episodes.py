@@ -62,3 +62,26 @@ def test_max_control_episodes_reprint_its_output(monkeypatch, tmp_path):
     summary = tmp_path / "max_control.txt"
     from_seeds = committed_tables.max_control_table(summary, tmp_path / "episodes.csv")
     assert from_seeds == committed_tables.max_control_table(summary)
+
+
+def test_apg_episodes_recompute_its_results(monkeypatch, tmp_path):
+    from agent_envs.training.results.apg_episodes import with_episodes
+    from agent_envs.training.results.episode_csv import read_rows
+
+    module = _load("bench_apg.py")
+    monkeypatch.setattr(module, "PAPER_ENV", {**module.PAPER_ENV, **TINY_ENV})
+    monkeypatch.setattr(module, "QUICK_ENV", {**module.PAPER_ENV, **TINY_ENV, "n_agents": 3})
+    argv = ["--out", str(tmp_path), "--seeds", "0", "--iterations", "1", "--test-seeds", "2"]
+    argv += ["--across-n", "5", "--across-n-seeds", "2", "--optimal-at", "5"]
+    assert module.main([*argv, "--parts", "paper", "quick", "across-n", "paper-linear"]) == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    rows = read_rows(tmp_path / "episodes.csv")
+    assert len(rows) == 4 * 2  # (paper, quick, N = 5, linear) x 2 test seeds, 1 training seed
+    assert with_episodes(results, rows) == results  # every gap and ratio, bit for bit
+    moved = [{**r, "apg_cost": 2 * r["apg_cost"]} for r in rows]
+    for part in ("paper", "quick", "across-n", "paper-linear"):  # each part read from its rows
+        assert with_episodes(results, moved)[part] != results[part], part
+    for name in ("apg_paper_table", "apg_quick_table", "apg_across_n_table"):
+        table = getattr(committed_tables, name)
+        summary = tmp_path / "results.json"
+        assert table(summary, tmp_path / "episodes.csv") == table(summary), name

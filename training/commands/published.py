@@ -146,6 +146,8 @@ _BENCHMARK = "results.committed_tables"
 _COMMAND = "results.command_tables"
 _LEADERBOARD = (f"{RESULTS}/leaderboard/episodes.csv",)
 _APG = (f"{RESULTS}/apg/results.json",)
+#: bench_apg.py's per-episode file beside it (`apg_episodes`)
+_APG_EPISODES = (f"{RESULTS}/apg/episodes.csv",)
 _CHEAP_CONTROL = (f"{RESULTS}/cheap-control-bound/cheap_control_bound.csv",)
 
 
@@ -176,16 +178,25 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         _renderer(_BENCHMARK, "across_n_table"),
     ),
     PublishedTable(
-        "apg-paper-table", "docs/learners/apg.md", _APG, _renderer(_BENCHMARK, "apg_paper_table")
+        "apg-paper-table",
+        "docs/learners/apg.md",
+        _APG,
+        _renderer(_BENCHMARK, "apg_paper_table"),
+        _APG_EPISODES,
     ),
     PublishedTable(
-        "apg-quick-table", "docs/learners/apg.md", _APG, _renderer(_BENCHMARK, "apg_quick_table")
+        "apg-quick-table",
+        "docs/learners/apg.md",
+        _APG,
+        _renderer(_BENCHMARK, "apg_quick_table"),
+        _APG_EPISODES,
     ),
     PublishedTable(
         "apg-across-n-table",
         "docs/learners/apg.md",
         _APG,
         _renderer(_BENCHMARK, "apg_across_n_table"),
+        _APG_EPISODES,
     ),
     PublishedTable(
         "shared-design-table",

@@ -22,7 +22,8 @@ it):
 - `apg_paper_table`, `apg_quick_table`, `apg_across_n_table`: ``benchmarks/bench_apg.py``'s
   ``apg/results.json`` (docs/learners/apg.md): per apg run the gap to optimal over the test
   seeds, the cost ratio to the proportional law and the training time; across N, the laws
-  trained at N = 100 evaluated at other N;
+  trained at N = 100 evaluated at other N; recomputed from its per-episode ``apg/episodes.csv``
+  when it is there;
 - `convergence_orders_table`: ``benchmarks/convergence_orders.py``'s printed table
   (docs/core.md): the measured deterministic and strong orders per scheme.
 
@@ -37,6 +38,7 @@ import json
 import re
 from pathlib import Path
 
+from agent_envs.training.results.apg_episodes import with_episodes
 from agent_envs.training.results.env_options_episodes import read_summary
 from agent_envs.training.results.episode_csv import read_rows
 from agent_envs.training.results.max_control_seeds import setting_lines
@@ -167,11 +169,20 @@ def _apg_run_cells(run: dict, minutes: bool) -> str:
     )
 
 
-def apg_quick_table(path: Path) -> str:
+def apg_results(path: Path, *per_episode: Path) -> dict:
+    """``apg/results.json``, its gaps and ratios recomputed from the per-episode file
+    (`per_episode`: ``apg/episodes.csv``, `apg_episodes.with_episodes`) when it exists."""
+    data = json.loads(Path(path).read_text())
+    if per_episode and all(Path(p).is_file() for p in per_episode):
+        data = with_episodes(data, read_rows(per_episode[0]))
+    return data
+
+
+def apg_quick_table(path: Path, *per_episode: Path) -> str:
     """docs/learners/apg.md's quick-setting table from ``apg/results.json`` (part ``quick``):
     per training seed the gap to optimal, mean over the test seeds of (J - V) / V with its
     min and max, the paired cost ratio to the proportional law, and CPU (wall) training time."""
-    runs = json.loads(Path(path).read_text())["quick"]["runs"]
+    runs = apg_results(path, *per_episode)["quick"]["runs"]
     lines = [
         "| training seed | gap to optimal [min, max] | cost / proportional's | "
         "training time, CPU (wall) |",
@@ -181,11 +192,11 @@ def apg_quick_table(path: Path) -> str:
     return "\n".join(lines)
 
 
-def apg_paper_table(path: Path) -> str:
+def apg_paper_table(path: Path, *per_episode: Path) -> str:
     """docs/learners/apg.md's paper-setting table from ``apg/results.json`` (parts ``paper``
     and ``paper-linear``, the law without its MLP): the quick table's columns, one row per
     run, then the proportional law's gap (beta = 12) over the same test seeds."""
-    data = json.loads(Path(path).read_text())
+    data = apg_results(path, *per_episode)
     lines = [
         "| policy | gap to optimal, mean over 20 test seeds [min, max] | cost / proportional's | "
         "training time, CPU (wall) |",
@@ -208,12 +219,12 @@ def apg_paper_table(path: Path) -> str:
 APG_N_LABELS = {100: "100 (trained here)", 10_000: '10 000 (`linear_operator = "matrix_free"`)'}
 
 
-def apg_across_n_table(path: Path) -> str:
+def apg_across_n_table(path: Path, *per_episode: Path) -> str:
     """docs/learners/apg.md's across-N table from ``apg/results.json`` (``across-n`` rows and,
     at the training size N = 100, the ``paper`` runs): per N the gap to optimal of each
     training seed's law, mean [worst] over the test seeds, the proportional law's gap, and
     each law's cost ratio to the proportional law; "not solved" where no optimum was solved."""
-    data = json.loads(Path(path).read_text())
+    data = apg_results(path, *per_episode)
     trained = data["paper"]
     by_n: dict[int, list[dict]] = {
         100: [
