@@ -85,3 +85,21 @@ def test_apg_episodes_recompute_its_results(monkeypatch, tmp_path):
         table = getattr(committed_tables, name)
         summary = tmp_path / "results.json"
         assert table(summary, tmp_path / "episodes.csv") == table(summary), name
+
+
+def test_registered_per_episode_files_are_the_files_the_scripts_write():
+    """`agent-envs tables` looks for each script's per-episode file under the name the script
+    gives it, beside the summary it renders today."""
+    from agent_envs.training.commands.published import PUBLISHED
+    from agent_envs.training.results.apg_episodes import EPISODES_FILE
+    from agent_envs.training.results.max_control_seeds import SEEDS_FILE
+
+    tables = {t.marker: t for t in PUBLISHED}
+    for marker in ("env-options-table", "env-options-eps1-table"):
+        table = tables[marker]
+        assert table.per_episode == tuple(str(p) for p in episode_files(table.sources[0]))
+    for marker, name in [("max-control-table", SEEDS_FILE)] + [
+        (m, EPISODES_FILE) for m in ("apg-paper-table", "apg-quick-table", "apg-across-n-table")
+    ]:
+        table = tables[marker]
+        assert table.per_episode == (str(Path(table.sources[0]).with_name(name)),), marker
