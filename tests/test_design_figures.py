@@ -71,3 +71,26 @@ def test_shared_design_table_is_its_runs_file():
         measured = json.loads((results / "env-options" / OPTIMUM_FILES[row["task"]]).read_text())
         law = measured["results"]["proportional"]["cost"]
         assert row["proportional_cost"] == pytest.approx(law, rel=1e-6), row
+
+
+def test_shared_transfer_summary_is_its_episodes():
+    """The transfer table's summary (docs/results/shared-across-n/issue41/across_n.csv) is the
+    mean of its committed episodes, policy by policy and N by N; every run saw the same 10
+    seeds."""
+    import csv
+
+    import numpy as np
+
+    folder = ROOT / "docs" / "results" / "shared-across-n" / "issue41"
+    with open(folder / "episodes.csv", newline="") as handle:
+        episodes = list(csv.DictReader(handle))
+    with open(folder / "across_n.csv", newline="") as handle:
+        summary = list(csv.DictReader(handle))
+    assert len(summary) == 16
+    for row in summary:
+        mine = [
+            e for e in episodes if (e["policy"], e["n_agents"]) == (row["policy"], row["n_agents"])
+        ]
+        assert sorted(int(e["seed"]) for e in mine) == list(range(10_000, 10_010))
+        costs = np.array([float(e["total_cost"]) for e in mine])
+        assert abs(costs.mean() - float(row["mean_cost"])) <= 1e-15

@@ -178,6 +178,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         _renderer(_BENCHMARK, "across_n_table"),
     ),
     PublishedTable(
+        "shared-transfer-table",
+        "docs/learners/shared.md",
+        (f"{RESULTS}/shared-across-n/issue41/across_n.csv",),
+        _renderer(_BENCHMARK, "shared_transfer_table"),
+    ),
+    PublishedTable(
         "apg-paper-table",
         "docs/learners/apg.md",
         _APG,

@@ -101,6 +101,30 @@ def across_n_table(path: Path) -> str:
     return "\n".join(lines)
 
 
+def shared_transfer_table(path: Path) -> str:
+    """The parameter-shared learners of the leaderboard (trained at N = 100) at other N, from
+    ``across_n.csv`` of `benchmarks/shared_across_n.py --model best` (policies named
+    ``shared (TASK__LEARNER__SEED)``): one row per N, each run's mean cost with its ratio to the
+    proportional controller, then the proportional and zero controllers."""
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    runs = [r["policy"] for r in rows if r["policy"].startswith("shared")]
+    runs = list(dict.fromkeys(runs))
+    names = [run[run.index("(") + 1 : -1].split("__", 1)[1] for run in runs]
+    sizes = sorted({int(r["n_agents"]) for r in rows})
+    data = {(r["policy"], int(r["n_agents"])): r for r in rows}
+    heads = " | ".join(name.replace("__", " seed ") for name in names)
+    lines = [f"| N | {heads} | proportional | zero |", "|" + "---|" * (len(runs) + 3)]
+    for n in sizes:
+        cells = [str(n)]
+        for run in runs:
+            r = data[(run, n)]
+            cells.append(f"{float(r['mean_cost']):.4g} ({float(r['ratio_to_proportional']):.2f}x)")
+        cells += [f"{float(data[(p, n)]['mean_cost']):.4g}" for p in ("proportional", "zero")]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 #: (kernel, xbar) -> the row label of the max_control table, in page order
 MAX_CONTROL_SETTINGS: dict[tuple[str, float], str] = {
     ("symmetric", 0.7): "symmetric eps = 0.05, xbar = 0.7",
