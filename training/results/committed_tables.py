@@ -84,21 +84,27 @@ def across_n_table(path: Path) -> str:
     with open(path, newline="") as handle:
         rows = list(csv.DictReader(handle))
     shared = sorted({r["policy"] for r in rows if r["policy"].startswith("shared")})
-    sizes = sorted({int(r["n_agents"]) for r in rows})
-    data = {(r["policy"], int(r["n_agents"])): r for r in rows}
     seeds = " | ".join(f"seed {i}" for i in range(1, len(shared)))
     lines = [
         f"| N | ppo-shared seed 0 | {seeds} | proportional | zero |",
         "|" + "---|" * (len(shared) + 3),
     ]
-    for n in sizes:
+    return "\n".join(lines + _size_rows(rows, shared))
+
+
+def _size_rows(rows: list[dict[str, str]], runs: list[str]) -> list[str]:
+    """One Markdown row per N of an across_n.csv: each run's mean cost with its ratio to the
+    proportional controller, then the proportional and zero controllers' costs."""
+    data = {(r["policy"], int(r["n_agents"])): r for r in rows}
+    out = []
+    for n in sorted({int(r["n_agents"]) for r in rows}):
         cells = [str(n)]
-        for policy in shared:
-            r = data[(policy, n)]
+        for run in runs:
+            r = data[(run, n)]
             cells.append(f"{float(r['mean_cost']):.4g} ({float(r['ratio_to_proportional']):.2f}x)")
         cells += [f"{float(data[(p, n)]['mean_cost']):.4g}" for p in ("proportional", "zero")]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        out.append("| " + " | ".join(cells) + " |")
+    return out
 
 
 def shared_transfer_table(path: Path) -> str:
@@ -111,18 +117,9 @@ def shared_transfer_table(path: Path) -> str:
     runs = [r["policy"] for r in rows if r["policy"].startswith("shared")]
     runs = list(dict.fromkeys(runs))
     names = [run[run.index("(") + 1 : -1].split("__", 1)[1] for run in runs]
-    sizes = sorted({int(r["n_agents"]) for r in rows})
-    data = {(r["policy"], int(r["n_agents"])): r for r in rows}
     heads = " | ".join(name.replace("__", " seed ") for name in names)
     lines = [f"| N | {heads} | proportional | zero |", "|" + "---|" * (len(runs) + 3)]
-    for n in sizes:
-        cells = [str(n)]
-        for run in runs:
-            r = data[(run, n)]
-            cells.append(f"{float(r['mean_cost']):.4g} ({float(r['ratio_to_proportional']):.2f}x)")
-        cells += [f"{float(data[(p, n)]['mean_cost']):.4g}" for p in ("proportional", "zero")]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return "\n".join(lines + _size_rows(rows, runs))
 
 
 #: (kernel, xbar) -> the row label of the max_control table, in page order
