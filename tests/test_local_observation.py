@@ -97,11 +97,39 @@ def test_tree_path_equals_blocks(monkeypatch, kind):
     assert got.tolist() == brute_force_neighbours(x, 5)
 
 
-def test_tree_falls_back_to_blocks_on_massive_ties(monkeypatch):
+def test_massive_ties_search_the_distinct_positions(monkeypatch):
+    """Many agents at one point (a collapsed swarm in float32) overflow the tree's candidate
+    budget; the grouped search over the distinct positions gives the blocks' indices."""
     x = np.zeros((300, 1))
     monkeypatch.setattr(local, "BRUTE_FORCE_MAX_AGENTS", 10)
     assert local._nearest_tree(x, 3) is None
-    np.testing.assert_array_equal(local.nearest_neighbours(x, 3)[:2], [[1, 2, 3], [0, 2, 3]])
+    got = local.nearest_neighbours(x, 3)
+    np.testing.assert_array_equal(got[:3], [[1, 2, 3], [0, 2, 3], [0, 1, 3]])
+    np.testing.assert_array_equal(got, local._nearest_blocks(x, 3))
+
+
+@pytest.mark.parametrize("d", [1, 2])
+@pytest.mark.parametrize("k", [1, 4, 9])
+def test_grouped_search_equals_blocks(d, k):
+    """Clusters of exactly equal positions, clusters smaller and larger than K, equal distances
+    between distinct positions (a lattice), and a lone agent: the same indices as the blocks
+    and as a brute-force ranking."""
+    rng = np.random.default_rng(d * 10 + k)
+    lattice = rng.integers(0, 6, size=(40, d)).astype(float) * 0.25
+    sizes = rng.integers(1, 25, size=40)
+    x = np.repeat(lattice, sizes, axis=0)
+    x = np.concatenate([x, np.full((1, d), 9.0)])[rng.permutation(len(x) + 1)]
+    got = local._nearest_grouped(x, k)
+    np.testing.assert_array_equal(got, local._nearest_blocks(x, k))
+    assert got.tolist() == brute_force_neighbours(x, k)
+
+
+def test_grouped_search_budget_falls_back_to_blocks(monkeypatch):
+    x = np.zeros((300, 1))
+    monkeypatch.setattr(local, "BRUTE_FORCE_MAX_AGENTS", 10)
+    monkeypatch.setattr(local, "CANDIDATE_BUDGET_PER_AGENT", 0)
+    assert local._nearest_grouped(x, 3) is None
+    np.testing.assert_array_equal(local.nearest_neighbours(x, 3), local._nearest_blocks(x, 3))
 
 
 def test_blocks_hold_no_n_by_n_array(monkeypatch):

@@ -56,17 +56,14 @@ TRAINING_SEEDS = (0, 1, 2)
 #: Tasks whose learners are not trained there but transferred from another task.
 TRANSFERS = {"agent_envs/LargeSwarm-v0": "agent_envs/StiffSwarm-v0"}
 #: The tasks a learner is run on where not every task: the parameter-shared learners are run on
-#: the paper's two stiffness regimes, and ppo-shared is transferred from the stiff one to
-#: N = 10^4. ppo-local is not: its rows, built from the Gymnasium observation's float32
-#: positions of a collapsed swarm, tie exactly for thousands of agents, and the exact neighbour
-#: search then falls back to its O(N^2) blocks (26 s a step at N = 10^4; docs/learners/shared.md).
+#: the paper's two stiffness regimes, and transferred from the stiff one to N = 10^4.
 LEARNER_TASKS = {
-    "ppo-shared": (
+    name: (
         "agent_envs/StiffSwarm-v0",
         "agent_envs/WeakCouplingSwarm-v0",
         "agent_envs/LargeSwarm-v0",
-    ),
-    "ppo-local": ("agent_envs/StiffSwarm-v0", "agent_envs/WeakCouplingSwarm-v0"),
+    )
+    for name in ("ppo-shared", "ppo-local")
 }
 
 
