@@ -94,3 +94,33 @@ def test_shared_transfer_summary_is_its_episodes():
         assert sorted(int(e["seed"]) for e in mine) == list(range(10_000, 10_010))
         costs = np.array([float(e["total_cost"]) for e in mine])
         assert abs(costs.mean() - float(row["mean_cost"])) <= 1e-15
+
+
+def test_shared_results_table_is_the_leaderboard_file():
+    """docs/learners/shared.md's results table (gap by training seed, and the laws' gaps) is the
+    committed leaderboard episodes file's, digit for digit as printed."""
+    from agent_envs.training.commands.leaderboard import read_episodes
+
+    rows = read_episodes(ROOT / "docs" / "results" / "leaderboard" / "episodes.csv")
+    tasks = ("agent_envs/StiffSwarm-v0", "agent_envs/WeakCouplingSwarm-v0")
+
+    def gaps(policy: str, task: str) -> str:
+        mine = [r for r in rows if r["policy"] == policy and r["task"] == task]
+        seeds = sorted({r["training_seed"] for r in mine})
+        means = [
+            sum(r["gap"] for r in mine if r["training_seed"] == s)
+            / sum(1 for r in mine if r["training_seed"] == s)
+            for s in seeds
+        ]
+        return ", ".join(f"{100 * m:+.2f}%" for m in means)
+
+    page = (ROOT / "docs" / "learners" / "shared.md").read_text()
+    expected = {
+        "`ppo-shared`": "ppo-shared",
+        "`ppo-local`": "ppo-local",
+        "centre law (one control for all)": "proportional-common",
+        "proportional law (per agent, local)": "proportional",
+    }
+    for label, policy in expected.items():
+        row = f"| {label} | " + " | ".join(gaps(policy, t) for t in tasks) + " |"
+        assert row in page, row
