@@ -394,10 +394,12 @@ def _fair_baseline_section(results, learners: dict[str, Learner]):
     return ReportSection(
         "Against each learner's fair baseline",
         text=(
-            "Each learner next to the best simple law its own interface can express: for one "
-            "common control from the summary observation, the proportional law on the centre "
+            "Each learner next to the best simple law its own interface can express: where "
+            "the learner sees the swarm's centre or sends one common control (the summary, "
+            "modes and swarm observations), the proportional law on the centre "
             f"({CENTRE_LAW}: u = 12 (xbar - c) for every agent, evaluated through that "
-            "interface); for a per-agent interface, the proportional controller. Same test "
+            "interface); where its rows hold no centre (apg's features, the local row), the "
+            "proportional controller. Same test "
             "seeds; ratios are the mean over seeds of the paired cost ratio (below 1: the "
             "learner is cheaper)."
         ),
