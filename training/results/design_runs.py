@@ -21,6 +21,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from agent_envs.training.results.episode_csv import write_rows
+
 #: Columns of runs.csv: the run, then one evaluation.
 RUN_COLUMNS = (
     "task",
@@ -56,11 +58,13 @@ def curve_rows(task: str, variant: str, seed: int, curve: Path) -> list[dict[str
 
 
 def write_runs(rows: Iterable[dict[str, Any]], path: Path) -> None:
-    """Write `RUN_COLUMNS` rows to `path` (floats with repr: the file round-trips exactly)."""
-    with open(path, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=RUN_COLUMNS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
+    """Write `RUN_COLUMNS` rows to `path` with `episode_csv.write_rows` (floats in repr: the file
+    round-trips exactly); ValueError for a row with other columns."""
+    rows = list(rows)
+    for row in rows:
+        if tuple(row) != RUN_COLUMNS:
+            raise ValueError(f"a runs.csv row has the columns {RUN_COLUMNS}; got {tuple(row)}")
+    write_rows(path, rows)
 
 
 def read_runs(path: Path) -> list[dict[str, Any]]:
@@ -93,13 +97,14 @@ def design_table(runs: Path, env_options: Path) -> str:
         "| best's gap to V | proportional's gap |",
         "|---|---|---|---|---|---|---|---|",
     ]
+    values = {task: validation_optimum(task, env_options) for task in {k[0] for k in keys}}
     for task, variant, seed in keys:
         mine = [
             r
             for r in rows
             if (r["task"], r["variant"], r["training_seed"]) == (task, variant, seed)
         ]
-        value = validation_optimum(task, env_options)
+        value = values[task]
         best = min(r["cost_mean"] for r in mine)
         law = mine[0]["proportional_cost"]
         out.append(
