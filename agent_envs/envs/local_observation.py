@@ -121,16 +121,25 @@ def _nearest_blocks(x: np.ndarray, count: int) -> np.ndarray:
     return np.concatenate(blocks, axis=0)
 
 
+def _ball_candidates(points: np.ndarray, wanted: int) -> list[list[int]]:
+    """For each of the points (M, d), the indices of every point at most its `wanted`-th
+    smallest k-d tree distance away, itself included, in no particular order: a ball query of
+    that distance, widened by `_TREE_WIDENING` for the tree's rounding, so every tie at it is
+    in (both searches' candidates)."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points)
+    tree_distances, _ = tree.query(points, k=wanted)
+    radius = tree_distances.reshape(len(points), -1)[:, -1]  # k = 1 gives a flat array
+    radius = np.nextafter(radius * (1.0 + _TREE_WIDENING), np.inf)
+    return tree.query_ball_point(points, radius)
+
+
 def _nearest_tree(x: np.ndarray, count: int) -> np.ndarray | None:
     """`nearest_neighbours` from a k-d tree's candidates, ranked by the exact distances; None
     where the candidates exceed the budget (exact ties of many agents)."""
-    from scipy.spatial import cKDTree
-
     n = x.shape[0]
-    tree = cKDTree(x)
-    tree_distances, _ = tree.query(x, k=count + 1)  # (self among them, or a tie at distance 0)
-    radius = np.nextafter(tree_distances[:, -1] * (1.0 + _TREE_WIDENING), np.inf)
-    lists = tree.query_ball_point(x, radius)
+    lists = _ball_candidates(x, count + 1)  # (self among them, or a tie at distance 0)
     lengths = np.fromiter(map(len, lists), dtype=np.intp, count=n)
     total = int(lengths.sum())
     if total > CANDIDATE_BUDGET_PER_AGENT * n:
@@ -141,19 +150,6 @@ def _nearest_tree(x: np.ndarray, count: int) -> np.ndarray | None:
     owners, others = owners[keep], others[keep]
     distances = squared_distances(x[others] - x[owners])
     return _ranked(owners, others, distances, n, count)
-
-
-def _nearest_positions(unique: np.ndarray, wanted: int) -> list[np.ndarray]:
-    """For each distinct position, the distinct positions at most its `wanted`-th smallest
-    distance away (itself first at 0, every tie at that distance included): a k-d tree's
-    candidates, widened as `_nearest_tree`'s."""
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(unique)
-    tree_distances, _ = tree.query(unique, k=wanted)
-    radius = tree_distances.reshape(len(unique), -1)[:, -1]
-    radius = np.nextafter(radius * (1.0 + _TREE_WIDENING), np.inf)
-    return [np.asarray(c, dtype=np.intp) for c in tree.query_ball_point(unique, radius)]
 
 
 def _nearest_grouped(x: np.ndarray, count: int) -> np.ndarray | None:
@@ -168,7 +164,7 @@ def _nearest_grouped(x: np.ndarray, count: int) -> np.ndarray | None:
     members = np.argsort(inverse, kind="stable")  # grouped by position, each in index order
     sizes = np.bincount(inverse, minlength=len(unique))
     starts = np.cumsum(sizes) - sizes
-    candidates = _nearest_positions(unique, min(count + 1, len(unique)))
+    candidates = _ball_candidates(unique, min(count + 1, len(unique)))
     if sum(map(len, candidates)) > CANDIDATE_BUDGET_PER_AGENT * n:
         return None
     out = np.empty((n, count), dtype=np.intp)
