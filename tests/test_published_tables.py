@@ -106,3 +106,55 @@ def test_long_horizon_figures_are_the_committed_run():
         for cell, row in zip(printed, rows, strict=True):
             assert _agrees(cell, row[column]), (column, cell, row[column])
     assert all(r["corrected_holds"] for r in read_rows(path))
+
+
+def _gaps_percent(path: Path) -> dict[str, list[float]]:
+    """Per-policy list of 100 (cost - V) / V over the seeds of one episodes.csv."""
+    import csv
+
+    costs: dict[str, dict[int, float]] = {}
+    with path.open() as f:
+        for row in csv.DictReader(f):
+            costs.setdefault(row["policy"], {})[int(row["seed"])] = float(row["total_cost"])
+    optimal = costs["optimal"]
+    return {
+        name: [100.0 * (c - optimal[s]) / optimal[s] for s, c in by_seed.items()]
+        for name, by_seed in costs.items()
+    }
+
+
+def test_optimum_page_seed_by_seed_figures_are_the_committed_runs():
+    """docs/optimum.md's seed-by-seed prose (the proportional law's range, MPC's wins, each
+    quick-preset learner's range over its 3 training seeds) is the committed episodes'."""
+    text = " ".join((ROOT / "docs" / "optimum.md").read_text().split())
+    gaps = _gaps_percent(ROOT / "docs/results/evaluate/quick-optimum/episodes.csv")
+    quoted = re.search(r"proportional controller costs ([\d.]+)% to ([\d.]+)% more", text)
+    assert quoted is not None
+    assert _agrees(quoted.group(1), min(gaps["proportional"]))
+    assert _agrees(quoted.group(2), max(gaps["proportional"]))
+    quoted = re.search(
+        r"MPC is cheaper than it on (\d+) of the 20 seeds, by at most ([\d.]+)%, and dearer on "
+        r"the other three by at most ([\d.]+)%",
+        text,
+    )
+    assert quoted is not None
+    mpc = gaps["mpc"]
+    assert len(mpc) == 20 and int(quoted.group(1)) == sum(g < 0 for g in mpc) == 17
+    assert _agrees(quoted.group(2), -min(mpc))
+    assert _agrees(quoted.group(3), max(mpc))
+    learners: dict[str, list[float]] = {}
+    for seed in (0, 1, 2):
+        for name, values in _gaps_percent(
+            ROOT / f"docs/results/quick/seed{seed}/episodes.csv"
+        ).items():
+            learners.setdefault(name, []).extend(values)
+    for label, name in (
+        ("`apg` is", "apg"),
+        ("SAC", "sac"),
+        ("parameter-shared PPO", "ppo-shared"),
+        ("and PPO", "ppo"),
+    ):
+        quoted = re.search(re.escape(label) + r" ([\d.]+)% to ([\d.]+)%", text)
+        assert quoted is not None, label
+        assert _agrees(quoted.group(1), min(learners[name])), name
+        assert _agrees(quoted.group(2), max(learners[name])), name
