@@ -172,12 +172,6 @@ PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable("leaderboard-table", "docs/leaderboard.md", _LEADERBOARD, _leaderboard(None)),
     PublishedTable("quick-table", "docs/results.md", QUICK_FILES, _quick),
     PublishedTable(
-        "across-n-table",
-        "docs/results.md",
-        (f"{RESULTS}/shared-across-n/across_n.csv",),
-        _renderer(_BENCHMARK, "across_n_table"),
-    ),
-    PublishedTable(
         "shared-transfer-table",
         "docs/learners/shared.md",
         (f"{RESULTS}/shared-across-n/issue41/across_n.csv",),

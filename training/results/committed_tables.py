@@ -10,9 +10,10 @@ it):
   energy sum |mean_k u|^2 / sum |u|^2, the R^2 of the common control on the centre offset, and
   the cost (and per-episode ratio) of the common mode alone; from the per-episode and per-step
   files beside it (``results_episodes.csv``, ``results_steps.csv``) when they are there;
-- `across_n_table`: ``benchmarks/shared_across_n.py``'s ``across_n.csv`` (docs/results.md):
-  per swarm size N, each shared policy's mean cost over the test seeds with its ratio to the
-  proportional controller's, then the proportional and zero controllers' mean costs;
+- `shared_transfer_table`: ``benchmarks/shared_across_n.py``'s ``across_n.csv``
+  (docs/learners/shared.md): per swarm size N, each shared policy's mean cost over the test
+  seeds with its ratio to the proportional controller's, then the proportional and zero
+  controllers' mean costs;
 - `max_control_table`: ``benchmarks/max_control.py``'s printed output (docs/envs/gymnasium.md):
   the largest |u_k^n| over the seeds, per (kernel, target) x (integrator, paths); printed from
   its per-seed ``episodes.csv`` when it is there;
@@ -75,21 +76,6 @@ def env_options_table(
         cells = [c.replace("%", " %") for c in cells]  # the page's "99.7 %"
         lines.append(f"| {label.format(episodes=episodes)} | {' | '.join(cells)} |")
     return "\n".join(lines)
-
-
-def across_n_table(path: Path) -> str:
-    """The shared policy across swarm sizes, from ``across_n.csv`` (columns policy, n_agents,
-    mean_cost, ratio_to_proportional, ...): costs to 4 significant digits, ratios to 2
-    decimals."""
-    with open(path, newline="") as handle:
-        rows = list(csv.DictReader(handle))
-    shared = sorted({r["policy"] for r in rows if r["policy"].startswith("shared")})
-    seeds = " | ".join(f"seed {i}" for i in range(1, len(shared)))
-    lines = [
-        f"| N | ppo-shared seed 0 | {seeds} | proportional | zero |",
-        "|" + "---|" * (len(shared) + 3),
-    ]
-    return "\n".join(lines + _size_rows(rows, shared))
 
 
 def _size_rows(rows: list[dict[str, str]], runs: list[str]) -> list[str]:
