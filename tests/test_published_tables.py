@@ -158,3 +158,25 @@ def test_optimum_page_seed_by_seed_figures_are_the_committed_runs():
         assert quoted is not None, label
         assert _agrees(quoted.group(1), min(learners[name])), name
         assert _agrees(quoted.group(2), max(learners[name])), name
+
+
+def test_em_transfer_prose_is_the_committed_runs():
+    """docs/results.md's EM-to-SERB prose: the EM-trained learners cost 14% to 118% more on
+    SERB than the SERB-trained runs of the same seed, and none is below the centre law."""
+    import pandas as pd
+
+    from agent_envs.training.commands.published import EM_TO_SERB_FILES, QUICK_FILES
+
+    text = " ".join((ROOT / "docs" / "results.md").read_text().split())
+    quoted = re.search(r"cost (\d+)% to (\d+)% more than the policies trained on SERB", text)
+    assert quoted is not None
+    excess, fair = [], []
+    for seed in range(3):
+        serb = pd.read_csv(ROOT / EM_TO_SERB_FILES[2 * seed + 1]).groupby("policy")
+        trained = pd.read_csv(ROOT / QUICK_FILES[seed]).groupby("policy")
+        for learner in ("ppo", "ppo-shared"):
+            cost = serb["total_cost"].mean()[learner]
+            excess.append(100 * (cost / trained["total_cost"].mean()[learner] - 1))
+            fair.append(cost > serb["total_cost"].mean()["proportional-common"])
+    assert _agrees(quoted.group(1), min(excess)) and _agrees(quoted.group(2), max(excess))
+    assert all(fair)

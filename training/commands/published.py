@@ -28,6 +28,12 @@ from agent_envs.training.config import option_field
 RESULTS = "docs/results"
 #: the quick preset's per-episode files, one per training seed
 QUICK_FILES = tuple(f"{RESULTS}/quick/seed{s}/episodes.csv" for s in range(3))
+#: the quick preset's EM-trained runs, evaluated on EM and on SERB, per training seed
+EM_TO_SERB_FILES = tuple(
+    f"{RESULTS}/em-to-serb/seed{s}/{integrator}/episodes.csv"
+    for s in range(3)
+    for integrator in ("em", "serb")
+)
 
 
 #: a table's render function: its source files (resolved under the root, in `sources` order)
@@ -171,6 +177,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
     ),
     PublishedTable("leaderboard-table", "docs/leaderboard.md", _LEADERBOARD, _leaderboard(None)),
     PublishedTable("quick-table", "docs/results.md", QUICK_FILES, _quick),
+    PublishedTable(
+        "em-transfer-table",
+        "docs/results.md",
+        (*EM_TO_SERB_FILES, *QUICK_FILES),
+        _renderer(_COMMAND, "em_transfer_table"),
+    ),
     PublishedTable(
         "shared-transfer-table",
         "docs/learners/shared.md",

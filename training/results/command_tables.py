@@ -15,7 +15,10 @@ tests/test_published_tables.py checks it):
   mean cost, the mean final RMS distance and control energy;
 - `optimum_table`: one ``agent-envs evaluate`` episodes file with the optimum evaluated
   (docs/optimum.md): per policy the mean cost and the per-seed gap to optimal (cost - V) / V,
-  each with its 95% t-interval, the mean final RMS distance and control energy.
+  each with its 95% t-interval, the mean final RMS distance and control energy;
+- `em_transfer_table`: ``agent-envs compare``'s EM-trained runs evaluated on EM and on SERB
+  (docs/results.md): per policy the mean cost and the paired ratio to the proportional
+  controller on each integrator, by training seed, beside the SERB-trained quick runs.
 
 The benchmark scripts' outputs have theirs in `committed_tables`.
 """
@@ -26,6 +29,7 @@ import csv
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 #: the turnpike table's columns after run and mode: (header, results.csv column)
 TURNPIKE_COLUMNS = (
@@ -181,4 +185,70 @@ def optimum_table(path: Path, optimum: str = "optimal") -> str:
         distance = _digits(float(rows["final_distance"].mean()), 3, 4)
         energy = f"{rows['control_energy'].mean():.4g}"
         lines.append(f"| {policy} | {mean} [{low}, {high}] | {gap_text} | {distance} | {energy} |")
+    return "\n".join(lines)
+
+
+#: the EM-to-SERB table's rows: (policy, label), in page order
+EM_TRANSFER_ROWS = (
+    ("ppo", "ppo (trained on EM)"),
+    ("ppo-shared", "ppo-shared (trained on EM)"),
+    ("proportional-common", "proportional-common"),
+    ("proportional", "proportional"),
+    ("zero", "zero"),
+    ("turnpike", "turnpike"),
+    ("optimal", "optimal (open-loop plan; on EM the solver stalls at u = 0)"),
+)
+
+
+def _paired_ratio(costs: Any, policy: str, base: str = "proportional") -> float:
+    """The mean over the seeds of `policy`'s cost over `base`'s on the same seed."""
+    return float((costs[policy] / costs[base]).mean())
+
+
+def em_transfer_table(*files: Path) -> str:
+    """docs/results.md's train-on-EM, deploy-on-SERB table from ``agent-envs compare
+    --env-kwargs '{"integrator": "em"}' --eval-env-kwargs '{"integrator": "serb"}'``'s
+    episodes files: `files` = for each training seed its ``evaluation/episodes.csv`` (EM) and
+    ``evaluation_transfer/episodes.csv`` (SERB), then the SERB-trained quick runs'
+    ``episodes.csv``, one per training seed in the same order. Per policy the mean cost on EM
+    and on SERB and the mean paired ratio to the proportional controller on each; a learner's
+    cells are its training seeds' ("a / b / c"), a reference's are one value (they do not
+    train; the table checks that every run agrees)."""
+    import pandas as pd
+
+    if len(files) % 3 or not files:
+        raise ValueError(
+            f"files: expected 3 per training seed (EM, SERB, SERB-trained), got {len(files)}"
+        )
+    n_seeds = len(files) // 3
+    runs = [
+        tuple(
+            pd.read_csv(path).pivot(index="seed", columns="policy", values="total_cost")
+            for path in pair
+        )
+        for pair in zip(files[0 : 2 * n_seeds : 2], files[1 : 2 * n_seeds : 2], strict=True)
+    ]
+    serb_trained = [
+        pd.read_csv(path).pivot(index="seed", columns="policy", values="total_cost")
+        for path in files[2 * n_seeds :]
+    ]
+    lines = [
+        "| policy | cost on EM | paired ratio to proportional on EM | cost on SERB | "
+        "paired ratio to proportional on SERB | SERB-trained policy on SERB |",
+        "|---|---|---|---|---|---|",
+    ]
+    for policy, label in EM_TRANSFER_ROWS:
+        learner = policy in ("ppo", "ppo-shared")
+        cells = []
+        for index in (0, 1):
+            means = [f"{run[index][policy].mean():.4g}" for run in runs]
+            ratios = [f"{_paired_ratio(run[index], policy):.3f}" for run in runs]
+            if not learner and (len(set(means)) > 1 or len(set(ratios)) > 1):
+                raise ValueError(f"{policy}: the runs disagree on a reference ({means})")
+            cells += [" / ".join(means if learner else means[:1])]
+            cells += [" / ".join(ratios if learner else ratios[:1])]
+        trained = (
+            " / ".join(f"{costs[policy].mean():.4g}" for costs in serb_trained) if learner else ""
+        )
+        lines.append(f"| {label} | " + " | ".join(cells) + f" | {trained} |")
     return "\n".join(lines)
