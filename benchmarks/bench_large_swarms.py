@@ -210,13 +210,17 @@ def bench_finufft(n: int) -> None:
     print(f"| {build:.3f} | {product:.4f} | {pair:.4f} | {pair / product:.1f} |")
 
 
-def bench_mean_field(sizes, figure: str | None) -> None:
+#: columns of the mean-field check's CSV (`--mean-field-csv`): one row per N and time
+MEAN_FIELD_COLUMNS = ("n_agents", "time", "w1_to_reference", "std", "reference_n", "wall_time_s")
+
+
+def bench_mean_field(sizes, figure: str | None, csv_path: str | None = None) -> None:
     from scipy.stats import wasserstein_distance
 
     from agent_envs import simulate
 
     print(f"\n## 5. Mean-field check: W1 to the empirical distribution of N = {sizes[-1]:.0e}")
-    starts = {}
+    starts, walls = {}, {}
     for n in sizes:
         params = SwarmParams(n_agents=n, alpha=ALPHA, epsilon=MEAN_FIELD_EPS, sigma=SIGMA)
         start = time.perf_counter()
@@ -224,6 +228,7 @@ def bench_mean_field(sizes, figure: str | None) -> None:
         wall = time.perf_counter() - start
         assert not traj.diverged
         starts[n] = {t: traj.positions[k, 0, :, 0] for t, k in (("0", 0), ("T/2", 25), ("T", -1))}
+        walls[n] = wall
         print(f"(N = {n:.0e}: 50 SERB steps in {wall:.1f} s)")
     ref = sizes[-1]
     print("| N | W1 at t = 0 | W1 at T/2 | W1 at T | std of x(T/2) | std of x(T) |")
@@ -240,6 +245,8 @@ def bench_mean_field(sizes, figure: str | None) -> None:
         f"| {ref:.0e} (reference) | 0 | 0 | 0 | {np.std(starts[ref]['T/2']):.3f} "
         f"| {np.std(starts[ref]['T']):.3f} |"
     )
+    if csv_path:
+        _write_mean_field(csv_path, sizes, starts, w, walls)
     if len(sizes) >= 3:
         ns = np.array(sizes[:-1], dtype=float)
         for t in w:
@@ -267,6 +274,28 @@ def bench_mean_field(sizes, figure: str | None) -> None:
         print(f"figure: {figure}")
 
 
+def _write_mean_field(path: str, sizes, starts, w, walls) -> None:
+    """The mean-field check's rows (`MEAN_FIELD_COLUMNS`): per N (the reference's W1 is 0) and
+    time t in {0, T/2, T}, W1 to the largest N and the sample's standard deviation, written
+    with full precision (repr) so that docs/large-swarms.md's table renders from it."""
+    import csv
+
+    ref = sizes[-1]
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(MEAN_FIELD_COLUMNS)
+        for n in sizes:
+            for t in ("0", "T/2", "T"):
+                w1 = 0.0 if n == ref else float(w[t][n])
+                std = float(np.std(starts[n][t]))
+                writer.writerow([n, t, repr(w1), repr(std), ref, f"{walls[n]:.1f}"])
+    print(f"mean-field rows: {path}")
+
+
+#: the benchmark's parts (`--parts`), in run order
+PARTS = ("scaling", "crossover", "two-dimensions", "finufft", "mean-field")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="N <= 1e5, d = 2 at N = 2000")
@@ -275,18 +304,33 @@ def main() -> None:
     parser.add_argument("--budget", type=float, default=120.0, help="seconds per size")
     parser.add_argument("--mean-field-max", type=int, default=10**6, help="largest N of table 5")
     parser.add_argument("--figure", default=None, help="save the mean-field plot there")
+    parser.add_argument(
+        "--mean-field-csv", default=None, help="write the mean-field check's rows (CSV) there"
+    )
+    parser.add_argument(
+        "--parts",
+        nargs="+",
+        choices=PARTS,
+        default=list(PARTS),
+        help="tables to run (default: all)",
+    )
     args = parser.parse_args()
     sizes = [10**3, 10**4, 10**5] if args.quick else [10**3, 10**4, 10**5, 10**6]
     print(f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}, cores={os.cpu_count()}")
-    bench_scaling(sizes, args.steps, args.dense_max, args.budget)
-    bench_crossover([100, 200, 300, 500, 1000], 4)
-    if args.quick:
+    if "scaling" in args.parts:
+        bench_scaling(sizes, args.steps, args.dense_max, args.budget)
+    if "crossover" in args.parts:
+        bench_crossover([100, 200, 300, 500, 1000], 4)
+    if "two-dimensions" in args.parts and args.quick:
         bench_two_dimensions([2000], 2000, 2000)
-    else:
+    elif "two-dimensions" in args.parts:
         bench_two_dimensions([2000, 5000, 10**4, 10**5], args.dense_max, 20_000)
-    bench_finufft(10**5 if args.quick else 10**6)
-    top = min(args.mean_field_max, 10**4 if args.quick else args.mean_field_max)
-    bench_mean_field([n for n in (10**3, 10**4, 10**5, 10**6) if n <= top], args.figure)
+    if "finufft" in args.parts:
+        bench_finufft(10**5 if args.quick else 10**6)
+    if "mean-field" in args.parts:
+        top = min(args.mean_field_max, 10**4 if args.quick else args.mean_field_max)
+        sizes = [n for n in (10**3, 10**4, 10**5, 10**6) if n <= top]
+        bench_mean_field(sizes, args.figure, args.mean_field_csv)
 
 
 if __name__ == "__main__":

@@ -180,3 +180,23 @@ def test_em_transfer_prose_is_the_committed_runs():
             fair.append(cost > serb["total_cost"].mean()["proportional-common"])
     assert _agrees(quoted.group(1), min(excess)) and _agrees(quoted.group(2), max(excess))
     assert all(fair)
+
+
+def test_mean_field_slopes_are_the_committed_run():
+    """docs/large-swarms.md's W1 slopes against N (at T and at t = 0) are the log-log fits of
+    the committed mean-field rows."""
+    import csv
+
+    import numpy as np
+
+    with open(ROOT / "docs/results/large-swarms/mean_field.csv", newline="") as handle:
+        rows = [r for r in csv.DictReader(handle) if r["n_agents"] != r["reference_n"]]
+    text = " ".join((ROOT / "docs" / "large-swarms.md").read_text().split())
+    quoted = re.search(r"slope (-[\d.]+) at T against (-[\d.]+) at t = 0", text)
+    assert quoted is not None
+    for group, time in ((1, "T"), (2, "0")):
+        mine = [r for r in rows if r["time"] == time]
+        n = np.log([float(r["n_agents"]) for r in mine])
+        w1 = np.log([float(r["w1_to_reference"]) for r in mine])
+        assert len(mine) == 3
+        assert _agrees(quoted.group(group), float(np.polyfit(n, w1, 1)[0]))

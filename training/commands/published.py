@@ -267,6 +267,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         _evaluations,
     ),
     PublishedTable(
+        "mean-field-table",
+        "docs/large-swarms.md",
+        (f"{RESULTS}/large-swarms/mean_field.csv",),
+        _renderer(_BENCHMARK, "mean_field_table"),
+    ),
+    PublishedTable(
         "optimum-table",
         "docs/optimum.md",
         (f"{RESULTS}/evaluate/quick-optimum/episodes.csv",),

@@ -25,6 +25,9 @@ it):
   seeds, the cost ratio to the proportional law and the training time; across N, the laws
   trained at N = 100 evaluated at other N; recomputed from its per-episode ``apg/episodes.csv``
   when it is there;
+- `mean_field_table`: ``benchmarks/bench_large_swarms.py``'s mean-field rows
+  (docs/large-swarms.md): per N, W1 of the empirical distribution at t = 0, T/2, T to the
+  largest N's;
 - `convergence_orders_table`: ``benchmarks/convergence_orders.py``'s printed table
   (docs/core.md): the measured deterministic and strong orders per scheme.
 
@@ -35,6 +38,7 @@ The outputs of `agent-envs` commands (reproductions, evaluations) have theirs in
 from __future__ import annotations
 
 import csv
+import math
 import json
 import re
 from pathlib import Path
@@ -276,3 +280,29 @@ def convergence_orders_table(path: Path) -> str:
         cells[0] = f" {SCHEME_LABELS.get(scheme, scheme)} "
         out.append("|" + "|".join(cells) + "|")
     return "\n".join(out)
+
+
+def _short_exponent(value: float) -> str:
+    """3 significant digits in the page's "1.55e-2" form (no exponent padding)."""
+    mantissa, exponent = f"{value:.2e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def mean_field_table(path: Path) -> str:
+    """docs/large-swarms.md's mean-field check from ``benchmarks/bench_large_swarms.py
+    --parts mean-field --mean-field-csv``'s rows: per N below the reference, the
+    Wasserstein-1 distance of the empirical distribution at t = 0, T/2 and T to the
+    reference N's, 3 significant digits."""
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    reference = {r["reference_n"] for r in rows}
+    if len(reference) != 1:
+        raise ValueError(f"{path}: rows of more than one reference N: {sorted(reference)}")
+    w1 = {(int(r["n_agents"]), r["time"]): float(r["w1_to_reference"]) for r in rows}
+    largest = int(reference.pop())
+    sizes = sorted({n for n, _ in w1 if n != largest})
+    lines = ["| N | W1 at t = 0 | W1 at T/2 | W1 at T |", "|---|---|---|---|"]
+    for n in sizes:
+        cells = " | ".join(_short_exponent(w1[(n, t)]) for t in ("0", "T/2", "T"))
+        lines.append(f"| 10^{round(math.log10(n))} | {cells} |")
+    return "\n".join(lines)
