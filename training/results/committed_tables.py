@@ -38,8 +38,8 @@ The outputs of `agent-envs` commands (reproductions, evaluations) have theirs in
 from __future__ import annotations
 
 import csv
-import math
 import json
+import math
 import re
 from pathlib import Path
 
