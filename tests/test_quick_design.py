@@ -11,10 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from agent_envs.training.results.design_runs import write_runs
+from agent_envs.training.results.design_runs import read_runs, write_runs
 from agent_envs.training.results.quick_design import (
     VALIDATION_SEEDS,
     best_gaps,
+    mean_cost,
     quick_design_table,
     read_references,
     write_references,
@@ -90,6 +91,19 @@ def test_quick_design_refuses_other_seeds_and_unknown_variants(tmp_path):
     write_references([{"policy": "optimal", "seed": 1000, "total_cost": 1.0}], references)
     with pytest.raises(ValueError, match="validation seeds"):
         read_references(references)
+
+
+def test_committed_runs_were_validated_on_the_reference_seeds():
+    """Every committed run's validation logged the proportional law's mean cost over the seeds
+    of references.csv (so they are the same 10 validation seeds), and names a variant."""
+    costs = read_references(RESULTS / "references.csv")
+    law = mean_cost(costs, "proportional")
+    variants = json.loads((RESULTS / "variants.json").read_text())
+    rows = read_runs(RESULTS / "runs.csv")
+    assert rows
+    for row in rows:
+        assert row["variant"] in variants
+        assert row["proportional_cost"] == pytest.approx(law, rel=1e-9), row
 
 
 def test_kept_variants_are_the_quick_presets_learners():
