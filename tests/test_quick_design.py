@@ -126,3 +126,39 @@ def test_kept_variants_are_the_quick_presets_learners():
         hyper.pop("n_eval_episodes", None)  # apg: validated on the 10 seeds (docs/presets.md)
         assert dataclasses.replace(learner, name=base.name, hyperparams=hyper) == base
         assert preset.evaluations == quick.evaluations
+
+
+def test_presets_prose_is_what_the_files_say():
+    """The figures docs/presets.md quotes under the table, recomputed from runs.csv and
+    references.csv."""
+    costs = read_references(RESULTS / "references.csv")
+    value = mean_cost(costs, "optimal")
+    rows = read_runs(RESULTS / "runs.csv")
+    gaps = best_gaps(RESULTS / "runs.csv", RESULTS / "references.csv")
+    page = " ".join((ROOT / "docs" / "presets.md").read_text().split())
+
+    def curve(variant: str, seed: int) -> list[dict]:
+        return [r for r in rows if (r["variant"], r["training_seed"]) == (variant, seed)]
+
+    last_five = [r["cost_mean"] for r in curve("sac-4000", 1)[-5:]]
+    assert f"({min(last_five):.3f}-{max(last_five):.3f} in the last five" in page
+    assert gaps["sac-4000", 1] > 0.10 > max(gaps["sac", s] for s in range(3))
+    assert all(gaps["sac", s] < gaps["sac-4000", s] for s in range(3))
+    bad = curve("ppo-shared-entry", 2)
+    assert f"validation cost of {bad[0]['cost_mean']:.1f} on seed 2" in page
+    assert f"(after {bad[0]['timesteps']:,} agent-steps".replace(",", " ") in page
+    assert f"zero control's {bad[0]['zero_cost']:.2f})" in page
+    assert f"still at {bad[-1]['cost_mean']:.1f} when" in page
+    assert f"seed 1's best is +{100 * gaps['ppo-shared-entry', 1]:.0f}%" in page
+    kept = sorted(gaps["ppo-shared", s] for s in range(3))
+    assert f"(+{100 * kept[0]:.1f}% to +{100 * kept[-1]:.1f}%)" in page
+    centre = mean_cost(costs, "proportional-common") / value - 1
+    law = mean_cost(costs, "proportional") / value - 1
+    for seed in range(3):
+        ppo = curve("ppo", seed)
+        assert ppo[-1]["cost_mean"] == min(r["cost_mean"] for r in ppo)
+        assert gaps["ppo", seed] < law
+        assert (gaps["ppo", seed] < centre) == (seed == 2)
+        apg = curve("apg", seed)
+        at_100 = next(r["cost_mean"] for r in apg if r["timesteps"] == 100 * 20)
+        assert (at_100 - min(r["cost_mean"] for r in apg)) / value < 0.0015
