@@ -34,6 +34,7 @@ DESIGN_SOURCES = [
     "benchmarks/sweep_budget.py",
     "benchmarks/benchmarl_action_scale.py",
     "benchmarks/shared_design.py",
+    "benchmarks/quick_design.py",
 ]
 TEST_SEED_NAMES = {"DEFAULT_TEST_SEED", "DEFAULT_TEST_SEEDS", "test_seeds"}
 

@@ -221,6 +221,15 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         _shared_design,
     ),
     PublishedTable(
+        "quick-design-table",
+        "docs/presets.md",
+        tuple(
+            f"{RESULTS}/quick-design/{name}"
+            for name in ("runs.csv", "references.csv", "variants.json")
+        ),
+        _renderer("results.quick_design", "quick_design_table"),
+    ),
+    PublishedTable(
         "reference-table", "docs/tasks.md", ("agent_envs/tasks/data/SHA256SUMS",), _task_references
     ),
     PublishedTable("design-table", "docs/tasks.md", (f"{RESULTS}/task-design.json",), _task_design),

@@ -41,7 +41,9 @@ OPTIMUM_FILES = {
 
 
 def curve_rows(task: str, variant: str, seed: int, curve: Path) -> list[dict[str, Any]]:
-    """The evaluations of one run's learning_curve.csv as `RUN_COLUMNS` rows."""
+    """The evaluations of one run's learning_curve.csv as `RUN_COLUMNS` rows (``zero_cost``
+    nan when the curve has no zero-control line: an `apg` run logs the proportional and the
+    turnpike controllers only)."""
     with open(curve, newline="") as handle:
         return [
             {
@@ -51,7 +53,7 @@ def curve_rows(task: str, variant: str, seed: int, curve: Path) -> list[dict[str
                 "timesteps": int(row["timesteps"]),
                 "cost_mean": float(row["cost_mean"]),
                 "proportional_cost": float(row["proportional_cost"]),
-                "zero_cost": float(row["zero_cost"]),
+                "zero_cost": float(row.get("zero_cost", "nan")),
             }
             for row in csv.DictReader(handle)
         ]
