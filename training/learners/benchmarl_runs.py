@@ -55,7 +55,8 @@ INTERFACE = {"observation": "swarm", "agent_reward": "team"}
 #: actions back is exact (docs/learners/marl-libraries.md, "Leaderboard units").
 DEFAULT_ACTION_SCALE = 0.25
 #: The frame budget of a leaderboard unit by algorithm (env steps; one frame = one step of the
-#: N agents), sized to <= 30 minutes of one core at N = 100 (docs/learners/marl-libraries.md).
+#: N agents): the design runs' on training seed 0, about 15 and 13 minutes of one core at
+#: N = 100, where validation J had its best early (docs/learners/marl-libraries.md).
 DEFAULT_FRAMES = {"mappo": 48_000, "ippo": 30_000}
 #: Frames per collected batch, minibatch passes per batch, frames per minibatch.
 DEFAULT_BATCH_FRAMES = 6_000
