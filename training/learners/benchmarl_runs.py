@@ -55,9 +55,11 @@ INTERFACE = {"observation": "swarm", "agent_reward": "team"}
 #: actions back is exact (docs/learners/marl-libraries.md, "Leaderboard units").
 DEFAULT_ACTION_SCALE = 0.25
 #: The frame budget of a leaderboard unit by algorithm (env steps; one frame = one step of the
-#: N agents): the design runs' on training seed 0, about 15 and 13 minutes of one core at
-#: N = 100, where validation J had its best early (docs/learners/marl-libraries.md).
-DEFAULT_FRAMES = {"mappo": 48_000, "ippo": 30_000}
+#: N agents), from the design runs on training seed 0 (docs/learners/marl-libraries.md):
+#: MAPPO's best validation J came at 12,000 frames and rose after, so its design budget
+#: (about 15 minutes of one core at N = 100); IPPO was still falling at its design budget's
+#: end (30,000), so 9 batches, about 23 minutes of one core, under the issue's 30.
+DEFAULT_FRAMES = {"mappo": 48_000, "ippo": 54_000}
 #: Frames per collected batch, minibatch passes per batch, frames per minibatch.
 DEFAULT_BATCH_FRAMES = 6_000
 DEFAULT_MINIBATCH_ITERS = 10
