@@ -163,11 +163,17 @@ def test_tasks_page_design_table_is_its_file():
 
 def test_units_follow_each_learners_tasks():
     """apg and SAC run on every task; the parameter-shared learners on the two stiffness regimes
-    and the transfer to N = 10^4; `--learners` picks a part; transfers come last."""
-    from agent_envs.training.commands.leaderboard import LEARNER_TASKS, units
+    and the transfer to N = 10^4, the opt-in BenchMARL learners on the two regimes; `--learners`
+    picks a part; transfers come last."""
+    from agent_envs.training.commands.leaderboard import (
+        LEARNER_TASKS,
+        LEARNERS,
+        MARL_LEARNERS,
+        units,
+    )
 
     ids = [t.id for t in TASK_LIST]
-    every = units(ids, seeds=(0,))
+    every = units(ids, seeds=(0,), learners=(*LEARNERS, *MARL_LEARNERS))
     for name in ("apg", "sac"):
         assert sorted(u.task for u in every if u.learner == name) == sorted(ids)
     for name, tasks in LEARNER_TASKS.items():
@@ -183,3 +189,28 @@ def test_leaderboard_learners_bad_input(tmp_path):
 
     with pytest.raises(ValueError, match="--learners must be among"):
         LeaderboardConfig(learners=("ppo-magic",), out=tmp_path / "lb")
+
+
+def test_benchmarl_learners_are_opt_in_and_name_the_marl_extra(tmp_path, monkeypatch):
+    """mappo and ippo are not run by default; asked for without BenchMARL, the command stops
+    with one line naming the `marl` extra (BenchMARL's absence simulated)."""
+    import importlib.util
+
+    from agent_envs.training.commands import leaderboard
+    from agent_envs.training.commands.cli import main
+
+    assert not set(leaderboard.MARL_LEARNERS) & set(leaderboard.LEARNERS)
+    assert leaderboard.LeaderboardConfig(out=tmp_path / "lb").learners == leaderboard.LEARNERS
+    for name in leaderboard.MARL_LEARNERS:
+        assert leaderboard.LEARNER_TASKS[name] == (
+            "agent_envs/StiffSwarm-v0",
+            "agent_envs/WeakCouplingSwarm-v0",
+        )
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "benchmarl" else real(name)
+    )
+    with pytest.raises(ValueError, match=r"--learners mappo ippo needs BenchMARL.*marl"):
+        leaderboard.LeaderboardConfig(learners=("apg", "mappo", "ippo"), out=tmp_path / "lb")
+    leaderboard.LeaderboardConfig(learners=("apg",), out=tmp_path / "lb")  # no BenchMARL needed
+    assert main(["leaderboard", "--out", str(tmp_path / "lb"), "--learners", "mappo"]) != 0

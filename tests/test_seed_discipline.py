@@ -33,6 +33,9 @@ DESIGN_SOURCES = [
     "benchmarks/task_design.py",
     "benchmarks/sweep_budget.py",
     "benchmarks/benchmarl_action_scale.py",
+    "benchmarks/benchmarl_fresh_policy.py",
+    "benchmarks/benchmarl_design_run.py",
+    "training/learners/benchmarl_runs.py",
     "benchmarks/shared_design.py",
     "benchmarks/quick_design.py",
 ]

@@ -51,19 +51,29 @@ from agent_envs.training.storage import write_text_atomic
 #: parameter-shared PPO learners of the PettingZoo env: `ppo-shared` (swarm observation, team
 #: reward) and `ppo-local` (local observation: own offset and K nearest neighbours, team reward).
 LEARNERS = ("apg", "sac", "ppo-shared", "ppo-local")
+#: BenchMARL's MAPPO and IPPO (`agent_envs.training.learners.benchmarl_runs`): opt-in
+#: (``--learners mappo ippo``), since they need the `marl` extra, which the leaderboard does not.
+MARL_LEARNERS = ("mappo", "ippo")
 #: Training seeds of every learner.
 TRAINING_SEEDS = (0, 1, 2)
 #: Tasks whose learners are not trained there but transferred from another task.
 TRANSFERS = {"agent_envs/LargeSwarm-v0": "agent_envs/StiffSwarm-v0"}
 #: The tasks a learner is run on where not every task: the parameter-shared learners are run on
-#: the paper's two stiffness regimes, and transferred from the stiff one to N = 10^4.
+#: the paper's two stiffness regimes, and transferred from the stiff one to N = 10^4; the
+#: BenchMARL learners on the two regimes only.
 LEARNER_TASKS = {
-    name: (
-        "agent_envs/StiffSwarm-v0",
-        "agent_envs/WeakCouplingSwarm-v0",
-        "agent_envs/LargeSwarm-v0",
-    )
-    for name in ("ppo-shared", "ppo-local")
+    **{
+        name: (
+            "agent_envs/StiffSwarm-v0",
+            "agent_envs/WeakCouplingSwarm-v0",
+            "agent_envs/LargeSwarm-v0",
+        )
+        for name in ("ppo-shared", "ppo-local")
+    },
+    **{
+        name: ("agent_envs/StiffSwarm-v0", "agent_envs/WeakCouplingSwarm-v0")
+        for name in MARL_LEARNERS
+    },
 }
 
 
@@ -171,24 +181,47 @@ def _write_unit(path: Path, rows: list[dict[str, Any]]) -> None:
     write_text_atomic(path, _csv(rows))
 
 
+def _score_sb3_or_apg(unit: Unit, out: Path, timesteps_scale: float) -> TaskScore:
+    from agent_envs.training.commands.learner_runs import evaluation_spec
+    from agent_envs.training.learners.policies import resolve_policy
+
+    run_dir = _train(unit, out, timesteps_scale)
+    spec = evaluation_spec(run_dir)
+
+    def make(env: Any) -> Any:
+        return resolve_policy(spec, env)[0]
+
+    return score(make, unit.task, name=unit.learner)
+
+
+def _score_marl(unit: Unit, out: Path, timesteps_scale: float) -> TaskScore:
+    """A BenchMARL unit: `benchmarl_runs.train_run` (its default budget x `timesteps_scale`,
+    validated on the task's validation seeds) in OUT/runs, then its best policy, actions x s,
+    scored per agent on the task's PettingZoo twin with the run's interface."""
+    from agent_envs.training.learners.benchmarl_runs import (
+        MarlRun,
+        default_frames,
+        policy_factory,
+        train_run,
+    )
+
+    frames = max(1, round(default_frames(unit.learner) * timesteps_scale))
+    run = MarlRun(unit.source, unit.learner, unit.seed, frames=frames)
+    folder = train_run(run, out / "runs")
+    make = policy_factory(folder)
+    return score(make, unit.task, name=unit.learner, per_agent=True, interface=run.interface)
+
+
 def run_unit(unit: Unit, out: Path, timesteps_scale: float = 1.0) -> Path:
     """Train and score one unit; write and return its file."""
     from threadpoolctl import threadpool_limits
-
-    from agent_envs.training.commands.learner_runs import evaluation_spec
-    from agent_envs.training.learners.policies import resolve_policy
 
     with threadpool_limits(1):
         import torch
 
         torch.set_num_threads(1)
-        run_dir = _train(unit, out, timesteps_scale)
-        spec = evaluation_spec(run_dir)
-
-        def make(env: Any) -> Any:
-            return resolve_policy(spec, env)[0]
-
-        result = score(make, unit.task, name=unit.learner)
+        train_and_score = _score_marl if unit.learner in MARL_LEARNERS else _score_sb3_or_apg
+        result = train_and_score(unit, out, timesteps_scale)
     path = out / "units" / f"{unit.stem}.csv"
     _write_unit(path, episode_rows(result, "learner", unit.seed))
     return path
@@ -236,6 +269,8 @@ POLICY_LABELS = {
     "sac": "sac (summary observation, common control)",
     "ppo-shared": "ppo-shared (parameter-shared PPO: swarm observation, team reward)",
     "ppo-local": "ppo-local (parameter-shared PPO: own offset and 6 nearest neighbours)",
+    "mappo": "mappo (BenchMARL MAPPO: swarm observation, team reward, centralised critic)",
+    "ippo": "ippo (BenchMARL IPPO: swarm observation, team reward, per-agent critic)",
     "optimal": "optimal (open-loop plan, 20 paths)",
     "mpc": "mpc (re-solve every step)",
     "lower_bound": "lower bound (certified, not a policy)",
@@ -318,7 +353,10 @@ class LeaderboardConfig:
     )
     seeds: tuple[int, ...] = option_field(TRAINING_SEEDS, "training seeds of every learner")
     learners: tuple[str, ...] = option_field(
-        LEARNERS, "learners to run (default: all)", nargs="+", metavar="NAME"
+        LEARNERS,
+        "learners to run (default: all but the opt-in mappo and ippo, which need the marl extra)",
+        nargs="+",
+        metavar="NAME",
     )
     workers: int = option_field(1, "units run in parallel processes")
     timesteps_scale: float = option_field(1.0, "multiply every training budget (a smoke run: 0.01)")
@@ -343,13 +381,27 @@ class LeaderboardConfig:
                 object.__setattr__(self, "tasks", (source, *self.tasks))
         object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
         object.__setattr__(self, "learners", tuple(self.learners))
+        known = (*LEARNERS, *MARL_LEARNERS)
         for name in self.learners:
-            if name not in LEARNERS:
-                raise ValueError(f"--learners must be among {', '.join(LEARNERS)}; got {name!r}")
+            if name not in known:
+                raise ValueError(f"--learners must be among {', '.join(known)}; got {name!r}")
+        check_marl_extra(self.learners)
         for s in self.seeds:
             check_int("--seeds", s, 0, 999)
         check_int("--workers", self.workers, 1, 64)
         check_positive("--timesteps-scale", self.timesteps_scale)
+
+
+def check_marl_extra(learners: Sequence[str]) -> None:
+    """ValueError naming the `marl` extra when a BenchMARL learner is asked for without it."""
+    import importlib.util
+
+    marl = [name for name in learners if name in MARL_LEARNERS]
+    if marl and importlib.util.find_spec("benchmarl") is None:
+        raise ValueError(
+            f"--learners {' '.join(marl)} needs BenchMARL, the `marl` extra: "
+            "pip install -c constraints.txt -e '.[marl]'"
+        )
 
 
 def run_leaderboard(config: LeaderboardConfig) -> int:
@@ -398,6 +450,7 @@ __all__ = [
     "EPISODE_COLUMNS",
     "LEARNERS",
     "LEARNER_TASKS",
+    "MARL_LEARNERS",
     "TRAINING_SEEDS",
     "TRANSFERS",
     "LeaderboardConfig",

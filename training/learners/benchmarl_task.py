@@ -13,7 +13,7 @@
                critic_model_config=MlpConfig.get_from_yaml(), seed=0,
                config=ExperimentConfig.get_from_yaml()).run()
 
-Needs the `marl` extra (BenchMARL, TorchRL); nothing else in agent_envs imports this module.
+Needs the `marl` extra (BenchMARL, TorchRL); imported only by `benchmarl_runs` (leaderboard units).
 Written as BenchMARL's own task families are (``benchmarl.environments.pettingzoo``): a `Task`
 enum (one member, SWARM) whose `TaskClass` builds the env with TorchRL's `PettingZooWrapper`
 from the task config, which is the env's keyword arguments (`SwarmTaskConfig`, defaults in
