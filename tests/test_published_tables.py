@@ -200,3 +200,51 @@ def test_mean_field_slopes_are_the_committed_run():
         w1 = np.log([float(r["w1_to_reference"]) for r in mine])
         assert len(mine) == 3
         assert _agrees(quoted.group(group), float(np.polyfit(n, w1, 1)[0]))
+
+
+def _table_rows(page: str, header_start: str) -> list[list[str]]:
+    """The body cells of the Markdown table on `page` whose header row starts with
+    `header_start` (bold marks stripped)."""
+    lines = (ROOT / page).read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.strip().startswith(header_start))
+    rows = []
+    for line in lines[start + 2 :]:
+        if not line.strip().startswith("|"):
+            break
+        rows.append([c.strip().replace("**", "") for c in line.strip().strip("|").split("|")])
+    return rows
+
+
+def test_marl_study_tables_are_the_committed_files():
+    """docs/learners/marl-libraries.md's fresh-policy and design-run tables are the committed
+    files of docs/results/marl-study/, to the printed digits."""
+    import csv
+    import json
+
+    page = "docs/learners/marl-libraries.md"
+    study = ROOT / "docs/results/marl-study"
+    fresh = json.loads((study / "fresh_policy.json").read_text())["rows"]
+    rows = _table_rows(page, "| s (train bound)")
+    assert len(rows) == 4
+    for cells in rows:
+        scale = {"1": 1.0, "1/2": 0.5, "1/4": 0.25, "1/8": 0.125}[cells[0].split()[0]]
+        mine = {r["layout"]: r for r in fresh if r["action_scale"] == scale}
+        for cell, layout in zip(cells[1:4], ("swarm", "relative", "local"), strict=True):
+            assert _agrees(cell, mine[layout]["fresh"]), (scale, layout)
+        assert _agrees(cells[4], mine["swarm"]["zero"])
+        assert _agrees(cells[5], mine["swarm"]["proportional"])
+    curves = {}
+    for algorithm in ("mappo", "ippo"):
+        path = study / "StiffSwarm-v0" / f"{algorithm}_seed0" / "validation.csv"
+        with open(path, newline="") as handle:
+            curves[algorithm] = {int(r["frames"]): r for r in csv.DictReader(handle)}
+    rows = _table_rows(page, "| frames | MAPPO: J")
+    assert len(rows) == len(curves["mappo"])
+    for cells in rows:
+        frames = int(cells[0].replace(",", ""))
+        for algorithm, (j, wall) in (("mappo", cells[1:3]), ("ippo", cells[3:5])):
+            if j == "-":
+                assert frames not in curves[algorithm]
+                continue
+            assert _agrees(j, float(curves[algorithm][frames]["validation_cost"]))
+            assert _agrees(wall, float(curves[algorithm][frames]["seconds"]))
