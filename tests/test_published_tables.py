@@ -248,3 +248,48 @@ def test_marl_study_tables_are_the_committed_files():
                 continue
             assert _agrees(j, float(curves[algorithm][frames]["validation_cost"]))
             assert _agrees(wall, float(curves[algorithm][frames]["seconds"]))
+
+
+def test_paper_size_cheap_control_figures_are_the_committed_run():
+    """docs/cheap-control-bound.md's "At the paper's sizes and noise" figures (V_fresh and F at
+    x^0 = xbar, the crossings, the contraction factors, the rows where the corrected bound
+    holds) are the committed paper-size run's."""
+    import csv
+
+    from agent_envs.training.experiments.cheap_control_bound import read_rows
+
+    folder = ROOT / "docs/results/cheap-control-bound/paper-size"
+    rows = read_rows(folder / "cheap_control_bound.csv")
+    text = " ".join((ROOT / "docs" / "cheap-control-bound.md").read_text().split())
+    quoted = re.search(
+        r"x\^0 = xbar: V_fresh = ([\d.e, -]+) against F = ([\d.e, -]+) for T = 0.5, 1, 2", text
+    )
+    assert quoted is not None
+    at_target = [r for r in rows if r["case"] == "x0=xbar"]
+    assert [r["T"] for r in at_target] == [0.5, 1.0, 2.0]
+    for group, column in ((1, "V_fresh"), (2, "floor")):
+        printed = [p.strip() for p in quoted.group(group).split(",")]
+        for cell, row in zip(printed, at_target, strict=True):
+            mantissa, exponent = cell.split("e")
+            assert _agrees(mantissa, row[column] / 10.0 ** int(exponent)), (column, cell)
+    noisy = next(r for r in rows if r["case"] == "V(T)" and r["sigma"] > 0)
+    random = next(r for r in rows if r["case"] == "random x0")
+    for printed, value in (
+        ("1.05e5", noisy["T_cross_lemma"]),
+        ("2.1e6", noisy["T_cross_theorem"]),
+        ("1.8e6", random["T_cross_lemma"]),
+    ):
+        assert f"at T = {printed}" in text or f"at {printed}" in text, printed
+        mantissa, exponent = printed.split("e")
+        assert _agrees(mantissa, value / 10.0 ** int(exponent)), printed
+    assert f"holds on all {len(rows)} rows" in text and all(r["corrected_holds"] for r in rows)
+    with open(folder / "contraction.csv", newline="") as handle:
+        held = {
+            r["control"]: float(r["factor_median"])
+            for r in csv.DictReader(handle)
+            if float(r["sigma"]) == 0 and "held" in r["control"]
+        }
+    frozen, exact = (held[k] for k in sorted(held, key=lambda k: "exact" in k))
+    quoted = re.search(r"contracts L by ([\d.]+) \(frozen J\) and ([\d.]+) \(exact J\)", text)
+    assert quoted is not None
+    assert _agrees(quoted.group(1), frozen) and _agrees(quoted.group(2), exact)
