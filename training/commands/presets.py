@@ -217,7 +217,7 @@ PAPER_BUDGETS = {
     "ppo-modes": 98_304,
     "sac": 20_000,
     "td3": 20_000,
-    "ppo-shared": 1_228_800,
+    "ppo-shared": 2_457_600,
     "ppo-local": 1_228_800,
 }
 
