@@ -293,3 +293,55 @@ def test_paper_size_cheap_control_figures_are_the_committed_run():
     quoted = re.search(r"contracts L by ([\d.]+) \(frozen J\) and ([\d.]+) \(exact J\)", text)
     assert quoted is not None
     assert _agrees(quoted.group(1), frozen) and _agrees(quoted.group(2), exact)
+
+
+def _turnpike_rows(folder: str) -> list[dict[str, str]]:
+    import csv
+
+    path = ROOT / "docs/results/turnpike-property" / folder / "turnpike_property.csv"
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def test_turnpike_property_prose_is_the_committed_runs():
+    """docs/turnpike-theory.md's paper-size figures (V, the entry rates at the longest horizon
+    against the predicted one, the noise-free shares) and the multi-seed share ranges are the
+    committed runs'."""
+    text = " ".join((ROOT / "docs" / "turnpike-theory.md").read_text().split())
+    rows = _turnpike_rows("paper-size")
+    quoted = re.search(
+        r"V = ([\d.]+) for every T \(([\d.]+)-([\d.]+) with sigma = 0.01\), entry rates "
+        r"([\d.]+) \(sigma = 0\) and ([\d.]+) \(sigma = 0.01\) against the predicted ([\d.]+), "
+        r"shares within delta ([\d.]+) / ([\d.]+) / ([\d.]+) for T = 1 / 2 / 4",
+        text,
+    )
+    assert quoted is not None
+    assert all(_agrees(quoted.group(1), float(r["V"])) for r in rows if float(r["sigma"]) == 0)
+    noisy = [float(r["V"]) for r in rows if float(r["sigma"]) == 0.01]
+    assert _agrees(quoted.group(2), min(noisy)) and _agrees(quoted.group(3), max(noisy))
+    longest = {float(r["sigma"]): r for r in rows if float(r["T"]) == 4.0}
+    assert _agrees(quoted.group(4), float(longest[0.0]["entry_rate"]))
+    assert _agrees(quoted.group(5), float(longest[0.01]["entry_rate"]))
+    assert _agrees(quoted.group(6), float(longest[0.0]["predicted_entry_rate"]))
+    noiseless = {float(r["T"]): r for r in rows if float(r["sigma"]) == 0}
+    for group, horizon in ((7, 1.0), (8, 2.0), (9, 4.0)):
+        assert _agrees(quoted.group(group), float(noiseless[horizon]["share_within_delta"]))
+    rows = _turnpike_rows("multi-seed")
+    assert len(rows) == 90 and all(r["converged"] == "True" for r in rows)
+    quoted = re.search(
+        r"the share at T = 8 is ([\d.]+)-([\d.]+) with delta = 2e-4, ([\d.]+)-([\d.]+) with delta "
+        r"/ 10 and ([\d.]+)-([\d.]+) with 10 delta \(([\d.]+)-([\d.]+), ([\d.]+)-([\d.]+), "
+        r"([\d.]+)-([\d.]+) at T = 2\)",
+        text,
+    )
+    assert quoted is not None
+    columns = ("share_within_delta", "share_delta_over_10", "share_delta_times_10")
+    group = 1
+    for horizon in (8.0, 2.0):
+        mine = [r for r in rows if float(r["T"]) == horizon and float(r["sigma"]) == 0]
+        assert len(mine) == 9
+        for column in columns:
+            values = [float(r[column]) for r in mine]
+            assert _agrees(quoted.group(group), min(values)), (horizon, column)
+            assert _agrees(quoted.group(group + 1), max(values)), (horizon, column)
+            group += 2
