@@ -345,3 +345,18 @@ def test_turnpike_property_prose_is_the_committed_runs():
             assert _agrees(quoted.group(group), min(values)), (horizon, column)
             assert _agrees(quoted.group(group + 1), max(values)), (horizon, column)
             group += 2
+
+
+def test_mappo_leaderboard_runs_are_the_quoted_ones():
+    """marl-libraries.md's best validation costs of the leaderboard's MAPPO units are their
+    committed run folders' (one per training seed, all at the last batch)."""
+    import json
+
+    text = " ".join((ROOT / "docs/learners/marl-libraries.md").read_text().split())
+    quoted = re.search(r"best validation costs ([\d.]+), ([\d.]+), ([\d.]+) on the seeds", text)
+    assert quoted is not None
+    folder = ROOT / "docs/results/marl-study/leaderboard/StiffSwarm-v0"
+    for seed in range(3):
+        result = json.loads((folder / f"mappo_seed{seed}" / "result.json").read_text())
+        assert _agrees(quoted.group(seed + 1), result["best_validation_cost"])
+        assert result["best_frames"] == result["frames"] == 12_000
