@@ -10,10 +10,11 @@ table of the next real run will be recomputable from its committed episodes.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 from pathlib import Path
+
+from scripts import load_script
 
 from agent_envs.training.results import committed_tables
 from agent_envs.training.results.env_options_episodes import episode_files, read_summary
@@ -23,10 +24,7 @@ TINY_ENV = {"n_agents": 4, "n_steps": 5, "n_paths": 2}
 
 
 def _load(name: str):
-    spec = importlib.util.spec_from_file_location(f"_episodes_{name}", ROOT / "benchmarks" / name)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(ROOT / "benchmarks" / name)
 
 
 def test_env_options_episodes_recompute_its_summary(monkeypatch, tmp_path):

@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from scripts import load_script
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / "docs"
@@ -143,12 +144,7 @@ def test_nav_pages_exist_and_every_page_is_in_the_nav():
 
 
 def _cli_hook():
-    spec = importlib.util.spec_from_file_location(
-        "cli_reference", DOCS / "hooks" / "cli_reference.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(DOCS / "hooks" / "cli_reference.py")
 
 
 def test_cli_reference_covers_every_subcommand():

@@ -5,11 +5,11 @@ the render is tests/test_published_tables.py's)."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+from scripts import load_script
 
 from agent_envs.training.results.design_runs import read_runs, write_runs
 from agent_envs.training.results.quick_design import (
@@ -110,11 +110,7 @@ def test_kept_variants_are_the_quick_presets_learners():
     """A variant labelled "(kept)" trains exactly the quick preset's learner."""
     from agent_envs.training.commands.presets import PRESETS
 
-    spec = importlib.util.spec_from_file_location(
-        "_quick_design", ROOT / "benchmarks" / "quick_design.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(ROOT / "benchmarks" / "quick_design.py")
     quick = PRESETS["quick"]
     variants = json.loads((RESULTS / "variants.json").read_text())
     kept = [name for name, v in variants.items() if "(kept)" in v["label"]]

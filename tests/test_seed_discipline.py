@@ -10,13 +10,13 @@ choice with their measurement stubbed, recording the seeds they ask for.
 from __future__ import annotations
 
 import ast
-import importlib.util
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scripts import load_script
 
 from agent_envs.tasks import TASKS
 from agent_envs.training.defaults import DEFAULT_EVAL_SEED, DEFAULT_TEST_SEEDS
@@ -111,10 +111,7 @@ def test_the_static_check_finds_a_test_seed(tmp_path):
 
 
 def _load(name: str):
-    spec = importlib.util.spec_from_file_location(f"_design_{name}", ROOT / "benchmarks" / name)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(ROOT / "benchmarks" / name)
 
 
 def test_env_options_figures_come_from_validation_seeds(monkeypatch, tmp_path):
