@@ -221,17 +221,12 @@ def em_transfer_table(*files: Path) -> str:
             f"files: expected 3 per training seed (EM, SERB, SERB-trained), got {len(files)}"
         )
     n_seeds = len(files) // 3
-    runs = [
-        tuple(
-            pd.read_csv(path).pivot(index="seed", columns="policy", values="total_cost")
-            for path in pair
-        )
-        for pair in zip(files[0 : 2 * n_seeds : 2], files[1 : 2 * n_seeds : 2], strict=True)
-    ]
-    serb_trained = [
+    costs = [
         pd.read_csv(path).pivot(index="seed", columns="policy", values="total_cost")
-        for path in files[2 * n_seeds :]
+        for path in files
     ]
+    runs = list(zip(costs[0 : 2 * n_seeds : 2], costs[1 : 2 * n_seeds : 2], strict=True))
+    serb_trained = costs[2 * n_seeds :]
     lines = [
         "| policy | cost on EM | paired ratio to proportional on EM | cost on SERB | "
         "paired ratio to proportional on SERB | SERB-trained policy on SERB |",
@@ -247,8 +242,6 @@ def em_transfer_table(*files: Path) -> str:
                 raise ValueError(f"{policy}: the runs disagree on a reference ({means})")
             cells += [" / ".join(means if learner else means[:1])]
             cells += [" / ".join(ratios if learner else ratios[:1])]
-        trained = (
-            " / ".join(f"{costs[policy].mean():.4g}" for costs in serb_trained) if learner else ""
-        )
+        trained = " / ".join(f"{run[policy].mean():.4g}" for run in serb_trained) if learner else ""
         lines.append(f"| {label} | " + " | ".join(cells) + f" | {trained} |")
     return "\n".join(lines)
