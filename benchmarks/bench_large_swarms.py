@@ -276,19 +276,25 @@ def bench_mean_field(sizes, figure: str | None, csv_path: str | None = None) -> 
 
 def _write_mean_field(path: str, sizes, starts, w, walls) -> None:
     """The mean-field check's rows (`MEAN_FIELD_COLUMNS`): per N (the reference's W1 is 0) and
-    time t in {0, T/2, T}, W1 to the largest N and the sample's standard deviation, written
-    with full precision (repr) so that docs/large-swarms.md's table renders from it."""
-    import csv
+    time t in {0, T/2, T}, W1 to the largest N and the sample's standard deviation, floats in
+    repr (`episode_csv.write_rows`) so that docs/large-swarms.md's table renders from them."""
+    from agent_envs.training.results.episode_csv import write_rows
 
     ref = sizes[-1]
-    with open(path, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(MEAN_FIELD_COLUMNS)
-        for n in sizes:
-            for t in ("0", "T/2", "T"):
-                w1 = 0.0 if n == ref else float(w[t][n])
-                std = float(np.std(starts[n][t]))
-                writer.writerow([n, t, repr(w1), repr(std), ref, f"{walls[n]:.1f}"])
+    rows = [
+        {
+            "n_agents": n,
+            "time": t,
+            "w1_to_reference": 0.0 if n == ref else float(w[t][n]),
+            "std": float(np.std(starts[n][t])),
+            "reference_n": ref,
+            "wall_time_s": round(walls[n], 1),
+        }
+        for n in sizes
+        for t in ("0", "T/2", "T")
+    ]
+    assert tuple(rows[0]) == MEAN_FIELD_COLUMNS
+    write_rows(path, rows)
     print(f"mean-field rows: {path}")
 
 
