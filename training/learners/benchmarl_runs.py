@@ -31,7 +31,6 @@ functions, so this module imports without them.
 from __future__ import annotations
 
 import copy
-import csv
 import dataclasses
 import json
 import math
@@ -251,13 +250,9 @@ class ValidationCallback:
 
 
 def _write_curve(path: Path, curve: list[dict[str, float]]) -> None:
-    from io import StringIO
+    from agent_envs.training.results.episode_csv import rows_text
 
-    text = StringIO()
-    writer = csv.DictWriter(text, fieldnames=CURVE_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows({k: repr(v) for k, v in row.items()} for row in curve)
-    write_text_atomic(path, text.getvalue())
+    write_text_atomic(path, rows_text(curve))
 
 
 def train_run(run: MarlRun, runs_dir: str | Path) -> Path:

@@ -11,6 +11,7 @@ bit, when it runs the same arithmetic in the same order.
 from __future__ import annotations
 
 import csv
+import io
 import numbers
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -30,17 +31,27 @@ def _text(value: object) -> str:
     return "" if value is None else str(value)
 
 
+def rows_text(rows: Iterable[Mapping[str, object]]) -> str:
+    """`rows` (same keys, in the first row's order) as CSV text; floats in repr, booleans as
+    0/1, None as an empty cell."""
+    rows = list(rows)
+    if not rows:
+        raise ValueError("rows: no rows to write")
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows({k: _text(v) for k, v in row.items()} for row in rows)
+    return out.getvalue()
+
+
 def write_rows(path: str | Path, rows: Iterable[Mapping[str, object]]) -> Path:
-    """Write `rows` (same keys, in the first row's order) to the CSV `path`; floats in repr,
-    booleans as 0/1, None as an empty cell. Returns `path`."""
+    """Write `rows` to the CSV `path` as `rows_text` writes them. Returns `path`."""
     rows = list(rows)
     if not rows:
         raise ValueError(f"{path}: no rows to write")
     path = Path(path)
     with open(path, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
-        writer.writeheader()
-        writer.writerows({k: _text(v) for k, v in row.items()} for row in rows)
+        handle.write(rows_text(rows))
     return path
 
 
@@ -62,4 +73,4 @@ def read_rows(path: str | Path) -> list[dict[str, Cell | None]]:
         return [{k: _typed(v) for k, v in row.items()} for row in csv.DictReader(handle)]
 
 
-__all__ = ["Cell", "Row", "read_rows", "write_rows"]
+__all__ = ["Cell", "Row", "read_rows", "rows_text", "write_rows"]
