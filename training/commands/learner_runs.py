@@ -21,7 +21,8 @@ from agent_envs.training.commands.experiment import APG, APG_RUN_KEYS
 from agent_envs.training.config import TrainConfig
 
 #: A run is reused or resumed only when all of these match, the budget included: a run resumed
-#: with another budget would keep its old evaluation and checkpoint schedule.
+#: with another budget would keep its old evaluation and checkpoint schedule. ``env_kwargs``
+#: match when they name the same env (`same_env_kwargs`: defaults spelt out or left out).
 SAME_RUN_FIELDS = (
     "algo",
     "env_id",
@@ -32,6 +33,26 @@ SAME_RUN_FIELDS = (
     "eval_seed",
     "timesteps",
 )
+
+
+def same_env_kwargs(saved: Any, wanted: Any) -> bool:
+    """Whether two env kwargs dicts name the same env: equal, or both valid and equal once
+    validated (`EpisodeConfig.from_kwargs`), so a run saved with every default spelt out (a
+    leaderboard task's kwargs) matches the same env given by its overrides only (a sweep's)."""
+    if saved == wanted:
+        return True
+    if not isinstance(saved, dict) or not isinstance(wanted, dict):
+        return False
+    from agent_envs.envs.episode_config import EpisodeConfig
+
+    try:
+        return bool(EpisodeConfig.from_kwargs(**saved) == EpisodeConfig.from_kwargs(**wanted))
+    except (TypeError, ValueError):  # invalid kwargs, or fields that do not compare (arrays)
+        return False
+
+
+def _same_field(name: str, saved: Any, wanted: Any) -> bool:
+    return same_env_kwargs(saved, wanted) if name == "env_kwargs" else saved == wanted
 
 
 def find_run(wanted: TrainConfig) -> tuple[Path, bool] | None:
@@ -52,7 +73,7 @@ def find_run(wanted: TrainConfig) -> tuple[Path, bool] | None:
             saved = json.loads(cfg_path.read_text())
         except (OSError, json.JSONDecodeError):
             continue
-        if any(saved.get(k) != getattr(wanted, k) for k in SAME_RUN_FIELDS):
+        if not all(_same_field(k, saved.get(k), getattr(wanted, k)) for k in SAME_RUN_FIELDS):
             continue
         summary_path = cfg_path.parent / "summary.json"
         finished = False
@@ -100,7 +121,7 @@ def _apg_run(config: Any, out: Path, run_name_: str | None) -> tuple[Path, bool]
             saved = json.loads((folder / "config.json").read_text())
         except (OSError, json.JSONDecodeError):
             continue
-        if any(saved.get(k) != v for k, v in wanted.items() if k != "iterations"):
+        if not all(_same_field(k, saved.get(k), v) for k, v in wanted.items() if k != "iterations"):
             continue
         try:
             done = int(json.loads((folder / "summary.json").read_text())["iterations"])
@@ -165,6 +186,7 @@ __all__ = [
     "budget",
     "evaluation_spec",
     "find_run",
+    "same_env_kwargs",
     "train_apg_trial",
     "train_from_dict",
     "train_learner",
