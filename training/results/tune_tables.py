@@ -1,0 +1,80 @@
+"""docs/tune.md's table of the searches that were not shipped, from their committed files.
+
+Each search (``agent-envs tune --out tune-paper-LEARNER``) commits ``trials.csv`` (one row
+per trial: its best validation cost on the validation seeds 1000..1004, the objective) and
+``tune_summary.md`` (whose "Parameter importances" list is Optuna's fANOVA over the trials).
+The hand-chosen entry it is compared with is the same learner's run on the same training seed
+(0) and validation seeds in the paper sweep: the lowest ``cost_mean`` of its
+``learning_curve.csv``. Nothing here trains; the table is what those files say.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from pathlib import Path
+
+#: a tune output folder is named tune-paper-LEARNER
+FOLDER = re.compile(r"tune-paper-(?P<learner>[a-z0-9-]+)$")
+#: one importance line of tune_summary.md: "- name: 0.217"
+IMPORTANCE = re.compile(r"^- (?P<name>[A-Za-z0-9_]+): (?P<value>[0-9.]+)$")
+
+
+def best_trial_cost(trials: Path) -> tuple[int, float]:
+    """(trials, the lowest finite ``validation_cost``) of a search's ``trials.csv``."""
+    with open(trials, newline="") as handle:
+        costs = [float(row["validation_cost"]) for row in csv.DictReader(handle)]
+    finite = [c for c in costs if math.isfinite(c)]
+    if not finite:
+        raise ValueError(f"{trials}: no trial has a finite validation_cost")
+    return len(costs), min(finite)
+
+
+def top_importances(summary: Path, count: int = 2) -> list[tuple[str, float]]:
+    """The `count` first (largest) fANOVA importances listed in a ``tune_summary.md``."""
+    lines = summary.read_text().splitlines()
+    try:
+        start = next(i for i, line in enumerate(lines) if line.startswith("## Parameter imp"))
+    except StopIteration:
+        raise ValueError(f"{summary}: no 'Parameter importances' section") from None
+    found = []
+    for line in lines[start + 1 :]:
+        if line.startswith("## "):
+            break
+        match = IMPORTANCE.match(line.strip())
+        if match:
+            found.append((match["name"], float(match["value"])))
+    return found[:count]
+
+
+def best_validation_cost(curve: Path) -> float:
+    """The lowest ``cost_mean`` of a run's ``learning_curve.csv``."""
+    with open(curve, newline="") as handle:
+        return min(float(row["cost_mean"]) for row in csv.DictReader(handle))
+
+
+def tune_search_table(*files: Path) -> str:
+    """Rows of (trials.csv, tune_summary.md, the hand-chosen run's learning_curve.csv) triples,
+    one per search, in the order given; the learner is read from the search's folder name."""
+    if not files or len(files) % 3:
+        raise ValueError("tune_search_table takes (trials.csv, tune_summary.md, curve) triples")
+    lines = [
+        "| learner | trials | best trial's validation cost | hand-chosen entry (training "
+        "seed 0) | most important (fANOVA) |",
+        "|---|---|---|---|---|",
+    ]
+    for trials, summary, curve in zip(files[::3], files[1::3], files[2::3], strict=True):
+        match = FOLDER.match(trials.parent.name)
+        if match is None:
+            raise ValueError(f"{trials.parent}: a search folder is named tune-paper-LEARNER")
+        count, best = best_trial_cost(trials)
+        important = ", ".join(f"{name} {value:.2f}" for name, value in top_importances(summary))
+        lines.append(
+            f"| {match['learner']} | {count} | {best:.3g} | {best_validation_cost(curve):.3g} | "
+            f"{important} |"
+        )
+    return "\n".join(lines)
+
+
+__all__ = ["best_trial_cost", "best_validation_cost", "top_importances", "tune_search_table"]
