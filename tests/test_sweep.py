@@ -97,7 +97,14 @@ def test_paper_preset_definition():
         "n_paths": 20,
         "max_control": 25.0,
     }
-    assert preset.references == ("optimal", "mpc", "turnpike", "proportional", "zero")
+    assert preset.references == (
+        "optimal",
+        "mpc",
+        "turnpike",
+        "proportional",
+        "zero",
+        "proportional-common",
+    )
     assert len(preset.seeds) >= 3
     assert preset.vec_env == "native" and preset.vec_env in VEC_ENV_CHOICES
     sb3 = [t for t in build_trials(preset) if t.kind == LEARNER and t.train["algo"] != "apg"]
@@ -149,9 +156,10 @@ def test_paper_preset_definition():
     for ref in references:
         if ref.setting == "main":
             assert ref.settings == ("main", "em-to-serb")
-    from agent_envs.baselines import BASELINES
+    from agent_envs.training.commands.experiment import available_references
 
-    wanted = [r for r in preset.references if r in BASELINES]
+    wanted, lacking = available_references(preset)
+    assert not lacking  # the centre law is an interface reference, not a BASELINES entry
     assert sorted(t.policy for t in references if t.setting == "main") == sorted(wanted)
     bound = [t for t in learners if t.setting == "bound150"]
     assert {t.policy for t in bound} == {"ppo"}
@@ -434,7 +442,7 @@ def test_reference_trial_without_ray_evaluates_once_then_reuses(tmp_path):
 
 def test_paper_preset_takes_optimal_and_mpc_once_the_baselines_have_them(monkeypatch):
     """With `optimal` and `mpc` registered (the optimal-control branch), the main env gets all
-    five references (shared with the EM-trained contrast) and eps = 1 all but MPC."""
+    six references (shared with the EM-trained contrast) and eps = 1 all but MPC."""
     from agent_envs.baselines import BASELINES
 
     for name in ("optimal", "mpc"):
@@ -445,12 +453,12 @@ def test_paper_preset_takes_optimal_and_mpc_once_the_baselines_have_them(monkeyp
         if t.kind == REFERENCE:
             for setting in t.settings:
                 by_setting.setdefault(setting, set()).add(t.policy)
-    five = {"optimal", "mpc", "turnpike", "proportional", "zero"}
+    six = {"optimal", "mpc", "turnpike", "proportional", "zero", "proportional-common"}
     assert by_setting == {
-        "main": five,
-        "em-to-serb": five,
-        "eps1": five - {"mpc"},
-        "bound150": five - {"mpc"},
+        "main": six,
+        "em-to-serb": six,
+        "eps1": six - {"mpc"},
+        "bound150": six - {"mpc"},
     }
 
 

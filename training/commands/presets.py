@@ -24,7 +24,9 @@ Presets:
   the full state and control in the modes basis, parameter-shared PPO with the swarm
   observation and the team reward (hyperparams/paper.yml; env options: docs/env-options.md), and
   ``apg``; 3 training seeds;
-  contrasts eps = 1, max_control = 150 and train-on-EM / evaluate-on-SERB. The published study
+  contrasts eps = 1, max_control = 150 and train-on-EM / evaluate-on-SERB; the references are
+  the optimum, MPC (main setting), the feedback controllers and ``proportional-common``. The
+  published study
   (docs/results.md "Results at the paper's scale", docs/results/paper-sweep).
 
 Renamed: before, ``compare --preset paper`` was another setting than ``sweep --preset paper``
@@ -279,7 +281,7 @@ _PAPER = Preset(
             env_kwargs={"epsilon": 1.0},
             learners=("ppo", "sac", "ppo-shared", "ppo-local", "apg"),
             # MPC re-solves at every step: the main setting only
-            references=("optimal", "turnpike", "proportional", "zero"),
+            references=("optimal", "turnpike", "proportional", "zero", CENTRE_LAW),
         ),
         EnvSetting(
             "bound150",
@@ -287,7 +289,7 @@ _PAPER = Preset(
             "control unclipped; good controls are then ~5% of the action range)",
             env_kwargs={"max_control": 150.0},
             learners=("ppo",),
-            references=("optimal", "turnpike", "proportional", "zero"),
+            references=("optimal", "turnpike", "proportional", "zero", CENTRE_LAW),
         ),
         EnvSetting(
             "em-to-serb",
@@ -346,7 +348,8 @@ _PAPER = Preset(
         APG_LEARNER,
     ),
     seeds=(0, 1, 2),
-    references=("optimal", "mpc", "turnpike", "proportional", "zero"),
+    # CENTRE_LAW: the fair baseline of the summary/common learners and of the swarm row
+    references=("optimal", "mpc", "turnpike", "proportional", "zero", CENTRE_LAW),
     # certainty-equivalent MPC: each re-solve plans on the sigma = 0 model (one path).
     # Re-solving the 20-path sample average at every step costs ~11 s a step at N = 100
     # (~5 min an episode, 1.7 core-h for 20 episodes); the noise-free re-solve ~0.6 s.
