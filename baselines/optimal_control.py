@@ -184,7 +184,7 @@ class DiscreteCostObjective:
 
     def _gradient_hint(self) -> str:
         """What to try after a non-finite gradient: an exponential integrator for an explicit
-        one (EM's gradient at a stiff eps overflows, ~1e15 at eps = 0.05), else the other
+        one (EM's gradient at a stiff eps overflows, 1e15-1e16 at eps = 0.05), else the other
         phi-methods."""
         if self.integrator not in ("erb", "serb"):
             return "try integrator='serb': an explicit scheme's gradient overflows when stiff"

@@ -19,7 +19,7 @@ script can be stopped and run again, part by part, on a small machine):
 - ``eps1``: train and evaluate at eps = 1 (the non-stiff kernel).
 - ``em-serb``: train on Euler-Maruyama, evaluate on SERB (the paper env). At eps = 0.05, EM
   is unstable for tau = 1/50 (tau |lambda| > 2): its states stay bounded but its gradient is
-  ~1e15 (part ``gradient``), so training only raises the EM cost and the best law kept is the
+  1e15-1e16 (part ``gradient``), so training only raises the EM cost and the best law kept is the
   initial one; the part records what happened.
 - ``em-serb-eps1``: the same at eps = 1, where EM is stable and its gradient finite.
 - ``paper-linear``: the paper setting with the linear law alone (``hidden = 0``: time-varying

@@ -11,7 +11,7 @@ with gradient clipping, periodic evaluation) for the swarm env `agent_envs/Swarm
    episode's K paths and over `episodes_per_iteration` episodes), back-propagated over the whole
    horizon (m steps; no truncated windows: with SERB the gradient through m = 50 steps stays
    finite and exact, and the target is met without truncation, which was therefore not
-   measured; with EM at eps = 0.05 the gradient is ~1e15 and no window length fixes the
+   measured; with EM at eps = 0.05 the gradient is 1e15-1e16 and no window length fixes the
    instability of the step itself, docs/learners/apg.md);
 3. Adam with the gradient's norm clipped to `max_grad_norm` and a cosine learning-rate decay
    to `final_learning_rate_fraction` of the rates (a constant rate leaves the law rattling

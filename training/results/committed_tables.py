@@ -264,6 +264,37 @@ def apg_across_n_table(path: Path, *per_episode: Path) -> str:
     return "\n".join(lines)
 
 
+#: docs/learners/apg.md's contrasts: bench_apg.py part -> row label
+APG_CONTRASTS = {
+    "eps1": "eps = 1 (non-stiff), SERB",
+    "em-serb": "train on EM, evaluate on SERB (eps = 0.05)",
+    "em-serb-eps1": "train on EM, evaluate on SERB (eps = 1)",
+}
+
+
+def apg_contrasts_table(path: Path, *per_episode: Path) -> str:
+    """docs/learners/apg.md's contrasts from ``apg/results.json`` (parts of `APG_CONTRASTS`,
+    recomputed from the per-episode file): per training seed the gap to optimal, mean over the
+    test seeds (worst test episode), the proportional law's gap and the optimum's mean cost V
+    of the evaluation env, and the CPU training time per seed."""
+    data = apg_results(path, *per_episode)
+    lines = [
+        "| contrast | gap to optimal per training seed, mean over 20 test seeds (worst) | "
+        "proportional's gap | V | training time, CPU per seed |",
+        "|---|---|---|---|---|",
+    ]
+    for part, label in APG_CONTRASTS.items():
+        value = data[part]
+        runs = value["runs"]
+        gaps = ", ".join(f"{r['gap']['mean']:+.2%} ({r['gap']['max']:+.2%})" for r in runs)
+        cpu = ", ".join(f"{r['cpu_time_s'] / 60:.1f}" for r in runs)
+        lines.append(
+            f"| {label} | {gaps} | {value['proportional_gap']['mean']:+.2%} | "
+            f"{value['optimal_mean_cost']:.4g} | {cpu} min |"
+        )
+    return "\n".join(lines)
+
+
 #: the core page's names of the convergence script's schemes (EM without noise is explicit Euler)
 SCHEME_LABELS = {"em": "em / ee"}
 
