@@ -170,6 +170,48 @@ _SMOKE_SWEEP = tuple(
     for run in ("ppo-seed0", "ppo-seed1", "turnpike", "proportional", "zero")
 )
 
+#: the paper sweep's trials (`agent-envs sweep --preset paper`) by setting: its learners,
+#: trained on seeds 0, 1, 2, and its reference controllers (em-to-serb's learners are
+#: evaluated on the main env, whose references the sweep runs once, for both settings)
+_PAPER_LEARNERS = {
+    "main": ("ppo", "ppo-modes", "sac", "td3", "ppo-shared", "ppo-local", "apg"),
+    "eps1": ("ppo", "sac", "ppo-shared", "ppo-local", "apg"),
+    "bound150": ("ppo",),
+    "em-to-serb": ("ppo", "sac", "apg"),
+}
+_PAPER_REFERENCES = {
+    "main": ("optimal", "mpc", "turnpike", "proportional", "zero", "proportional-common"),
+    "eps1": ("optimal", "turnpike", "proportional", "zero", "proportional-common"),
+    "bound150": ("optimal", "turnpike", "proportional", "zero", "proportional-common"),
+    "em-to-serb": (),
+}
+
+
+def _paper_sweep_files(settings: tuple[str, ...]) -> tuple[str, ...]:
+    """The committed per-trial episode files of `settings`, named by trial id
+    (``docs/results/paper-sweep/episodes/TRIAL.csv``: a learner run's ``test_evaluation/``
+    or a reference's folder of the sweep's output)."""
+    trials = [
+        f"{setting}__{learner}__{seed}"
+        for setting in settings
+        for learner in _PAPER_LEARNERS[setting]
+        for seed in range(3)
+    ] + [f"{setting}__{ref}" for setting in settings for ref in _PAPER_REFERENCES[setting]]
+    return tuple(f"{RESULTS}/paper-sweep/episodes/{trial}.csv" for trial in trials)
+
+
+#: docs/tune.md's unshipped searches: each search's trials and summary, then the hand-chosen
+#: entry's training-seed-0 run of the paper sweep (its learning curve, same validation seeds)
+_TUNE_SEARCHES = tuple(
+    path
+    for learner in ("ppo", "td3", "sac")
+    for path in (
+        f"{RESULTS}/tune-paper-{learner}/trials.csv",
+        f"{RESULTS}/tune-paper-{learner}/tune_summary.md",
+        f"{RESULTS}/paper-sweep/curves/main__{learner}__0.csv",
+    )
+)
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -177,6 +219,23 @@ PUBLISHED: tuple[PublishedTable, ...] = (
     ),
     PublishedTable("leaderboard-table", "docs/leaderboard.md", _LEADERBOARD, _leaderboard(None)),
     PublishedTable("quick-table", "docs/results.md", QUICK_FILES, _quick),
+    PublishedTable(
+        "paper-sweep-table",
+        "docs/results.md",
+        _paper_sweep_files(("main",)),
+        _renderer("results.paper_sweep", "paper_sweep_table"),
+    ),
+    PublishedTable(
+        "paper-sweep-contrasts",
+        "docs/results.md",
+        _paper_sweep_files(("main", "eps1", "bound150", "em-to-serb")),
+        _renderer(
+            "results.paper_sweep",
+            "paper_sweep_contrasts",
+            settings=("eps1", "bound150", "em-to-serb"),
+            reference_setting={"em-to-serb": "main"},
+        ),
+    ),
     PublishedTable(
         "em-transfer-table",
         "docs/results.md",
@@ -208,6 +267,13 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/learners/apg.md",
         _APG,
         _renderer(_BENCHMARK, "apg_across_n_table"),
+        _APG_EPISODES,
+    ),
+    PublishedTable(
+        "apg-contrasts-table",
+        "docs/learners/apg.md",
+        _APG,
+        _renderer(_BENCHMARK, "apg_contrasts_table"),
         _APG_EPISODES,
     ),
     PublishedTable(
@@ -292,6 +358,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/sweep.md",
         _SMOKE_SWEEP,
         _renderer("commands.sweep_report", "across_seed_markdown"),
+    ),
+    PublishedTable(
+        "tune-search-table",
+        "docs/tune.md",
+        _TUNE_SEARCHES,
+        _renderer("results.tune_tables", "tune_search_table"),
     ),
     PublishedTable(
         "convergence-orders-table",

@@ -18,7 +18,7 @@ on the same episode (`optimal`):
 
 A contrast setting whose references the sweep evaluates once with the main setting's (the
 ``em-to-serb`` learners are evaluated on the main env) names that setting in
-``reference_setting``; its table then shows that setting's optimum and proportional law.
+``reference_setting``; its table then shows that setting's `BORROWED` references.
 """
 
 from __future__ import annotations
@@ -36,6 +36,9 @@ ID_SEPARATOR = "__"
 #: the reference every gap is taken against, and the one P(cost < .) is quoted for
 OPTIMUM = "optimal"
 BASELINE = "proportional"
+#: the references a setting evaluated on another setting's env shows of that setting: the
+#: optimum, the proportional law and the centre law (the summary/common learners' fair baseline)
+BORROWED = (OPTIMUM, BASELINE, "proportional-common")
 
 
 @dataclass(frozen=True)
@@ -97,6 +100,9 @@ def seed_gaps(runs: PolicyRuns, optimum: PolicyRuns) -> np.ndarray:
 
 
 def _percent(value: float) -> str:
+    """A relative gap in percent to 3 significant digits (scientific below 0.001%)."""
+    if abs(value) < 1e-5:
+        return f"{100 * value:+.1e}%"
     if abs(value) >= 0.995:
         return f"{100 * value:+.0f}%"
     if abs(value) >= 0.0995:
@@ -121,8 +127,7 @@ def _setting_rows(
 
     own = {p: r for (s, p), r in runs.items() if s == setting}
     if references_from != setting:
-        borrowed = (OPTIMUM, BASELINE)
-        own.update({p: r for (s, p), r in runs.items() if s == references_from and p in borrowed})
+        own.update({p: r for (s, p), r in runs.items() if s == references_from and p in BORROWED})
     if OPTIMUM not in own or BASELINE not in own:
         raise ValueError(f"setting {setting}: the files lack its {OPTIMUM} or {BASELINE} trial")
     scores = {p: PolicyScores(r.costs, r.diverged) for p, r in own.items()}
