@@ -82,3 +82,15 @@ def test_files_must_share_test_seeds_and_be_named_by_trial(tmp_path, files):
         read_runs([*files, bad])
     with pytest.raises(ValueError, match="SETTING__POLICY"):
         read_runs([_write(other, "main-zero", [1.0, 1.0, 1.0])])
+
+
+def test_percent_keeps_three_digits_and_a_tiny_gap_its_exponent():
+    from agent_envs.training.results.paper_sweep import _percent
+
+    assert [_percent(v) for v in (39.89, 0.1903, 0.0195, 0.00054, -5.04e-7)] == [
+        "+3989%",
+        "+19.0%",
+        "+1.95%",
+        "+0.054%",
+        "-5.0e-05%",
+    ]
