@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from agent_envs.training.config import option_field
+from agent_envs.training.results.benchmark_figures import benchmark_files
 
 #: the results folder, relative to the repository root
 RESULTS = "docs/results"
@@ -212,6 +213,10 @@ _TUNE_SEARCHES = tuple(
     )
 )
 
+#: docs/benchmarks.md's current figures: three runs of each benchmark script's printed output
+#: (`benchmark_figures.SCRIPTS`), run by run
+_BENCHMARK_OUTPUTS = benchmark_files(f"{RESULTS}/benchmarks")
+
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
@@ -364,6 +369,12 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "docs/tune.md",
         _TUNE_SEARCHES,
         _renderer("results.tune_tables", "tune_search_table"),
+    ),
+    PublishedTable(
+        "benchmark-figures-table",
+        "docs/benchmarks.md",
+        _BENCHMARK_OUTPUTS,
+        _renderer("results.benchmark_figures", "benchmark_figures_table"),
     ),
     PublishedTable(
         "convergence-orders-table",
