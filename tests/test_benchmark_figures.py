@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from agent_envs.training.results.benchmark_figures import FIGURES, SCRIPTS, cell, extract
+from agent_envs.training.results.benchmark_figures import (
+    FIGURES,
+    SCRIPTS,
+    cell,
+    extract,
+    printed_table,
+)
 
 
 def test_cell_is_the_median_run_with_the_range_as_printed():
@@ -29,3 +35,12 @@ def test_every_figure_reads_a_script_of_the_table():
     scripts = {script for script, _ in SCRIPTS}
     assert all(script in scripts for figure in FIGURES for script, _ in figure.values)
     assert FIGURES[0].question  # the first row opens a question
+
+
+def test_printed_table_is_the_nth_markdown_table_verbatim(tmp_path):
+    out = tmp_path / "bench.txt"
+    out.write_text("title\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\nnote | not a row\n| c |\n|---|\n")
+    assert printed_table(out) == "| a | b |\n|---|---|\n| 1 | 2 |"
+    assert printed_table(out, 1) == "| c |\n|---|"
+    with pytest.raises(ValueError, match="printed 2 tables"):
+        printed_table(out, 2)

@@ -279,9 +279,41 @@ def benchmark_figures_table(*files: Path) -> str:
     return "\n".join(lines)
 
 
+def printed_tables(text: str) -> list[str]:
+    """The Markdown tables a benchmark printed, in order: runs of lines starting with "|"."""
+    tables: list[list[str]] = []
+    previous = False
+    for line in text.splitlines():
+        is_row = line.startswith("|")
+        if is_row and not previous:
+            tables.append([])
+        if is_row:
+            tables[-1].append(line.rstrip())
+        previous = is_row
+    return ["\n".join(rows) for rows in tables if len(rows) >= 2]
+
+
+def printed_table(path: Path, index: int = 0) -> str:
+    """The `index`-th Markdown table of a committed benchmark output, verbatim: a section of
+    docs/benchmarks.md or docs/large-swarms.md that quotes one run of a script."""
+    tables = printed_tables(Path(path).read_text())
+    if not -len(tables) <= index < len(tables):
+        raise ValueError(f"{path}: printed {len(tables)} tables, no table {index}")
+    return tables[index]
+
+
 def benchmark_files(root: str) -> tuple[str, ...]:
     """The committed outputs under `root` (``docs/results/benchmarks``), run by run."""
     return tuple(f"{root}/{run}/{script}.txt" for run in RUNS for script, _ in SCRIPTS)
 
 
-__all__ = ["FIGURES", "Figure", "benchmark_figures_table", "benchmark_files", "cell", "extract"]
+__all__ = [
+    "FIGURES",
+    "Figure",
+    "benchmark_figures_table",
+    "benchmark_files",
+    "cell",
+    "extract",
+    "printed_table",
+    "printed_tables",
+]
