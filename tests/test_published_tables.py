@@ -468,3 +468,94 @@ def test_paper_sweep_prose_is_the_committed_episodes():
     for seed in seeds:
         ratio = _sweep_costs(f"em-to-serb__apg__{seed}") / proportional
         assert np.allclose(ratio, 1.0, rtol=0, atol=2e-6), seed
+
+
+#: timing prose: (page, the printed figure in the page's words, its output file, the same
+#: figure in the output): each quoted number is the committed run's
+TIMING_PROSE = (
+    (
+        "benchmarks.md",
+        r"at the edge \(([\d.]+)x, frozen J",
+        "bench_integrators",
+        r"\| 100 \| 1 \| serb \(frozen\) \| [\d.]+ \| ([\d.]+) \|",
+    ),
+    (
+        "benchmarks.md",
+        r"\*\*not met\*\* \(([\d.]+)x\)",
+        "bench_integrators",
+        r"\| 100 \| 20 \| serb \(frozen\) \| [\d.]+ \| [\d.]+ \| ([\d.]+) \|",
+    ),
+    (
+        "benchmarks.md",
+        r"only at m = 3200: ([\d.]+)x and [\d.]+x",
+        "bench_integrators",
+        r"error at T: EM needs m = 3200 to match SERB\(25\): ([\d.]+)x",
+    ),
+    (
+        "benchmarks.md",
+        r"only at m = 3200: [\d.]+x and ([\d.]+)x",
+        "bench_integrators",
+        r"error at T: EM needs m = 3200 to match SERB\(25\): ([\d.]+)x the wall time\s*\Z",
+    ),
+    (
+        "benchmarks.md",
+        r"one gradient costs ([\d.]+)x a torch forward",
+        "bench_gradient",
+        r"\| krylov \|[^|]+\|[^|]+\|[^|]+\| ([\d.]+) \|",
+    ),
+    (
+        "benchmarks.md",
+        r"takes ([\d.]+)x a torch forward simulation",
+        "bench_optimal",
+        r"gradient / forward \(torch\)\s+([\d.]+) x",
+    ),
+    (
+        "benchmarks.md",
+        r"and ([\d.]+)x the numpy `simulate`",
+        "bench_optimal",
+        r"gradient / forward \(numpy\)\s+([\d.]+) x",
+    ),
+    (
+        "benchmarks.md",
+        r"relative gradient of 1e-6 takes ([\d.]+) s",
+        "bench_optimal",
+        r"solve to relative gradient 1e-06: ([\d.]+) s",
+    ),
+    (
+        "benchmarks.md",
+        r"the limit changes nothing \(([\d.]+)x; entering it costs ([\d.]+) us",
+        "bench_blas_threads",
+        r"ratio limited / default: ([\d.]+); entering hot_path_threads\(\): ([\d.]+) us",
+    ),
+    (
+        "large-swarms.md",
+        r"from N = 10\^4 to 10\^6: ([\d.]+) \(spread\), ([\d.]+) \(clustered\)",
+        "bench_large_swarms",
+        r"spread step time, N = 1e4 -> 1e6: ([\d.]+)[\s\S]*"
+        r"clustered step time, N = 1e4 -> 1e6: ([\d.]+)",
+    ),
+    (
+        "large-swarms.md",
+        r"matrix-free is ([\d.]+)x faster",
+        "bench_large_swarms",
+        r"\| 1e\+04 \|[^\n]*\| ([\d.]+) \|\n",
+    ),
+)
+
+
+@pytest.mark.parametrize(
+    "page, quoted, script, printed",
+    TIMING_PROSE,
+    ids=[t[2] + ":" + t[1][:24] for t in TIMING_PROSE],
+)
+def test_timing_prose_is_the_committed_run(page, quoted, script, printed):
+    text = " ".join((ROOT / "docs" / page).read_text().split())
+    output = (ROOT / "docs" / "results" / "benchmarks" / "other" / f"{script}.txt").read_text()
+    found = re.search(quoted, text)
+    assert found is not None, quoted
+    source = re.search(printed, output)
+    assert source is not None, printed
+    groups = [g for g in found.groups() if g is not None]
+    assert groups and len(groups) <= len(source.groups())
+    for cell, value in zip(groups, source.groups()[: len(groups)], strict=True):
+        assert _agrees(cell, float(value)), (cell, value)

@@ -216,6 +216,13 @@ _TUNE_SEARCHES = tuple(
 #: docs/benchmarks.md's current figures: three runs of each benchmark script's printed output
 #: (`benchmark_figures.SCRIPTS`), run by run
 _BENCHMARK_OUTPUTS = benchmark_files(f"{RESULTS}/benchmarks")
+_TIMINGS = "results.benchmark_figures"
+
+
+def _other_output(script: str) -> tuple[str]:
+    """One run's printed output of a benchmark script quoted by a section of the docs."""
+    return (f"{RESULTS}/benchmarks/other/{script}.txt",)
+
 
 #: every published table that `agent-envs tables` owns, in page order
 PUBLISHED: tuple[PublishedTable, ...] = (
@@ -374,7 +381,85 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         "benchmark-figures-table",
         "docs/benchmarks.md",
         _BENCHMARK_OUTPUTS,
-        _renderer("results.benchmark_figures", "benchmark_figures_table"),
+        _renderer(_TIMINGS, "benchmark_figures_table"),
+    ),
+    PublishedTable(
+        "scoring-overhead-table",
+        "docs/benchmarks.md",
+        _other_output("bench_scoring"),
+        _renderer(_TIMINGS, "printed_table"),
+    ),
+    PublishedTable(
+        "integrators-phi-table",
+        "docs/benchmarks.md",
+        _other_output("bench_integrators"),
+        _renderer(_TIMINGS, "printed_table", index=0),
+    ),
+    PublishedTable(
+        "integrators-step-table",
+        "docs/benchmarks.md",
+        _other_output("bench_integrators"),
+        _renderer(_TIMINGS, "printed_table", index=1),
+    ),
+    PublishedTable(
+        "integrators-accuracy-100-table",
+        "docs/benchmarks.md",
+        _other_output("bench_integrators"),
+        _renderer(_TIMINGS, "printed_table", index=2),
+    ),
+    PublishedTable(
+        "integrators-accuracy-1000-table",
+        "docs/benchmarks.md",
+        _other_output("bench_integrators"),
+        _renderer(_TIMINGS, "printed_table", index=3),
+    ),
+    PublishedTable(
+        "gradient-cost-table",
+        "docs/benchmarks.md",
+        _other_output("bench_gradient"),
+        _renderer(_TIMINGS, "printed_table"),
+    ),
+    PublishedTable(
+        "vector-env-rates-table",
+        "docs/benchmarks.md",
+        (f"{RESULTS}/benchmarks/run1/bench_vector_env.txt",),
+        _renderer(_TIMINGS, "printed_table"),
+    ),
+    PublishedTable(
+        "env-step-output",
+        "docs/benchmarks.md",
+        _other_output("bench_env_step"),
+        _renderer(_TIMINGS, "printed_text"),
+    ),
+    PublishedTable(
+        "blas-threads-table",
+        "docs/benchmarks.md",
+        _other_output("bench_blas_threads"),
+        _renderer(_TIMINGS, "printed_table"),
+    ),
+    PublishedTable(
+        "optimal-solver-output",
+        "docs/benchmarks.md",
+        _other_output("bench_optimal"),
+        _renderer(_TIMINGS, "printed_text"),
+    ),
+    PublishedTable(
+        "large-swarms-step-table",
+        "docs/large-swarms.md",
+        _other_output("bench_large_swarms"),
+        _renderer(_TIMINGS, "printed_table", index=0),
+    ),
+    PublishedTable(
+        "large-swarms-crossover-table",
+        "docs/large-swarms.md",
+        _other_output("bench_large_swarms"),
+        _renderer(_TIMINGS, "printed_table", index=1),
+    ),
+    PublishedTable(
+        "large-swarms-d2-table",
+        "docs/large-swarms.md",
+        _other_output("bench_large_swarms"),
+        _renderer(_TIMINGS, "printed_table", index=2),
     ),
     PublishedTable(
         "convergence-orders-table",

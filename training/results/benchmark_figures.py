@@ -302,6 +302,11 @@ def printed_table(path: Path, index: int = 0) -> str:
     return tables[index]
 
 
+def printed_text(path: Path) -> str:
+    """A committed benchmark output whose figures are lines, not a table: verbatim, fenced."""
+    return "```text\n" + Path(path).read_text().strip() + "\n```"
+
+
 def benchmark_files(root: str) -> tuple[str, ...]:
     """The committed outputs under `root` (``docs/results/benchmarks``), run by run."""
     return tuple(f"{root}/{run}/{script}.txt" for run in RUNS for script, _ in SCRIPTS)
@@ -316,4 +321,5 @@ __all__ = [
     "extract",
     "printed_table",
     "printed_tables",
+    "printed_text",
 ]
