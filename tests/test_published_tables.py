@@ -559,3 +559,77 @@ def test_timing_prose_is_the_committed_run(page, quoted, script, printed):
     assert groups and len(groups) <= len(source.groups())
     for cell, value in zip(groups, source.groups()[: len(groups)], strict=True):
         assert _agrees(cell, float(value)), (cell, value)
+
+
+def test_user_step_tables_are_the_committed_run():
+    """docs/benchmarks.md "Where users step": every value and A/B figure of its two tables is
+    the committed JSON's (`bench_user_step.py --json`), rounded as printed."""
+    import json
+
+    data = json.loads((ROOT / "docs/results/user-step/bench_user_step_ab.json").read_text())
+    steps = {s["figure"]: s for s in data["steps"]}
+    text = (ROOT / "docs" / "benchmarks.md").read_text()
+    section = text.split("### Where users step", 1)[1].split("\n## ", 1)[0]
+    rows = [
+        [c.strip() for c in line.strip("|").split("|")]
+        for line in section.splitlines()
+        if line.startswith("|") and not line.startswith("|---")
+    ]
+    by_figure = {row[1]: row for row in rows if len(row) >= 4}
+
+    def check(row_figure: str, json_figure: str) -> None:
+        row, step = by_figure[row_figure], steps[json_figure]
+        assert _agrees(row[2], step["value"]), (row_figure, row[2], step["value"])
+        if row[3]:
+            assert _agrees(row[3].split("x")[0], step["old_over_new"]), (row_figure, row[3])
+
+    check(
+        "`gym.make` env step (default wrappers) / native per-env step, B = 64",
+        "`gym.make` env step / native per-env step (B = 64), 1 path",
+    )
+    check(
+        "bare `SwarmEnv` step (no wrapper) / the same floor",
+        "bare `SwarmEnv` step (no wrapper) / native per-env step",
+    )
+    check(
+        "first steps of a fresh process / the same steps warm",
+        "`gym.make` env, first steps of a fresh process / warm",
+    )
+    check(
+        "parallel env step, N = 100 / native per-env step",
+        "PettingZoo step, N = 100 / native per-env step",
+    )
+    check(
+        "the same / its five dicts of N entries alone (PettingZoo's API)",
+        "PettingZoo step, N = 100 / its five dicts alone",
+    )
+    check(
+        "the same / (native per-env step + five dicts)",
+        "PettingZoo step, N = 100 / (native per-env step + five dicts)",
+    )
+    check(
+        "parallel env step, N = 10 / native per-env step, N = 10",
+        "PettingZoo step, N = 10 / native per-env step, N = 10",
+    )
+    check(
+        "`gym.make` env step / native per-env step, 20 paths, B = 64",
+        "`gym.make` env step / native per-env step, 20 paths",
+    )
+    shares = by_figure[
+        "each wrapper's share of the `gym.make` step: OrderEnforcing; PassiveEnvChecker; TimeLimit"
+    ][2].split(";")
+    for cell, name in zip(
+        shares, ("OrderEnforcing", "PassiveEnvChecker", "TimeLimit"), strict=True
+    ):
+        value = steps[f"{name}'s share of the `gym.make` step"]["value"]
+        assert _agrees(cell.replace("%", "").strip(), 100 * value), (name, cell)
+    ppo = {p["vec_env"]: p for p in data["ppo"]}
+    for label, key in (
+        ("`DummyVecEnv` of `gym.make` envs", "dummy"),
+        ("`NativeVecEnv`", "native"),
+        ("parameter-shared PPO through SuperSuit", "supersuit"),
+    ):
+        row = next(r for r in rows if r[0] == label)
+        assert _agrees(row[1].replace(",", ""), round(ppo[key]["learn"])), (label, row[1])
+        assert _agrees(row[2].replace("%", "").strip(), 100 * ppo[key]["env_share"]), label
+        assert _agrees(row[3], ppo[key]["new_over_old"]), (label, row[3])
