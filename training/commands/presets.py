@@ -213,7 +213,8 @@ PAPER_ENV = {
 }
 
 # Budgets (SB3 timesteps; agent-steps for the parameter-shared learner) of the paper preset,
-# sized so that the whole preset ends in about an hour on 2 cores (docs/presets.md).
+# first sized for about an hour on 2 cores; since issue 41 (ppo-shared's doubled budget and
+# ppo-local) a run from scratch takes about 3 hours on 2 cores (docs/presets.md).
 PAPER_BUDGETS = {
     "ppo": 98_304,
     "ppo-modes": 98_304,
