@@ -365,6 +365,7 @@ BATTERY: list[tuple[list[str], str]] = [
     (["tables", "--root", "{out}"], "--root"),
     (["tables", "--root", "{file}", "--check"], "--root"),
     (["tables", "--check=x"], "--check"),
+    (["tables", "--figures=x"], "--figures"),
 ]
 
 

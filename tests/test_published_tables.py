@@ -633,3 +633,27 @@ def test_user_step_tables_are_the_committed_run():
         assert _agrees(row[1].replace(",", ""), round(ppo[key]["learn"])), (label, row[1])
         assert _agrees(row[2].replace("%", "").strip(), 100 * ppo[key]["env_share"]), label
         assert _agrees(row[3], ppo[key]["new_over_old"]), (label, row[3])
+
+
+@pytest.mark.parametrize("setting", ["main", "eps1", "bound150", "em-to-serb"])
+def test_sweep_learning_curve_figures_replot_from_the_committed_curves(setting, tmp_path):
+    """`agent-envs tables --figures`: each paper-sweep learning-curve figure re-plotted from the
+    committed per-run curves draws the points the sweep's report wrote
+    (learning_curves_SETTING.csv), and writes a PNG."""
+    import numpy as np
+    import pandas as pd
+
+    from agent_envs.training.commands.published import FIGURES
+
+    (figure,) = [f for f in FIGURES if f.path.endswith(f"learning_curves_{setting}.png")]
+    from agent_envs.training.commands.sweep_report import committed_learning_curves
+
+    out = tmp_path / "curves.png"
+    points = committed_learning_curves(
+        *[ROOT / s for s in figure.sources], setting=setting, path=out
+    )
+    assert out.stat().st_size > 10_000
+    report = pd.read_csv(ROOT / "docs/results/paper-sweep" / f"learning_curves_{setting}.csv")
+    assert list(points["learner"]) == list(report["learner"])
+    for column in ("swarm steps", "mean", "min", "max"):
+        assert np.allclose(points[column], report[column], rtol=1e-12), column

@@ -2,6 +2,7 @@
 
     agent-envs tables            # rewrite every stale marked table of README.md and docs/
     agent-envs tables --check    # exit 1 naming each stale table; write nothing
+    agent-envs tables --figures  # also re-plot the figures drawn from committed files
 
 A published table is a block of a page between the markers ``<!-- NAME:start -->`` and
 ``<!-- NAME:end -->`` whose body is `render(files)`: a function that reads committed files under
@@ -491,6 +492,77 @@ PUBLISHED: tuple[PublishedTable, ...] = (
 )
 
 
+# ------------------------------------------------------------------------------ figures
+
+#: a figure's plot function: (its source files, the PNG path to write) -> None
+Plot = Callable[[list[Path], Path], None]
+
+
+@dataclass(frozen=True)
+class PublishedFigure:
+    """One figure of the docs re-plotted from committed files: `path` (relative to the root)
+    is `plot(sources, path)`. A PNG's bytes depend on matplotlib's version and fonts, so
+    figures are rewritten by ``agent-envs tables --figures``, not compared by ``--check``."""
+
+    path: str
+    sources: tuple[str, ...]
+    plot: Plot
+
+    def write(self, root: Path) -> None:
+        self.plot([root / source for source in self.sources], root / self.path)
+
+
+def _sweep_curves_figure(setting: str) -> Plot:
+    def plot(files: list[Path], path: Path) -> None:
+        from agent_envs.training.commands.sweep_report import committed_learning_curves
+
+        committed_learning_curves(*files, setting=setting, path=path)
+
+    return plot
+
+
+def _sweep_curve_files(setting: str) -> tuple[str, ...]:
+    """A setting's committed learning curves and the optimum's (and MPC's) episodes of the
+    env it is evaluated on (the main env for em-to-serb)."""
+    env_setting = "main" if setting == "em-to-serb" else setting
+    tests = [r for r in ("optimal", "mpc") if r in _PAPER_REFERENCES[env_setting]]
+    return (
+        *(
+            f"{RESULTS}/paper-sweep/curves/{setting}__{learner}__{seed}.csv"
+            for learner in _PAPER_LEARNERS[setting]
+            for seed in range(3)
+        ),
+        *(f"{RESULTS}/paper-sweep/episodes/{env_setting}__{ref}.csv" for ref in tests),
+    )
+
+
+#: every figure `agent-envs tables --figures` re-plots from committed files. The other figures
+#: need what no committed file holds: the cheap-control bound's Lyapunov series per step, the
+#: large swarms' positions (its empirical CDFs), the sweep report's trajectories, and the GIF
+#: (it simulates and trains apg); each page names the command that draws them.
+FIGURES: tuple[PublishedFigure, ...] = (
+    *(
+        PublishedFigure(
+            f"{RESULTS}/paper-sweep/learning_curves_{setting}.png",
+            _sweep_curve_files(setting),
+            _sweep_curves_figure(setting),
+        )
+        for setting in ("main", "eps1", "bound150", "em-to-serb")
+    ),
+)
+
+
+def write_figures(root: Path, figures: tuple[PublishedFigure, ...] = FIGURES) -> list[str]:
+    """Re-plot every figure of `figures` under `root`; return their paths."""
+    for figure in figures:
+        for relative in figure.sources:
+            if not (root / relative).is_file():
+                raise ValueError(f"{figure.path}: {root / relative} does not exist")
+    for figure in figures:
+        figure.write(root)
+    return [figure.path for figure in figures]
+
+
 # ------------------------------------------------------------------------------ markers
 
 
@@ -555,6 +627,11 @@ class TablesConfig:
     check: bool = option_field(
         False, "write nothing; exit 1 naming each table that differs from its files"
     )
+    figures: bool = option_field(
+        False,
+        "also re-plot the figures drawn from committed files (`FIGURES`: the paper sweep's "
+        "learning curves); PNGs are not compared by --check",
+    )
 
     def __post_init__(self) -> None:
         root = Path(self.root)
@@ -574,11 +651,16 @@ def run_tables(config: TablesConfig) -> int:
     for name in write_tables(config.root):
         print(f"rewrote {name}")
     print(f"{len(PUBLISHED)} published tables current")
+    if config.figures:
+        for name in write_figures(config.root):
+            print(f"re-plotted {name}")
     return 0
 
 
 __all__ = [
+    "FIGURES",
     "PUBLISHED",
+    "PublishedFigure",
     "PublishedTable",
     "TablesConfig",
     "check_sources",
@@ -586,5 +668,6 @@ __all__ = [
     "replace_block",
     "run_tables",
     "stale_tables",
+    "write_figures",
     "write_tables",
 ]

@@ -123,7 +123,6 @@ def plot_learning_curve_bands(
     range over seeds (band); the reference controllers on the same validation seeds as black
     lines, and `test_references` (name -> mean cost on the test seeds; the optimal control and
     MPC) as grey lines. Returns the plotted points, or None when no run logged a curve."""
-    from matplotlib.figure import Figure
 
     from agent_envs.training.commands.experiment import learner_run_dir
     from agent_envs.training.defaults import is_multiagent
@@ -147,6 +146,21 @@ def plot_learning_curve_bands(
                 references[name] = float(rows[-1][f"{name}_cost"])
     if not curves:
         return None
+    return _plot_curve_bands(curves, references, test_references, setting, path)
+
+
+def _plot_curve_bands(
+    curves: Mapping[str, list[tuple[np.ndarray, np.ndarray]]],
+    references: Mapping[str, float],
+    test_references: Mapping[str, float] | None,
+    setting: str,
+    path: Path,
+) -> pd.DataFrame:
+    """The figure of `plot_learning_curve_bands` from its curves: {learner: [(swarm steps,
+    validation costs) per training seed]}, the references on the validation seeds and on the
+    test seeds; returns the plotted points."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(8, 4.5))
     ax = fig.subplots()
     points = []
@@ -176,6 +190,41 @@ def plot_learning_curve_bands(
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     return pd.DataFrame(points)
+
+
+def committed_learning_curves(*files: Path, setting: str, path: Path) -> pd.DataFrame:
+    """Re-plot a setting's learning-curve figure from the committed files of a paper sweep:
+    each learner run's curve ``curves/SETTING__LEARNER__SEED.csv`` and the optimum's and MPC's
+    per-episode files ``episodes/SETTING__REF.csv`` (their mean cost on the test seeds, the grey
+    lines). Swarm steps divide a parameter-shared learner's agent-steps by N, as the sweep does
+    (the learners' env ids and N from the paper preset)."""
+    from agent_envs.training.defaults import is_multiagent
+    from agent_envs.training.learners.callbacks import read_learning_curve
+
+    preset = get_preset("paper")
+    env_ids = {learner.name: learner.env_id for learner in preset.learners}
+    n_agents = int(preset.env_kwargs["n_agents"])
+    curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)
+    references: dict[str, float] = {}
+    tests: dict[str, float] = {}
+    for file in files:
+        parts = file.stem.split("__")
+        if file.parent.name == "episodes":
+            if parts[1] in TEST_SEED_LINES:
+                tests[parts[1]] = float(pd.read_csv(file)["total_cost"].mean())
+            continue
+        if parts[0] != setting:
+            continue
+        rows = read_learning_curve(file)
+        per_step = n_agents if is_multiagent(env_ids[parts[1]]) else 1
+        steps = np.array([r["timesteps"] for r in rows], float) / per_step
+        curves[parts[1]].append((steps, np.array([r["cost_mean"] for r in rows], float)))
+        for name in IMPROVEMENT_REFERENCES:
+            if f"{name}_cost" in rows[-1]:
+                references[name] = float(rows[-1][f"{name}_cost"])
+    if not curves:
+        raise ValueError(f"no learning curve of setting {setting} among the files")
+    return _plot_curve_bands(curves, references, tests, setting, path)
 
 
 def _env_options(trial: Trial) -> str:
