@@ -82,6 +82,11 @@ def test_files_must_share_test_seeds_and_be_named_by_trial(tmp_path, files):
         read_runs([*files, bad])
     with pytest.raises(ValueError, match="SETTING__POLICY"):
         read_runs([_write(other, "main-zero", [1.0, 1.0, 1.0])])
+    clash = tmp_path / "clash"
+    clash.mkdir()
+    both = [_write(clash, "main__sac", [1.0, 2.0, 3.0]), _write(clash, "main__sac__0", [1.0] * 3)]
+    with pytest.raises(ValueError, match="share the name"):
+        read_runs(both)
 
 
 def test_percent_keeps_three_digits_and_a_tiny_gap_its_exponent():

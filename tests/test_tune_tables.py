@@ -52,3 +52,13 @@ def test_bad_input_is_named(tmp_path):
         tune_search_table(*files)
     with pytest.raises(ValueError, match="triples"):
         tune_search_table(*files[:2])
+    good = _search(tmp_path, "sac", ["0.07"])
+    good[2].write_text("timesteps,cost_mean\n100,nan\n200,inf\n")
+    with pytest.raises(ValueError, match="no evaluation has a finite"):
+        tune_search_table(*good)
+
+
+def test_a_nan_evaluation_is_skipped(tmp_path):
+    files = _search(tmp_path, "ppo", ["0.07"])
+    files[2].write_text("timesteps,cost_mean\n100,nan\n200,0.0690\n")
+    assert "| ppo | 1 | 0.07 | 0.069 |" in tune_search_table(*files)

@@ -13,8 +13,9 @@ on the same episode (`optimal`):
 - gap to optimal: g_s = mean_i (cost_{s,i} - V_i) / V_i per training seed, quoted as the mean
   of the g_s with their range (min .. max) over seeds;
 - IQM cost [95% CI] and P(cost < proportional): the across-seed statistics of the sweep report
-  (`seed_statistics.across_seed_table`, stratified bootstrap seeded with 0), a diverged
-  episode counting as the worst score.
+  (`seed_statistics.across_seed_table`), a diverged episode counting as the worst score. The
+  bootstrap's generator is seeded with 0 for each table, which draws for its own policies in
+  its own order, so a CI can differ from the report's (``across_seeds.csv``) in its last digit.
 
 A contrast setting whose references the sweep evaluates once with the main setting's (the
 ``em-to-serb`` learners are evaluated on the main env) names that setting in
@@ -82,6 +83,13 @@ def read_runs(files: list[Path]) -> dict[tuple[str, str], PolicyRuns]:
         grouped[setting, policy].append((training_seed, episodes))
     runs = {}
     for (setting, policy), parts in grouped.items():
+        kinds = {seed is None for seed, _ in parts}
+        if len(kinds) > 1 or (None in {s for s, _ in parts} and len(parts) > 1):
+            raise ValueError(
+                f"{setting}__{policy}: a reference (no seed) and trained runs, or two "
+                "reference files, share the name"
+            )
+    for (setting, policy), parts in grouped.items():
         runs[setting, policy] = PolicyRuns(
             setting,
             policy,
@@ -100,7 +108,8 @@ def seed_gaps(runs: PolicyRuns, optimum: PolicyRuns) -> np.ndarray:
 
 
 def _percent(value: float) -> str:
-    """A relative gap in percent to 3 significant digits (scientific below 0.001%)."""
+    """A relative gap in percent: 3 significant digits from 1% up, 3 decimals from 0.01% to 1%
+    (so 0.054% keeps two digits), scientific with 2 digits below 0.001%."""
     if abs(value) < 1e-5:
         return f"{100 * value:+.1e}%"
     if abs(value) >= 0.995:

@@ -49,9 +49,13 @@ def top_importances(summary: Path, count: int = 2) -> list[tuple[str, float]]:
 
 
 def best_validation_cost(curve: Path) -> float:
-    """The lowest ``cost_mean`` of a run's ``learning_curve.csv``."""
+    """The lowest finite ``cost_mean`` of a run's ``learning_curve.csv``."""
     with open(curve, newline="") as handle:
-        return min(float(row["cost_mean"]) for row in csv.DictReader(handle))
+        costs = [float(row["cost_mean"]) for row in csv.DictReader(handle)]
+    finite = [c for c in costs if math.isfinite(c)]
+    if not finite:
+        raise ValueError(f"{curve}: no evaluation has a finite cost_mean")
+    return min(finite)
 
 
 def tune_search_table(*files: Path) -> str:
