@@ -138,14 +138,22 @@ def bench_scaling(sizes, steps: int, dense_max: int, budget: float) -> None:
         print("\nlog-log slope 1e4 -> 1e6: not measured (10^4 or 10^6 not run or skipped)")
 
 
-def bench_crossover(sizes, steps: int) -> None:
-    print("\n## 2. Crossover of linear_operator='auto' (spread step, d = 1, 1 path)")
-    print("| N | dense [ms] | matrix-free [ms] | dense / matrix-free |")
-    print("|---|---|---|---|")
+def bench_crossover(sizes, steps: int, path_counts=(1, 20)) -> None:
+    """Dense against matrix-free SERB steps from a spread start, d = 1, per path count: the
+    crossover `AUTO_MATRIX_FREE_MIN_AGENTS[1]` is chosen from (the dense step's cost grows
+    with the paths faster than the matrix-free one's)."""
+    print("\n## 2. Crossover of linear_operator='auto' (spread step, d = 1)")
+    print("| N | paths | dense [ms] | matrix-free [ms] | dense / matrix-free |")
+    print("|---|---|---|---|---|")
     for n in sizes:
-        t_dense = np.median(_steps(n, 1, "dense", _spread(n), steps)[0][1:])
-        t_free = np.median(_steps(n, 1, "matrix_free", _spread(n), steps)[0][1:])
-        print(f"| {n} | {1e3 * t_dense:.2f} | {1e3 * t_free:.2f} | {t_dense / t_free:.2f} |")
+        for paths in path_counts:
+            x0 = np.broadcast_to(_spread(n), (paths, n, 1)).copy()
+            t_dense = np.median(_steps(n, 1, "dense", x0, steps)[0][1:])
+            t_free = np.median(_steps(n, 1, "matrix_free", x0, steps)[0][1:])
+            print(
+                f"| {n} | {paths} | {1e3 * t_dense:.2f} | {1e3 * t_free:.2f} | "
+                f"{t_dense / t_free:.2f} |"
+            )
     print(f"(auto: matrix-free from N = {operators.AUTO_MATRIX_FREE_MIN_AGENTS[1]} for d = 1)")
 
 
@@ -326,7 +334,7 @@ def main() -> None:
     if "scaling" in args.parts:
         bench_scaling(sizes, args.steps, args.dense_max, args.budget)
     if "crossover" in args.parts:
-        bench_crossover([100, 200, 300, 500, 1000], 4)
+        bench_crossover([100, 300, 500, 700, 800, 900, 1000, 1400], 4)
     if "two-dimensions" in args.parts and args.quick:
         bench_two_dimensions([2000], 2000, 2000)
     elif "two-dimensions" in args.parts:

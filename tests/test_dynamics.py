@@ -245,9 +245,9 @@ def test_forced_matrix_free_drift_matches_the_dense_one_with_a_control():
 @pytest.mark.parametrize(
     ("dim", "n_agents", "n_paths", "matrix_free"),
     [
-        (1, 499, 1, False),
-        (1, 500, 1, True),  # AUTO_MATRIX_FREE_MIN_AGENTS
-        (1, 600, 1, True),
+        (1, 999, 1, False),
+        (1, 1000, 1, True),  # AUTO_MATRIX_FREE_MIN_AGENTS
+        (1, 1400, 1, True),
         (2, 1999, 1, False),
         (2, 2000, 1, True),
         (1, 400, 500, False),  # 8 (2 + d) P N^2 bytes: 1.9e9 < 2 GiB
@@ -255,7 +255,7 @@ def test_forced_matrix_free_drift_matches_the_dense_one_with_a_control():
     ],
 )
 def test_auto_goes_matrix_free_from_the_documented_sizes(dim, n_agents, n_paths, matrix_free):
-    """`linear_operator="auto"`: matrix-free for numpy states from N = 500 (d = 1) and
+    """`linear_operator="auto"`: matrix-free for numpy states from N = 1000 (d = 1) and
     N = 2000 (d = 2), or when a step's dense matrices would exceed 2 GiB (the class doc)."""
     model = SwarmModel(SwarmParams(n_agents=n_agents, dim=dim))
     x = np.broadcast_to(np.zeros((1, n_agents, dim)), (n_paths, n_agents, dim))  # no copy

@@ -563,6 +563,18 @@ TIMING_PROSE = (
         "bench_large_swarms",
         r"\| 1e\+04 \|[^\n]*\| ([\d.]+) \|\n",
     ),
+    (
+        "large-swarms.md",
+        r"9x faster there with one path \(([\d.]+)\)",
+        "bench_large_swarms_crossover",
+        r"(?m)^\| 500 \| 1 \|[^|]+\|[^|]+\| ([\d.]+) \|",
+    ),
+    (
+        "large-swarms.md",
+        r"3\.7x with 20 paths \(([\d.]+)\)",
+        "bench_large_swarms_crossover",
+        r"(?m)^\| 500 \| 20 \|[^|]+\|[^|]+\| ([\d.]+) \|",
+    ),
 )
 
 
@@ -693,3 +705,20 @@ def test_paper_sweep_file_lists_are_the_presets_trials():
     trials = {t.trial_id for t in build_trials(get_preset("paper"))}
     listed = {Path(f).stem for f in _paper_sweep_files(("main", "eps1", "bound150", "em-to-serb"))}
     assert listed == trials
+
+
+def test_auto_threshold_sits_at_the_committed_crossover():
+    """`AUTO_MATRIX_FREE_MIN_AGENTS[1]` (d = 1) is where the committed crossover run puts it:
+    below it the dense step wins with one path, from it matrix-free wins with 20 paths."""
+    from agent_envs.dynamics.operators import AUTO_MATRIX_FREE_MIN_AGENTS
+
+    output = (ROOT / "docs/results/benchmarks/other/bench_large_swarms_crossover.txt").read_text()
+    ratio = {
+        (int(n), int(p)): float(r)
+        for n, p, r in re.findall(r"(?m)^\| (\d+) \| (\d+) \|[^|]+\|[^|]+\| ([\d.]+) \|", output)
+    }
+    threshold = AUTO_MATRIX_FREE_MIN_AGENTS[1]
+    assert f"(auto: matrix-free from N = {threshold} for d = 1)" in output
+    below = max(n for n, _ in ratio if n < threshold)
+    assert ratio[below, 1] < 1.0  # dense still wins below the threshold (one path)
+    assert ratio[threshold, 20] > 1.0  # matrix-free wins from it (20 paths)

@@ -36,8 +36,12 @@ from agent_envs.dynamics.kernels import CuckerSmaleKernel, InteractionKernel
 LINEAR_OPERATORS = ("auto", "dense", "matrix_free")
 # "auto" goes matrix-free from this N on for the Cucker-Smale kernel in d = 1, 2: the crossover
 # of one SERB step, dense vs matrix-free, measured by benchmarks/bench_large_swarms.py
-# (tables 2 and 3).
-AUTO_MATRIX_FREE_MIN_AGENTS = {1: 500, 2: 2000}
+# (tables 2 and 3). d = 1 moved from 500 to 1000 once the dense kernel pass was compiled: in
+# table 2 (docs/results/benchmarks/other/bench_large_swarms_crossover.txt) dense / matrix-free
+# is 0.11 (1 path) and 0.27 (20 paths) at N = 500, 0.83 and 1.52 at N = 1000, 1.46 and 2.44 at
+# N = 1400: the crossover is near N = 1100 with one path and 850 with 20, so 1000 loses at
+# most ~1.5x on either side (500 lost up to 9x).
+AUTO_MATRIX_FREE_MIN_AGENTS = {1: 1000, 2: 2000}
 # The grid sum replaces the chunked one from this N on (d = 2: below it the O(N^2) chunked
 # product is cheaper than the grid's 2-D FFTs; measured 0.07 s vs 0.10 s at N = 5000, 0.32 s
 # vs 0.11 s at N = 10^4, for x uniform on [-1, 1]^2, alpha = 0.1).

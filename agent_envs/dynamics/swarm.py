@@ -126,7 +126,7 @@ class SwarmModel:
     ``"dense"`` forms the (..., N, N) matrix L(x) (and the (..., Nd, Nd) exact Jacobian);
     ``"matrix_free"`` uses `LinearizationOperator` (kernel sums without P; numpy only; the
     exact Jacobian only for d = 1 with the Cucker-Smale kernel); ``"auto"`` (default) is
-    matrix-free for numpy states with the Cucker-Smale kernel when d = 1 and N >= 500 or
+    matrix-free for numpy states with the Cucker-Smale kernel when d = 1 and N >= 1000 or
     d = 2 and N >= 2000 (`AUTO_MATRIX_FREE_MIN_AGENTS`), or when the dense matrices of a step
     would exceed `DENSE_MEMORY_BUDGET_BYTES`, and dense otherwise.
 

@@ -174,7 +174,7 @@ class SwarmEnv(EpisodeAttributes, gym.Env[np.ndarray, np.ndarray]):
     The defaults are the paper's stiff setting. A kernel object has `value`, `grad_x`,
     `grad_y` and `symmetric` and answers in the library of its input (numpy or torch; docs page
     "Numerical core", "Your own kernel"). `linear_operator="auto"` is matrix-free for
-    numpy states with the Cucker-Smale kernel when d = 1 and N >= 500 or d = 2 and N >= 2000,
+    numpy states with the Cucker-Smale kernel when d = 1 and N >= 1000 or d = 2 and N >= 2000,
     or whenever the dense matrices of a step would exceed 2 GiB; dense otherwise (docs page
     "Large swarms"). Bad values raise `ValueError`/`TypeError` naming the argument and its
     accepted range: numbers must be ints or floats (numpy's included; bools, strings, complex

@@ -453,8 +453,8 @@ PUBLISHED: tuple[PublishedTable, ...] = (
     PublishedTable(
         "large-swarms-crossover-table",
         "docs/large-swarms.md",
-        _other_output("bench_large_swarms"),
-        _renderer(_TIMINGS, "printed_table", index=1),
+        _other_output("bench_large_swarms_crossover"),
+        _renderer(_TIMINGS, "printed_table"),
     ),
     PublishedTable(
         "large-swarms-d2-table",
