@@ -220,9 +220,16 @@ _BENCHMARK_OUTPUTS = benchmark_files(f"{RESULTS}/benchmarks")
 _TIMINGS = "results.benchmark_figures"
 
 
-def _other_output(script: str) -> tuple[str]:
-    """One run's printed output of a benchmark script quoted by a section of the docs."""
-    return (f"{RESULTS}/benchmarks/other/{script}.txt",)
+def _printed(
+    marker: str, page: str, script: str, index: int | None = 0, folder: str = "other"
+) -> PublishedTable:
+    """A section quoting one committed run of a benchmark script
+    (``docs/results/benchmarks/FOLDER/SCRIPT.txt``): its `index`-th printed table verbatim, or
+    with ``index=None`` its whole output (a script that prints lines, not a table)."""
+    sources = (f"{RESULTS}/benchmarks/{folder}/{script}.txt",)
+    if index is None:
+        return PublishedTable(marker, page, sources, _renderer(_TIMINGS, "printed_text"))
+    return PublishedTable(marker, page, sources, _renderer(_TIMINGS, "printed_table", index=index))
 
 
 #: every published table that `agent-envs tables` owns, in page order
@@ -384,84 +391,21 @@ PUBLISHED: tuple[PublishedTable, ...] = (
         _BENCHMARK_OUTPUTS,
         _renderer(_TIMINGS, "benchmark_figures_table"),
     ),
-    PublishedTable(
-        "scoring-overhead-table",
-        "docs/benchmarks.md",
-        _other_output("bench_scoring"),
-        _renderer(_TIMINGS, "printed_table"),
+    _printed("scoring-overhead-table", "docs/benchmarks.md", "bench_scoring"),
+    _printed("integrators-phi-table", "docs/benchmarks.md", "bench_integrators"),
+    _printed("integrators-step-table", "docs/benchmarks.md", "bench_integrators", 1),
+    _printed("integrators-accuracy-100-table", "docs/benchmarks.md", "bench_integrators", 2),
+    _printed("integrators-accuracy-1000-table", "docs/benchmarks.md", "bench_integrators", 3),
+    _printed("gradient-cost-table", "docs/benchmarks.md", "bench_gradient"),
+    _printed("vector-env-rates-table", "docs/benchmarks.md", "bench_vector_env", folder="run1"),
+    _printed("env-step-output", "docs/benchmarks.md", "bench_env_step", None),
+    _printed("blas-threads-table", "docs/benchmarks.md", "bench_blas_threads"),
+    _printed("optimal-solver-output", "docs/benchmarks.md", "bench_optimal", None),
+    _printed("large-swarms-step-table", "docs/large-swarms.md", "bench_large_swarms"),
+    _printed(
+        "large-swarms-crossover-table", "docs/large-swarms.md", "bench_large_swarms_crossover"
     ),
-    PublishedTable(
-        "integrators-phi-table",
-        "docs/benchmarks.md",
-        _other_output("bench_integrators"),
-        _renderer(_TIMINGS, "printed_table", index=0),
-    ),
-    PublishedTable(
-        "integrators-step-table",
-        "docs/benchmarks.md",
-        _other_output("bench_integrators"),
-        _renderer(_TIMINGS, "printed_table", index=1),
-    ),
-    PublishedTable(
-        "integrators-accuracy-100-table",
-        "docs/benchmarks.md",
-        _other_output("bench_integrators"),
-        _renderer(_TIMINGS, "printed_table", index=2),
-    ),
-    PublishedTable(
-        "integrators-accuracy-1000-table",
-        "docs/benchmarks.md",
-        _other_output("bench_integrators"),
-        _renderer(_TIMINGS, "printed_table", index=3),
-    ),
-    PublishedTable(
-        "gradient-cost-table",
-        "docs/benchmarks.md",
-        _other_output("bench_gradient"),
-        _renderer(_TIMINGS, "printed_table"),
-    ),
-    PublishedTable(
-        "vector-env-rates-table",
-        "docs/benchmarks.md",
-        (f"{RESULTS}/benchmarks/run1/bench_vector_env.txt",),
-        _renderer(_TIMINGS, "printed_table"),
-    ),
-    PublishedTable(
-        "env-step-output",
-        "docs/benchmarks.md",
-        _other_output("bench_env_step"),
-        _renderer(_TIMINGS, "printed_text"),
-    ),
-    PublishedTable(
-        "blas-threads-table",
-        "docs/benchmarks.md",
-        _other_output("bench_blas_threads"),
-        _renderer(_TIMINGS, "printed_table"),
-    ),
-    PublishedTable(
-        "optimal-solver-output",
-        "docs/benchmarks.md",
-        _other_output("bench_optimal"),
-        _renderer(_TIMINGS, "printed_text"),
-    ),
-    PublishedTable(
-        "large-swarms-step-table",
-        "docs/large-swarms.md",
-        _other_output("bench_large_swarms"),
-        _renderer(_TIMINGS, "printed_table", index=0),
-    ),
-    PublishedTable(
-        "large-swarms-crossover-table",
-        "docs/large-swarms.md",
-        _other_output("bench_large_swarms_crossover"),
-        _renderer(_TIMINGS, "printed_table"),
-    ),
-    PublishedTable(
-        "large-swarms-d2-table",
-        "docs/large-swarms.md",
-        _other_output("bench_large_swarms"),
-        _renderer(_TIMINGS, "printed_table", index=2),
-    ),
+    _printed("large-swarms-d2-table", "docs/large-swarms.md", "bench_large_swarms", 2),
     PublishedTable(
         "convergence-orders-table",
         "docs/core.md",
