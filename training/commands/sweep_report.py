@@ -112,6 +112,22 @@ def across_seed_markdown(*files: Path, bootstrap_seed: int = 0) -> str:
 TEST_SEED_LINES = ("optimal", "mpc")
 
 
+def _add_curve(
+    curves: dict[str, list[tuple[np.ndarray, np.ndarray]]],
+    references: dict[str, float],
+    learner: str,
+    rows: list[dict[str, Any]],
+    per_step: int,
+) -> None:
+    """Add one run's learning curve (its rows; timesteps / `per_step` = swarm steps) to
+    `learner`'s curves, and its last row's reference costs on the validation seeds."""
+    steps = np.array([r["timesteps"] for r in rows], float) / per_step
+    curves[learner].append((steps, np.array([r["cost_mean"] for r in rows], float)))
+    for name in IMPROVEMENT_REFERENCES:
+        if f"{name}_cost" in rows[-1]:
+            references[name] = float(rows[-1][f"{name}_cost"])
+
+
 def plot_learning_curve_bands(
     trials: list[Trial],
     out: Path,
@@ -139,11 +155,7 @@ def plot_learning_curve_bands(
             continue
         n_agents = json.loads((run_dir / "env.json").read_text())["n_agents"]
         per_step = n_agents if is_multiagent(trial.train["env_id"]) else 1
-        steps = np.array([r["timesteps"] for r in rows], float) / per_step
-        curves[trial.policy].append((steps, np.array([r["cost_mean"] for r in rows], float)))
-        for name in IMPROVEMENT_REFERENCES:
-            if f"{name}_cost" in rows[-1]:
-                references[name] = float(rows[-1][f"{name}_cost"])
+        _add_curve(curves, references, trial.policy, rows, per_step)
     if not curves:
         return None
     return _plot_curve_bands(curves, references, test_references, setting, path)
@@ -217,11 +229,7 @@ def committed_learning_curves(*files: Path, setting: str, path: Path) -> pd.Data
             continue
         rows = read_learning_curve(file)
         per_step = n_agents if is_multiagent(env_ids[parts[1]]) else 1
-        steps = np.array([r["timesteps"] for r in rows], float) / per_step
-        curves[parts[1]].append((steps, np.array([r["cost_mean"] for r in rows], float)))
-        for name in IMPROVEMENT_REFERENCES:
-            if f"{name}_cost" in rows[-1]:
-                references[name] = float(rows[-1][f"{name}_cost"])
+        _add_curve(curves, references, parts[1], rows, per_step)
     if not curves:
         raise ValueError(f"no learning curve of setting {setting} among the files")
     return _plot_curve_bands(curves, references, tests, setting, path)
