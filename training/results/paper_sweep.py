@@ -83,13 +83,12 @@ def read_runs(files: list[Path]) -> dict[tuple[str, str], PolicyRuns]:
         grouped[setting, policy].append((training_seed, episodes))
     runs = {}
     for (setting, policy), parts in grouped.items():
-        kinds = {seed is None for seed, _ in parts}
-        if len(kinds) > 1 or (None in {s for s, _ in parts} and len(parts) > 1):
+        # a reference (no seed) is one file: with any other of its name, a clash
+        if len(parts) > 1 and any(seed is None for seed, _ in parts):
             raise ValueError(
                 f"{setting}__{policy}: a reference (no seed) and trained runs, or two "
                 "reference files, share the name"
             )
-    for (setting, policy), parts in grouped.items():
         runs[setting, policy] = PolicyRuns(
             setting,
             policy,
