@@ -21,14 +21,24 @@ FOLDER = re.compile(r"tune-paper-(?P<learner>[a-z0-9-]+)$")
 IMPORTANCE = re.compile(r"^- (?P<name>[A-Za-z0-9_]+): (?P<value>[0-9.]+)$")
 
 
+def _column(path: Path, name: str) -> list[float]:
+    """One numeric column of a CSV file."""
+    with open(path, newline="") as handle:
+        return [float(row[name]) for row in csv.DictReader(handle)]
+
+
+def _lowest_finite(values: list[float], error: str) -> float:
+    """The smallest finite value (ValueError `error` when there is none)."""
+    finite = [v for v in values if math.isfinite(v)]
+    if not finite:
+        raise ValueError(error)
+    return min(finite)
+
+
 def best_trial_cost(trials: Path) -> tuple[int, float]:
     """(trials, the lowest finite ``validation_cost``) of a search's ``trials.csv``."""
-    with open(trials, newline="") as handle:
-        costs = [float(row["validation_cost"]) for row in csv.DictReader(handle)]
-    finite = [c for c in costs if math.isfinite(c)]
-    if not finite:
-        raise ValueError(f"{trials}: no trial has a finite validation_cost")
-    return len(costs), min(finite)
+    costs = _column(trials, "validation_cost")
+    return len(costs), _lowest_finite(costs, f"{trials}: no trial has a finite validation_cost")
 
 
 def top_importances(summary: Path, count: int = 2) -> list[tuple[str, float]]:
@@ -50,12 +60,9 @@ def top_importances(summary: Path, count: int = 2) -> list[tuple[str, float]]:
 
 def best_validation_cost(curve: Path) -> float:
     """The lowest finite ``cost_mean`` of a run's ``learning_curve.csv``."""
-    with open(curve, newline="") as handle:
-        costs = [float(row["cost_mean"]) for row in csv.DictReader(handle)]
-    finite = [c for c in costs if math.isfinite(c)]
-    if not finite:
-        raise ValueError(f"{curve}: no evaluation has a finite cost_mean")
-    return min(finite)
+    return _lowest_finite(
+        _column(curve, "cost_mean"), f"{curve}: no evaluation has a finite cost_mean"
+    )
 
 
 def tune_search_table(*files: Path) -> str:
